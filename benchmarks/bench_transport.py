@@ -1,0 +1,123 @@
+"""Time render_transport for the default 24-detector camera in the demo scene.
+
+Usage:
+    python benchmarks/bench_transport.py [--out benchmarks/results/transport.json]
+        [--spp 16] [--resolutions 32 64] [--repeats 5]
+
+For each mask resolution: checks the renderer against the closed form for an
+open mask under a uniform sky (fails loudly if off by > 1 %), warms up (JIT
+compilation and kernel recording are not timed), then times several calls and
+reports the median and spread. A plain Mitsuba render of the same scene with
+the same number of rays (a perspective sensor with K*rows*cols pixels at the
+same spp, same integrator) is timed alongside; the ratio is our overhead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import subprocess
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+import mincam_render as mr
+from mincam_render import backend
+from mincam_render import mitsuba_scene as ms
+
+
+def git_revision() -> str:
+    try:
+        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def check_closed_form(camera: mr.FreeformCamera, spp: int) -> float:
+    scene = ms.scene_dict({"sky": ms.constant_environment(1.0)})
+    t = mr.render_transport(scene, camera, spp=spp, seed=0)
+    a, w, d = camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m
+    expected = mr.parallel_rectangles_coupling((-a / 2, a / 2, -a / 2, a / 2), (-w / 2, w / 2, -w / 2, w / 2), d)
+    err = float(np.abs(t.sum(axis=(1, 2)) / expected - 1).max())
+    if err > 0.01:
+        raise SystemExit(f"closed-form check failed: relative error {err:.3%} > 1 %")
+    return err
+
+
+def timed(fn, repeats: int) -> list[float]:
+    fn()  # warm-up: compile and record kernels
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        dr.sync_thread()
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", type=Path, default=Path("benchmarks/results/transport.json"))
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args()
+
+    info = backend.describe()
+    scene = ms.load_scene(ms.demo_scene())
+    rows_out = []
+    for res in args.resolutions:
+        cam = mr.FreeformCamera(mask_resolution=(res, res))
+        err = check_closed_form(cam, args.spp)
+        ours = timed(lambda cam=cam: mr.render_transport(scene, cam, spp=args.spp, seed=0), args.repeats)
+        sensor = mi.load_dict(
+            {
+                "type": "perspective",
+                "fov": 70.0,
+                "film": {"type": "hdrfilm", "width": res * 6, "height": res * 4, "rfilter": {"type": "box"}},
+            }
+        )
+        plain = timed(
+            lambda sensor=sensor: mi.render(scene, sensor=sensor, spp=args.spp, seed=0).numpy(), args.repeats
+        )
+        rays = cam.num_detectors * res * res * args.spp
+        row = {
+            "detectors": cam.num_detectors,
+            "mask_resolution": [res, res],
+            "spp": args.spp,
+            "rays": rays,
+            "closed_form_rel_error": err,
+            "seconds_median": statistics.median(ours),
+            "seconds_min": min(ours),
+            "seconds_max": max(ours),
+            "mrays_per_s": rays / statistics.median(ours) / 1e6,
+            "plain_mitsuba_seconds_median": statistics.median(plain),
+            "overhead_ratio": statistics.median(ours) / statistics.median(plain),
+        }
+        rows_out.append(row)
+        print(
+            f"{cam.num_detectors} detectors x {res}x{res} x {args.spp} spp: "
+            f"{row['seconds_median'] * 1e3:.1f} ms median [{row['seconds_min'] * 1e3:.1f}, "
+            f"{row['seconds_max'] * 1e3:.1f}], {row['mrays_per_s']:.1f} Mrays/s; plain Mitsuba "
+            f"{row['plain_mitsuba_seconds_median'] * 1e3:.1f} ms (ratio {row['overhead_ratio']:.2f}); "
+            f"closed-form error {err:.2e}"
+        )
+    result = {
+        "benchmark": "render_transport, demo scene, default camera",
+        "machine": {"platform": platform.platform(), "processor": platform.processor(), "cpus": __import__("os").cpu_count()},
+        "backend": info,
+        "git_revision": git_revision(),
+        "results": rows_out,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,57 @@
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mincam_render.cli import main
+from mincam_render.exr import read_transport_exr, write_transport_exr
+
+
+def test_exr_round_trip_is_exact(tmp_path, rng):
+    t = rng.uniform(0, 1e-7, size=(3, 5, 7)).astype(np.float32)
+    meta = {"spp": 16, "camera": {"mask_size_m": 0.016}}
+    write_transport_exr(tmp_path / "t.exr", t, meta)
+    back, meta_back = read_transport_exr(tmp_path / "t.exr")
+    np.testing.assert_array_equal(back, t)
+    assert meta_back == meta
+    assert not list(tmp_path.glob("*.partial*"))
+
+
+def test_cli_transport_writes_exr_png_and_config(variant, tmp_path):
+    out = tmp_path / "run"
+    res = CliRunner().invoke(
+        main, ["transport", "--out", str(out), "--grid", "1x2", "--mask-res", "8", "--spp", "4", "--seed", "0"]
+    )
+    assert res.exit_code == 0, res.output
+    t, meta = read_transport_exr(out / "transport.exr")
+    assert t.shape == (2, 8, 8) and np.all(np.isfinite(t)) and t.sum() > 0
+    config = json.loads((out / "config.json").read_text())
+    assert config["seed"] == 0 and config["camera"]["mask_resolution"] == [8, 8]
+    assert meta["spp"] == 4
+    png = (out / "transport.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--grid", "4by6"], "ROWSxCOLS"),
+        (["--position", "1,2"], "x,y,z"),
+        (["--spp", "0"], "spp"),
+        (["--pitch-mm", "5"], "layout"),
+        (["--look-at", "0,0,0"], "look_at"),
+    ],
+)
+def test_cli_bad_arguments_fail_with_one_clear_line_and_no_output(variant, tmp_path, args, message):
+    out = tmp_path / "run"
+    res = CliRunner().invoke(main, ["transport", "--out", str(out), *args])
+    assert res.exit_code != 0
+    assert message in res.output
+    assert "Traceback" not in res.output
+    assert not out.exists()
+
+
+def test_cli_missing_scene_file(variant, tmp_path):
+    res = CliRunner().invoke(main, ["transport", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")])
+    assert res.exit_code != 0 and "does not exist" in res.output
