@@ -42,7 +42,9 @@ def check_closed_form(camera: mr.FreeformCamera, spp: int) -> float:
     scene = ms.scene_dict({"sky": ms.constant_environment(1.0)})
     t = mr.render_transport(scene, camera, spp=spp, seed=0)
     a, w, d = camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m
-    expected = mr.parallel_rectangles_coupling((-a / 2, a / 2, -a / 2, a / 2), (-w / 2, w / 2, -w / 2, w / 2), d)
+    expected = mr.parallel_rectangles_coupling(
+        (-a / 2, a / 2, -a / 2, a / 2), (-w / 2, w / 2, -w / 2, w / 2), d
+    )
     err = float(np.abs(t.sum(axis=(1, 2)) / expected - 1).max())
     if err > 0.01:
         raise SystemExit(f"closed-form check failed: relative error {err:.3%} > 1 %")
@@ -61,7 +63,9 @@ def timed(fn, repeats: int) -> list[float]:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/transport.json"))
     p.add_argument("--spp", type=int, default=16)
     p.add_argument("--resolutions", type=int, nargs="+", default=[32, 64])
@@ -74,16 +78,24 @@ def main() -> None:
     for res in args.resolutions:
         cam = mr.FreeformCamera(mask_resolution=(res, res))
         err = check_closed_form(cam, args.spp)
-        ours = timed(lambda cam=cam: mr.render_transport(scene, cam, spp=args.spp, seed=0), args.repeats)
+        ours = timed(
+            lambda cam=cam: mr.render_transport(scene, cam, spp=args.spp, seed=0), args.repeats
+        )
         sensor = mi.load_dict(
             {
                 "type": "perspective",
                 "fov": 70.0,
-                "film": {"type": "hdrfilm", "width": res * 6, "height": res * 4, "rfilter": {"type": "box"}},
+                "film": {
+                    "type": "hdrfilm",
+                    "width": res * 6,
+                    "height": res * 4,
+                    "rfilter": {"type": "box"},
+                },
             }
         )
         plain = timed(
-            lambda sensor=sensor: mi.render(scene, sensor=sensor, spp=args.spp, seed=0).numpy(), args.repeats
+            lambda sensor=sensor: mi.render(scene, sensor=sensor, spp=args.spp, seed=0).numpy(),
+            args.repeats,
         )
         rays = cam.num_detectors * res * res * args.spp
         row = {
@@ -104,12 +116,17 @@ def main() -> None:
             f"{cam.num_detectors} detectors x {res}x{res} x {args.spp} spp: "
             f"{row['seconds_median'] * 1e3:.1f} ms median [{row['seconds_min'] * 1e3:.1f}, "
             f"{row['seconds_max'] * 1e3:.1f}], {row['mrays_per_s']:.1f} Mrays/s; plain Mitsuba "
-            f"{row['plain_mitsuba_seconds_median'] * 1e3:.1f} ms (ratio {row['overhead_ratio']:.2f}); "
+            f"{row['plain_mitsuba_seconds_median'] * 1e3:.1f} ms "
+            f"(ratio {row['overhead_ratio']:.2f}); "
             f"closed-form error {err:.2e}"
         )
     result = {
         "benchmark": "render_transport, demo scene, default camera",
-        "machine": {"platform": platform.platform(), "processor": platform.processor(), "cpus": __import__("os").cpu_count()},
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor(),
+            "cpus": __import__("os").cpu_count(),
+        },
         "backend": info,
         "git_revision": git_revision(),
         "results": rows_out,

@@ -63,6 +63,7 @@ def use_variant(backend: Backend = Backend.AUTO) -> str:
 
     Raises:
         BackendUnavailableError: the requested backend cannot run here.
+
     """
     backend = Backend(backend)
     want_cuda = backend is Backend.CUDA or (

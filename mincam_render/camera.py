@@ -104,6 +104,7 @@ class DirectionalResponse:
     Args:
         angles_deg: increasing angles from the normal, first 0, last <= 90 (deg).
         relative_sensitivity: ``f`` at those angles, each in [0, 10].
+
     """
 
     angles_deg: tuple[float, ...]
@@ -154,6 +155,7 @@ class DetectorElectronics:
             paper eq. 5), (0, 1].
         integration_time_s: exposure per measurement, sets photon shot noise (s).
         dark_current_a: diode dark current (A), [0, 1e-3].
+
     """
 
     responsivity_a_per_w: float = TYPICAL_RESPONSIVITY_A_PER_W
@@ -167,7 +169,9 @@ class DetectorElectronics:
 
     def __post_init__(self) -> None:
         o = "DetectorElectronics"
-        _check_real(o, "responsivity_a_per_w", self.responsivity_a_per_w, "A/W", 0, 10, lo_open=True)
+        _check_real(
+            o, "responsivity_a_per_w", self.responsivity_a_per_w, "A/W", 0, 10, lo_open=True
+        )
         _check_real(o, "gain_v_per_a", self.gain_v_per_a, "V/A", 1.0, 1e12)
         _check_real(o, "read_noise_v", self.read_noise_v, "V", 0.0, 10.0)
         _check_int(o, "adc_bits", self.adc_bits, 1, 32)
@@ -190,6 +194,7 @@ class DetectorLayout:
 
     Args:
         positions_m: ``((x, y), ...)`` board coordinates of each detector (m).
+
     """
 
     positions_m: tuple[tuple[float, float], ...]
@@ -253,6 +258,7 @@ class FreeformCamera:
         directional_response: angular sensitivity beyond cosine; None = Lambert only.
         electronics: photodiode and read-out chain.
         transmittance_range: ``(min, max)`` printable transmittance, 0 <= min < max <= 1.
+
     """
 
     detector_size_m: float = PROTOTYPE_DETECTOR_SIZE_M
@@ -295,7 +301,9 @@ class FreeformCamera:
         if np.linalg.norm(up) < 1e-12 or np.linalg.norm(np.cross(fwd, up)) < 1e-9 * np.linalg.norm(
             up
         ) * np.linalg.norm(fwd):
-            raise _fail(o, "up", self.up, "", "a non-zero direction not parallel to look_at - position")
+            raise _fail(
+                o, "up", self.up, "", "a non-zero direction not parallel to look_at - position"
+            )
         tr = self.transmittance_range
         if not isinstance(tr, tuple | list) or len(tr) != 2:
             raise _fail(o, "transmittance_range", tr, "", "(min, max) with 0 <= min < max <= 1")
@@ -370,6 +378,7 @@ class FreeformCamera:
 
         Raises:
             ValueError: the point is not in front of the board.
+
         """
         right, up, fwd = self.frame
         rel = np.asarray(point_m, dtype=np.float64) - self.detector_centers_m[detector]

@@ -22,7 +22,9 @@ def _vec3(ctx, param, value):
     try:
         parts = [float(p) for p in value.split(",")]
     except ValueError:
-        raise click.BadParameter(f"{value!r} is not three comma-separated numbers, e.g. 0,0,1") from None
+        raise click.BadParameter(
+            f"{value!r} is not three comma-separated numbers, e.g. 0,0,1"
+        ) from None
     if len(parts) != 3:
         raise click.BadParameter(f"{value!r} has {len(parts)} numbers; expected x,y,z (metres)")
     return tuple(parts)
@@ -41,31 +43,72 @@ def _grid(ctx, param, value):
 def main(verbose: bool) -> None:
     """Render, train and export minimalist cameras of freeform pixels."""
     logging.basicConfig(
-        level=logging.DEBUG if verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s"
+        level=logging.DEBUG if verbose else logging.INFO,
+        format="%(levelname)s %(name)s: %(message)s",
     )
 
 
 @main.command("transport")
 @click.argument("scene", required=False, type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("runs/transport"),
-              show_default=True, help="Output directory (created).")
-@click.option("--spp", type=click.IntRange(1, 1 << 24), default=16, show_default=True,
-              help="Samples per mask texel.")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/transport"),
+    show_default=True,
+    help="Output directory (created).",
+)
+@click.option(
+    "--spp",
+    type=click.IntRange(1, 1 << 24),
+    default=16,
+    show_default=True,
+    help="Samples per mask texel.",
+)
 @click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Random seed.")
-@click.option("--mask-res", type=click.IntRange(1, 4096), default=32, show_default=True,
-              help="Mask resolution (texels per side).")
-@click.option("--grid", "grid", default="4x6", show_default=True, callback=_grid,
-              help="Detector grid ROWSxCOLS on the board.")
-@click.option("--pitch-mm", type=float, default=20.0, show_default=True, help="Detector pitch (mm).")
-@click.option("--position", callback=_vec3, default="0,0,0", show_default=True,
-              help="Board centre x,y,z (m).")
-@click.option("--look-at", callback=_vec3, default="0,0,1", show_default=True,
-              help="Point the board faces x,y,z (m).")
-@click.option("--up", callback=_vec3, default="0,1,0", show_default=True,
-              help="Up direction x,y,z (row 0 of the masks).")
-@click.option("--max-depth", type=click.IntRange(1, 64), default=None,
-              help="Override the scene's path depth (1 = emitters only).")
-def transport_cmd(scene, out, spp, seed, mask_res, grid, pitch_mm, position, look_at, up, max_depth):
+@click.option(
+    "--mask-res",
+    type=click.IntRange(1, 4096),
+    default=32,
+    show_default=True,
+    help="Mask resolution (texels per side).",
+)
+@click.option(
+    "--grid",
+    "grid",
+    default="4x6",
+    show_default=True,
+    callback=_grid,
+    help="Detector grid ROWSxCOLS on the board.",
+)
+@click.option(
+    "--pitch-mm", type=float, default=20.0, show_default=True, help="Detector pitch (mm)."
+)
+@click.option(
+    "--position", callback=_vec3, default="0,0,0", show_default=True, help="Board centre x,y,z (m)."
+)
+@click.option(
+    "--look-at",
+    callback=_vec3,
+    default="0,0,1",
+    show_default=True,
+    help="Point the board faces x,y,z (m).",
+)
+@click.option(
+    "--up",
+    callback=_vec3,
+    default="0,1,0",
+    show_default=True,
+    help="Up direction x,y,z (row 0 of the masks).",
+)
+@click.option(
+    "--max-depth",
+    type=click.IntRange(1, 64),
+    default=None,
+    help="Override the scene's path depth (1 = emitters only).",
+)
+def transport_cmd(
+    scene, out, spp, seed, mask_res, grid, pitch_mm, position, look_at, up, max_depth
+):
     """Render transport images T[detector, row, col] of a camera in a scene.
 
     SCENE is a Mitsuba XML file; without it the built-in demo scene is used.
@@ -93,8 +136,14 @@ def transport_cmd(scene, out, spp, seed, mask_res, grid, pitch_mm, position, loo
         )
         scene_input = str(scene) if scene is not None else demo_scene()
         info = backend.describe()
-        log.info("rendering %d detectors x %dx%d texels x %d spp (%s)", camera.num_detectors,
-                 mask_res, mask_res, spp, info["variant"])
+        log.info(
+            "rendering %d detectors x %dx%d texels x %d spp (%s)",
+            camera.num_detectors,
+            mask_res,
+            mask_res,
+            spp,
+            info["variant"],
+        )
         t0 = time.perf_counter()
         t = render_transport(scene_input, camera, spp=spp, seed=seed, max_depth=max_depth)
         seconds = time.perf_counter() - t0
@@ -114,7 +163,8 @@ def transport_cmd(scene, out, spp, seed, mask_res, grid, pitch_mm, position, loo
     }
     write_transport_exr(out / "transport.exr", t, config)
     plot_transport_grid(
-        t, out / "transport.png",
+        t,
+        out / "transport.png",
         title=f"transport images, {config['scene']}, {spp} spp",
         board_positions_m=np.asarray(camera.layout.positions_m),
     )

@@ -1,12 +1,12 @@
-"""The differentiable mask plane: mask logits -> transmittance -> detector power.
+r"""The differentiable mask plane: mask logits -> transmittance -> detector power.
 
 This is the one module that converts between Dr.Jit and PyTorch (``dr.wrap``).
 The measurement of detector ``k`` for frame ``b`` is
 
 .. math::
 
-    P_{bk} = \\sum_{v,u} T_{bkvu}\\, M_{kvu}, \\qquad
-    M = m_{lo} + (m_{hi} - m_{lo})\\,\\sigma(M_t)
+    P_{bk} = \sum_{v,u} T_{bkvu}\, M_{kvu}, \qquad
+    M = m_{lo} + (m_{hi} - m_{lo})\,\sigma(M_t)
 
 (paper eqs. 1-2 with the printable range of supplement B). ``T`` is the
 transport image in watts (see :mod:`mincam_render.transport`), ``M_t`` the
@@ -84,6 +84,7 @@ def mask_power(
 
     Raises:
         ValueError: shapes, dtypes or devices do not match.
+
     """
     if transport.ndim != 4:
         raise ValueError(

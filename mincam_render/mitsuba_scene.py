@@ -28,6 +28,7 @@ def load_scene(scene: SceneInput) -> mi.Scene:
 
     Raises:
         SceneError: the file is missing or unreadable, or Mitsuba rejects the scene.
+
     """
     use_variant()
     if isinstance(scene, mi.Scene):
@@ -86,7 +87,7 @@ def constant_environment(radiance_w_m2_sr: float) -> dict[str, Any]:
 def rectangle(
     center_m, facing_m, size_m, bsdf=None, radiance_w_m2_sr: float | None = None, up=(0.0, 1.0, 0.0)
 ) -> dict[str, Any]:
-    """A rectangle of ``size_m = (width, height)`` centred at ``center_m`` whose front faces ``facing_m``.
+    """A ``(width, height)`` rectangle centred at ``center_m``, front facing ``facing_m``.
 
     With ``radiance_w_m2_sr`` it is an area emitter (one-sided, W m^-2 sr^-1).
     """
@@ -138,7 +139,11 @@ def demo_scene() -> dict[str, Any]:
             ),
             # world -x is the camera's right (board looks along +z with +y up)
             "lamp": rectangle(
-                (-0.6, 0.5, 1.95), (-0.6, 0.5, 0.0), (0.4, 0.3), diffuse(0.0), radiance_w_m2_sr=200.0
+                (-0.6, 0.5, 1.95),
+                (-0.6, 0.5, 0.0),
+                (0.4, 0.3),
+                diffuse(0.0),
+                radiance_w_m2_sr=200.0,
             ),
             "ball": sphere((0.4, -0.6, 1.2), 0.3, diffuse(0.8)),
         }
@@ -202,7 +207,11 @@ def with_mask_geometry(
         ("_mincam_wall_py", (0, w / 2, d / 2), rot_x90, (w / 2, d / 2, 1)),
         ("_mincam_wall_ny", (0, -w / 2, d / 2), rot_x90, (w / 2, d / 2, 1)),
     ):
-        out[name] = {"type": "rectangle", "to_world": placed(offset, scale, extra), "bsdf": diffuse(0.0)}
+        out[name] = {
+            "type": "rectangle",
+            "to_world": placed(offset, scale, extra),
+            "bsdf": diffuse(0.0),
+        }
     out["_mincam_diode"] = {
         "type": "rectangle",
         "to_world": placed((0, 0, 0), (a / 2, a / 2, 1)),
@@ -219,3 +228,97 @@ def with_mask_geometry(
         },
     }
     return out
+
+
+def mesh(
+    name: str, vertices_m, faces, *, reflectance: float, radiance_w_m2_sr: float | None = None
+):
+    """A triangle mesh object (e.g. from trimesh) with a diffuse BSDF, for a scene dict.
+
+    Its ``vertex_positions`` can be updated per frame with ``mi.traverse``
+    (key ``"<dict key>.vertex_positions"``), keeping the face count fixed.
+
+    Args:
+        name: Mitsuba object id.
+        vertices_m: ``(V, 3)`` vertex positions (m).
+        faces: ``(F, 3)`` vertex indices.
+        reflectance: diffuse albedo, 0-1.
+        radiance_w_m2_sr: makes the mesh an area emitter (W m^-2 sr^-1).
+    """
+    import numpy as np
+
+    use_variant()
+    v = np.asarray(vertices_m, dtype=np.float32)
+    f = np.asarray(faces, dtype=np.uint32)
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(diffuse(reflectance))
+    if radiance_w_m2_sr is not None:
+        props["emitter"] = mi.load_dict(
+            {"type": "area", "radiance": {"type": "rgb", "value": float(radiance_w_m2_sr)}}
+        )
+    m = mi.Mesh(
+        name,
+        vertex_count=len(v),
+        face_count=len(f),
+        has_vertex_normals=False,
+        has_vertex_texcoords=False,
+        props=props,
+    )
+    params = mi.traverse(m)
+    params["vertex_positions"] = mi.Float(v.ravel())
+    params["faces"] = mi.UInt32(f.ravel())
+    params.update()
+    return m
+
+
+def environment_map(radiance_w_m2_sr, to_world=None) -> dict[str, Any]:
+    """An environment emitter from a lat-long map ``L[row, col]`` (W m^-2 sr^-1).
+
+    Row 0 is the zenith of the map's frame (Mitsuba's +y up by default).
+    The map can be updated per frame via the ``"<key>.data"`` parameter.
+    """
+    import numpy as np
+
+    use_variant()
+    data = np.ascontiguousarray(np.asarray(radiance_w_m2_sr, dtype=np.float32))[..., None]
+    d: dict[str, Any] = {"type": "envmap", "bitmap": mi.Bitmap(data)}
+    if to_world is not None:
+        d["to_world"] = to_world
+    return d
+
+
+def directional_light(direction, irradiance_w_m2: float) -> dict[str, Any]:
+    """A distant light (e.g. the sun) travelling along ``direction``, irradiance in W/m^2."""
+    return {
+        "type": "directional",
+        "direction": list(map(float, direction)),
+        "irradiance": {"type": "rgb", "value": float(irradiance_w_m2)},
+    }
+
+
+def spot_light(position_m, target_m, intensity_w_sr: float, cutoff_deg: float = 60.0) -> dict:
+    """A spot light of radiant intensity ``intensity_w_sr`` (W/sr) on its axis."""
+    return {
+        "type": "spot",
+        "to_world": _to_world(position_m, target_m, _any_up(position_m, target_m)),
+        "intensity": {"type": "rgb", "value": float(intensity_w_sr)},
+        "cutoff_angle": float(cutoff_deg),
+        "beam_width": float(cutoff_deg) * 0.75,
+    }
+
+
+def point_light(position_m, intensity_w_sr: float) -> dict[str, Any]:
+    """An isotropic point light of radiant intensity ``intensity_w_sr`` (W/sr)."""
+    return {
+        "type": "point",
+        "position": list(map(float, position_m)),
+        "intensity": {"type": "rgb", "value": float(intensity_w_sr)},
+    }
+
+
+def _any_up(position, target):
+    import numpy as np
+
+    d = np.subtract(target, position)
+    d = d / np.linalg.norm(d)
+    return (0.0, 0.0, 1.0) if abs(d[1]) > 0.9 else (0.0, 1.0, 0.0)

@@ -29,11 +29,19 @@ def plot_transport_grid(
     """
     t = np.asarray(transport_w, dtype=np.float64)
     k = t.shape[0]
-    cols = min(k, 6) if board_positions_m is None else len(np.unique(np.round(board_positions_m[:, 0], 6)))
+    cols = (
+        min(k, 6)
+        if board_positions_m is None
+        else len(np.unique(np.round(board_positions_m[:, 0], 6)))
+    )
     cols = max(1, min(cols, k))
     rows = math.ceil(k / cols)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(1.9 * cols + 1.2, 1.9 * rows + 0.8), squeeze=False, constrained_layout=True
+        rows,
+        cols,
+        figsize=(1.9 * cols + 1.2, 1.9 * rows + 0.8),
+        squeeze=False,
+        constrained_layout=True,
     )
     vmax = float(np.percentile(t, 99.5)) or 1.0
     # a power-law scale keeps dim walls visible next to a bright lamp

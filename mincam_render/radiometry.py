@@ -1,23 +1,23 @@
-"""Closed-form radiometry of the freeform pixel geometry (float64 numpy).
+r"""Closed-form radiometry of the freeform pixel geometry (float64 numpy).
 
 For two parallel rectangles facing each other at distance ``z`` (a detector and
 a region of its mask plane), the coupling integral
 
 .. math::
 
-    \\mathcal{G} = \\int_{A_1}\\int_{A_2} \\frac{\\cos\\theta_1\\cos\\theta_2}{r^2}
-        \\,dA_2\\,dA_1 = \\pi A_1 F_{12}
+    \mathcal{G} = \int_{A_1}\int_{A_2} \frac{\cos\theta_1\cos\theta_2}{r^2}
+        \,dA_2\,dA_1 = \pi A_1 F_{12}
 
 has a closed form (the view factor between parallel rectangles, obtained by
 contour integration; e.g. Howell's catalogue of configuration factors):
 
 .. math::
 
-    \\mathcal{G} = \\tfrac12 \\sum_{i,j,k,l \\in \\{1,2\\}} (-1)^{i+j+k+l}\\,
-        g(x_i - \\xi_k,\\; y_j - \\eta_l), \\quad
-    g(u, v) = v\\sqrt{u^2+z^2}\\,\\operatorname{atan}\\tfrac{v}{\\sqrt{u^2+z^2}}
-            + u\\sqrt{v^2+z^2}\\,\\operatorname{atan}\\tfrac{u}{\\sqrt{v^2+z^2}}
-            - \\tfrac{z^2}{2}\\ln(u^2+v^2+z^2).
+    \mathcal{G} = \tfrac12 \sum_{i,j,k,l \in \{1,2\}} (-1)^{i+j+k+l}\,
+        g(x_i - \xi_k,\; y_j - \eta_l), \quad
+    g(u, v) = v\sqrt{u^2+z^2}\,\operatorname{atan}\tfrac{v}{\sqrt{u^2+z^2}}
+            + u\sqrt{v^2+z^2}\,\operatorname{atan}\tfrac{u}{\sqrt{v^2+z^2}}
+            - \tfrac{z^2}{2}\ln(u^2+v^2+z^2).
 
 A uniform radiance ``L`` seen through a fully open aperture ``A_2`` delivers
 ``P = L * G`` watts onto ``A_1``.
@@ -55,6 +55,7 @@ def parallel_rectangles_coupling(
 
     Raises:
         ValueError: non-positive distance or empty rectangles.
+
     """
     x1, x2, y1, y2 = map(float, rect1_m)
     k1, k2, l1, l2 = map(float, rect2_m)

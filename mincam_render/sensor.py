@@ -1,13 +1,13 @@
-"""Detector electronics: from optical power to the freeform pixel's output voltage.
+r"""Detector electronics: from optical power to the freeform pixel's output voltage.
 
 Paper eqs. 3-5 plus photon shot noise (which the paper omits):
 
 .. math::
 
-    I = R\\,P + I_{dark}, \\qquad
-    p_n = G I + n_{shot} + n_r + n_q, \\qquad
-    p_f = \\begin{cases} p_n & p_n \\le p_{max} \\\\
-          \\alpha (p_n - p_{max}) + p_{max} & p_n > p_{max} \\end{cases}
+    I = R\,P + I_{dark}, \qquad
+    p_n = G I + n_{shot} + n_r + n_q, \qquad
+    p_f = \begin{cases} p_n & p_n \le p_{max} \\
+          \alpha (p_n - p_{max}) + p_{max} & p_n > p_{max} \end{cases}
 
 with ``n_shot ~ N(0, G^2 q I / t)`` (Poisson photo-electrons over the
 integration time ``t``, Gaussian limit), ``n_r ~ N(0, sigma_r^2)``,
@@ -52,6 +52,7 @@ def detector_voltage(
 
     Returns:
         ``p_f[..., detector]`` in volts, same shape, dtype and device as ``power_w``.
+
     """
     e = electronics
     current_a = e.responsivity_a_per_w * power_w + e.dark_current_a

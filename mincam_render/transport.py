@@ -1,13 +1,13 @@
-"""Transport images: the power each mask texel would pass to its detector.
+r"""Transport images: the power each mask texel would pass to its detector.
 
 For detector ``k`` with active area ``A_d`` and texel ``(v, u)`` of area ``A_t``
 on its mask plane (distance ``d``, parallel to the detector):
 
 .. math::
 
-    T_k(v, u) = \\int_{A_d} \\int_{A_t} L(q \\to x)\\,
-        \\frac{\\cos\\theta_q \\cos\\theta_x}{|x - q|^2}\\, f(\\theta)\\, dx\\, dq,
-    \\qquad \\cos\\theta_q = \\cos\\theta_x = d / |x - q|
+    T_k(v, u) = \int_{A_d} \int_{A_t} L(q \to x)\,
+        \frac{\cos\theta_q \cos\theta_x}{|x - q|^2}\, f(\theta)\, dx\, dq,
+    \qquad \cos\theta_q = \cos\theta_x = d / |x - q|
 
 in watts, where ``L`` is radiance (W m^-2 sr^-1) arriving from the scene along
 ``q -> x`` and ``f`` is the diode's directional response beyond Lambert's
@@ -49,14 +49,18 @@ _RESPONSE_TABLE_SIZE = 181
 
 @dataclass(frozen=True)
 class _PassGeometry:
-    """Dr.Jit arrays describing one camera (inputs of the frozen pass)."""
+    """Dr.Jit arrays describing one camera (inputs of the frozen pass).
 
-    centers: mi.Point3f  # detector centres, K entries (m)
-    right: mi.Vector3f  # board axes, 1 entry each
-    up: mi.Vector3f
-    forward: mi.Vector3f
-    sizes: mi.Float  # [detector side, mask side, mask distance] (m)
+    Scalars live in one array of >= 15 floats, not in size-1 arrays: the load
+    alignment Dr.Jit emits for a size-1 array depends on its address, which
+    changes the kernel hash and forces needless recompilation.
+    """
+
+    params: mi.Float  # [a_det, w_mask, d, right xyz, up xyz, fwd xyz, centres xyz * K] (m)
     response: mi.Float  # f(theta) on a uniform grid over [0, pi/2]
+
+
+_CENTERS_OFFSET = 12
 
 
 def _transport_pass(
@@ -77,9 +81,20 @@ def _transport_pass(
     v = (texel // cols) % rows
     k = texel // (cols * rows)
 
-    a_det = dr.gather(mi.Float, geo.sizes, 0)
-    w_mask = dr.gather(mi.Float, geo.sizes, 1)
-    dist = dr.gather(mi.Float, geo.sizes, 2)
+    def scalar(i: int) -> mi.Float:
+        return dr.gather(mi.Float, geo.params, i)
+
+    def vec(i: int) -> mi.Vector3f:
+        return mi.Vector3f(scalar(i), scalar(i + 1), scalar(i + 2))
+
+    a_det, w_mask, dist = scalar(0), scalar(1), scalar(2)
+    right, up, fwd = vec(3), vec(6), vec(9)
+    base = _CENTERS_OFFSET + 3 * k
+    center = mi.Point3f(
+        dr.gather(mi.Float, geo.params, base),
+        dr.gather(mi.Float, geo.params, base + 1),
+        dr.gather(mi.Float, geo.params, base + 2),
+    )
 
     xi_q = sampler.next_2d()
     xi_x = sampler.next_2d()
@@ -93,10 +108,6 @@ def _transport_pass(
     r2 = dr.fma(ds, ds, dr.fma(dt, dt, dist * dist))
     inv_r = dr.rsqrt(r2)
 
-    right = dr.gather(mi.Vector3f, geo.right, 0)
-    up = dr.gather(mi.Vector3f, geo.up, 0)
-    fwd = dr.gather(mi.Vector3f, geo.forward, 0)
-    center = dr.gather(mi.Point3f, geo.centers, k)
     origin = center + fwd * dist + right * x_s + up * x_t
     direction = dr.normalize((right * ds + up * dt + fwd * dist) * inv_r)
     ray = mi.Ray3f(origin, direction)
@@ -121,11 +132,12 @@ def _transport_pass(
 
 
 #: Passes of at most this many rays replay a frozen recording by default. Measured
-#: on 2 CPU cores (demo scene, LLVM): 8x16x16 texels x 4 spp: frozen 3.3 ms vs
-#: traced 5.1 ms; 24x64x64 x 16 spp: frozen 649 ms vs traced 401 ms (replayed
-#: kernels run slower per ray, so large passes are traced; their kernels still
-#: come from Dr.Jit's cache, not recompiled, when only parameters changed).
-FREEZE_MAX_RAYS = 1 << 15
+#: on 2 CPU cores (demo scene, LLVM, median of 7): 8x16x16 texels x 4 spp: frozen
+#: 4.3 ms vs traced 6.0 ms; 24x32x32 x 16: 98 vs 104 ms; 24x64x64 x 16: 379 vs
+#: 315 ms (replayed kernels run slower per ray, so large passes are traced; their
+#: kernels still come from Dr.Jit's cache, not recompiled, when only parameters
+#: changed).
+FREEZE_MAX_RAYS = 1 << 19
 
 #: Frozen passes keyed by the integrator's configuration: scene parameters are
 #: traced inputs of a recording, but scalar integrator settings (max_depth,
@@ -147,21 +159,13 @@ def _frozen_pass_for(integrator: mi.Integrator):
 
 def _geometry(camera: FreeformCamera) -> _PassGeometry:
     right, up, fwd = camera.frame
-    c = camera.detector_centers_m
     if camera.directional_response is None:
         table = np.ones(_RESPONSE_TABLE_SIZE, dtype=np.float32)
     else:
         table = camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE)
-    return _PassGeometry(
-        centers=mi.Point3f(c[:, 0], c[:, 1], c[:, 2]),
-        right=mi.Vector3f(*[[float(x)] for x in right]),
-        up=mi.Vector3f(*[[float(x)] for x in up]),
-        forward=mi.Vector3f(*[[float(x)] for x in fwd]),
-        sizes=mi.Float(
-            [camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m]
-        ),
-        response=mi.Float(table),
-    )
+    sizes = [camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m]
+    flat = np.concatenate([sizes, right, up, fwd, camera.detector_centers_m.ravel()])
+    return _PassGeometry(params=mi.Float(flat.astype(np.float32)), response=mi.Float(table))
 
 
 def _pass_seed(seed: int, pass_index: int) -> int:
@@ -205,17 +209,25 @@ def render_transport(
     Raises:
         ValueError: bad ``spp``, ``seed``, ``max_depth`` or camera/pass sizes.
         SceneError: the scene cannot be loaded.
+
     """
     if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 24:
-        raise ValueError(f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]")
+        raise ValueError(
+            f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]"
+        )
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        raise ValueError(f"render_transport: seed = {seed!r} is invalid: allowed an integer in [0, 2^63)")
+        raise ValueError(
+            f"render_transport: seed = {seed!r} is invalid: allowed an integer in [0, 2^63)"
+        )
     if max_depth is not None and (not isinstance(max_depth, int) or not 1 <= max_depth <= 64):
         raise ValueError(
-            f"render_transport: max_depth = {max_depth!r} is invalid: allowed None or an integer in [1, 64]"
+            f"render_transport: max_depth = {max_depth!r} is invalid: allowed None or an "
+            "integer in [1, 64]"
         )
     if not isinstance(camera, FreeformCamera):
-        raise ValueError(f"render_transport: camera = {camera!r} is invalid: allowed a FreeformCamera")
+        raise ValueError(
+            f"render_transport: camera = {camera!r} is invalid: allowed a FreeformCamera"
+        )
     use_variant()
     mi_scene = load_scene(scene)
     rows, cols = camera.mask_resolution

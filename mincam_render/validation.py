@@ -36,6 +36,7 @@ def render_through_mask_geometry(
         spp: samples of the irradiance meter.
         seed: Mitsuba sampler seed.
         max_depth: path depth of the transport render being checked.
+
     """
     use_variant()
     m = np.asarray(transmittance, dtype=np.float64)

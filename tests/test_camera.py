@@ -33,7 +33,8 @@ def test_frame_is_right_handed_photo_convention():
 def test_grid_layout_positions_and_texel_centres():
     lay = DetectorLayout.grid(rows=2, cols=3, pitch_m=0.02)
     np.testing.assert_allclose(
-        lay.positions_m, [(-0.02, 0.01), (0, 0.01), (0.02, 0.01), (-0.02, -0.01), (0, -0.01), (0.02, -0.01)]
+        lay.positions_m,
+        [(-0.02, 0.01), (0, 0.01), (0.02, 0.01), (-0.02, -0.01), (0, -0.01), (0.02, -0.01)],
     )
     cam = FreeformCamera(layout=lay, mask_resolution=(4, 8))
     c = cam.texel_centers_m(0)
@@ -93,7 +94,13 @@ def test_bad_electronics_field(name, value):
 
 @pytest.mark.parametrize(
     ("angles", "values"),
-    [((0, 90), (1,)), ((10, 90), (1, 1)), ((0, 60, 50), (1, 1, 1)), ((0, 100), (1, 1)), ((0, 90), (1, -1))],
+    [
+        ((0, 90), (1,)),
+        ((10, 90), (1, 1)),
+        ((0, 60, 50), (1, 1, 1)),
+        ((0, 100), (1, 1)),
+        ((0, 90), (1, -1)),
+    ],
 )
 def test_bad_directional_response(angles, values):
     with pytest.raises(ValueError, match=r"DirectionalResponse\."):

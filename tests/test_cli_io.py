@@ -21,7 +21,20 @@ def test_exr_round_trip_is_exact(tmp_path, rng):
 def test_cli_transport_writes_exr_png_and_config(variant, tmp_path):
     out = tmp_path / "run"
     res = CliRunner().invoke(
-        main, ["transport", "--out", str(out), "--grid", "1x2", "--mask-res", "8", "--spp", "4", "--seed", "0"]
+        main,
+        [
+            "transport",
+            "--out",
+            str(out),
+            "--grid",
+            "1x2",
+            "--mask-res",
+            "8",
+            "--spp",
+            "4",
+            "--seed",
+            "0",
+        ],
     )
     assert res.exit_code == 0, res.output
     t, meta = read_transport_exr(out / "transport.exr")
@@ -53,5 +66,7 @@ def test_cli_bad_arguments_fail_with_one_clear_line_and_no_output(variant, tmp_p
 
 
 def test_cli_missing_scene_file(variant, tmp_path):
-    res = CliRunner().invoke(main, ["transport", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")])
+    res = CliRunner().invoke(
+        main, ["transport", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")]
+    )
     assert res.exit_code != 0 and "does not exist" in res.output

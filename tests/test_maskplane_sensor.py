@@ -28,7 +28,9 @@ def test_mask_power_matches_numpy(rng):
     for dtype in (torch.float32, torch.float64):
         p = mask_power(torch.tensor(t, dtype=dtype), torch.tensor(logits, dtype=dtype), RANGE)
         assert p.shape == (5, 3) and p.dtype == dtype
-        np.testing.assert_allclose(p.numpy(), numpy_power(t, logits), rtol=1e-5 if dtype == torch.float32 else 1e-12)
+        np.testing.assert_allclose(
+            p.numpy(), numpy_power(t, logits), rtol=1e-5 if dtype == torch.float32 else 1e-12
+        )
 
 
 def test_open_and_closed_masks_hit_the_printable_limits(rng):
@@ -61,8 +63,18 @@ def test_mask_power_gradients_match_finite_differences(rng):
     lg = logits.clone().requires_grad_()
     tg = t.clone().requires_grad_()
     loss(tg, lg).backward()
-    np.testing.assert_allclose(lg.grad.numpy(), central_fd(lambda x: loss(t, x), logits, 1e-6).numpy(), rtol=1e-6, atol=1e-10)
-    np.testing.assert_allclose(tg.grad.numpy(), central_fd(lambda x: loss(x, logits), t, 1e-6).numpy(), rtol=1e-6, atol=1e-10)
+    np.testing.assert_allclose(
+        lg.grad.numpy(),
+        central_fd(lambda x: loss(t, x), logits, 1e-6).numpy(),
+        rtol=1e-6,
+        atol=1e-10,
+    )
+    np.testing.assert_allclose(
+        tg.grad.numpy(),
+        central_fd(lambda x: loss(x, logits), t, 1e-6).numpy(),
+        rtol=1e-6,
+        atol=1e-10,
+    )
 
 
 def test_torch_grad_equals_drjit_side_closed_form(rng):
@@ -164,10 +176,12 @@ def test_noise_off_is_deterministic_and_noise_on_is_seeded():
 
 def test_sensor_gradcheck_float64():
     e = DetectorElectronics(full_scale_v=3.2, saturation_slope=0.05)
-    p = torch.tensor([[1e-8, 4e-7, 2e-6]], dtype=torch.float64, requires_grad=True)  # last saturates
+    p = torch.tensor(
+        [[1e-8, 4e-7, 2e-6]], dtype=torch.float64, requires_grad=True
+    )  # last saturates
 
     def f(x):
-        return detector_voltage(x * 1e-6, e, generator=torch.Generator().manual_seed(1)) 
+        return detector_voltage(x * 1e-6, e, generator=torch.Generator().manual_seed(1))
 
     assert torch.autograd.gradcheck(f, (p * 1e6,), eps=1e-6, atol=1e-6, rtol=1e-4)
 
@@ -194,7 +208,11 @@ def test_chain_finite_with_gradients_from_moonless_to_sunlit(radiance):
     """Transport scales with radiance: ~1e-9 W per texel per W m^-2 sr^-1 for the prototype."""
     t = torch.full((2, 3, 8, 8), 1e-9 * radiance)
     logits = torch.zeros(3, 8, 8, requires_grad=True)
-    v = detector_voltage(mask_power(t, logits, RANGE), DetectorElectronics(), generator=torch.Generator().manual_seed(0))
+    v = detector_voltage(
+        mask_power(t, logits, RANGE),
+        DetectorElectronics(),
+        generator=torch.Generator().manual_seed(0),
+    )
     v.sum().backward()
     assert torch.isfinite(v).all() and torch.isfinite(logits.grad).all()
     assert (logits.grad.abs() > 0).all()

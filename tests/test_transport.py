@@ -75,7 +75,9 @@ def test_open_mask_in_uniform_sky_matches_closed_form(variant, tmp_path, res, po
 
 def test_directional_response_against_quadrature(variant):
     """f(theta) multiplies each ray: compare with a float64 Gauss-Legendre integral."""
-    resp = DirectionalResponse(angles_deg=(0, 20, 40, 60, 90), relative_sensitivity=(1, 0.95, 0.8, 0.5, 0))
+    resp = DirectionalResponse(
+        angles_deg=(0, 20, 40, 60, 90), relative_sensitivity=(1, 0.95, 0.8, 0.5, 0)
+    )
     cam = single(mask_resolution=(16, 16), directional_response=resp)
     t = render_transport(uniform_sky(), cam, spp=32, seed=1)
     a, w, d = cam.detector_size_m, cam.mask_size_m, cam.mask_distance_m
@@ -118,7 +120,9 @@ def test_orientation_up_right_emitter_lands_top_right(variant):
 
 def test_parallax_between_two_detectors_is_baseline_times_distance_over_depth(variant):
     baseline, depth = 0.020, 0.3
-    cam = FreeformCamera(layout=DetectorLayout.row(count=2, pitch_m=baseline), mask_resolution=(64, 64))
+    cam = FreeformCamera(
+        layout=DetectorLayout.row(count=2, pitch_m=baseline), mask_resolution=(64, 64)
+    )
     t = render_transport(point_light_scene((0.0, 0.0, depth)), cam, spp=256, seed=0)
     (r0, c0), (r1, c1) = centroid(t[0]), centroid(t[1])
     texel = cam.texel_size_m[1]
@@ -129,18 +133,24 @@ def test_parallax_between_two_detectors_is_baseline_times_distance_over_depth(va
 
 def test_mirrored_scene_gives_mirrored_transport(variant):
     cam = single(mask_resolution=(16, 16))
+
     def scene(sign):
         return ms.scene_dict(
             {
-                "lamp": ms.rectangle((sign * 0.3, 0.2, 1.0), (0, 0, 0), (0.2, 0.3), radiance_w_m2_sr=10.0),
+                "lamp": ms.rectangle(
+                    (sign * 0.3, 0.2, 1.0), (0, 0, 0), (0.2, 0.3), radiance_w_m2_sr=10.0
+                ),
                 "wall": ms.rectangle((0, 0, 2.0), (0, 0, 0), (4, 4), ms.diffuse(0.5)),
             },
             max_depth=3,
         )
+
     a = render_transport(scene(+1), cam, spp=4096, seed=0)
     b = render_transport(scene(-1), cam, spp=4096, seed=1)
     # column sums: texels half-covered by the lamp's edge have ~1.5 % MC noise at 4096 spp
-    np.testing.assert_allclose(a.sum(axis=1), b[:, :, ::-1].sum(axis=1), rtol=0.06, atol=2e-3 * a.max())
+    np.testing.assert_allclose(
+        a.sum(axis=1), b[:, :, ::-1].sum(axis=1), rtol=0.06, atol=2e-3 * a.max()
+    )
     assert float(a.sum()) == pytest.approx(float(b.sum()), rel=0.01)
 
 
@@ -156,11 +166,15 @@ def test_batched_detectors_equal_single_renders(variant):
         },
         max_depth=3,
     )
-    batched = render_transport(scene, FreeformCamera(layout=lay, mask_resolution=(8, 8)), spp=1024, seed=0)
+    batched = render_transport(
+        scene, FreeformCamera(layout=lay, mask_resolution=(8, 8)), spp=1024, seed=0
+    )
     for k, pos in enumerate(lay.positions_m):
         one = render_transport(
-            scene, FreeformCamera(layout=DetectorLayout(positions_m=(pos,)), mask_resolution=(8, 8)),
-            spp=1024, seed=7,
+            scene,
+            FreeformCamera(layout=DetectorLayout(positions_m=(pos,)), mask_resolution=(8, 8)),
+            spp=1024,
+            seed=7,
         )
         blocks_b = batched[k].reshape(4, 2, 4, 2).sum(axis=(1, 3))
         blocks_1 = one[0].reshape(4, 2, 4, 2).sum(axis=(1, 3))
@@ -171,7 +185,9 @@ def test_batched_detectors_equal_single_renders(variant):
 @pytest.mark.parametrize("depth", [1, 3])
 def test_transport_dot_mask_equals_mitsuba_render_of_mask_geometry(variant, rng, depth):
     """Linearity against an independent path: irradiance meter behind a mask sheet."""
-    cam = single(mask_resolution=(8, 8), position=(0.1, 0.2, -0.1), look_at=(0.3, 0.5, 1.5), up=(0.2, 1, 0))
+    cam = single(
+        mask_resolution=(8, 8), position=(0.1, 0.2, -0.1), look_at=(0.3, 0.5, 1.5), up=(0.2, 1, 0)
+    )
     scene = ms.scene_dict(
         {
             "sky": ms.constant_environment(0.5),
@@ -182,7 +198,9 @@ def test_transport_dot_mask_equals_mitsuba_render_of_mask_geometry(variant, rng,
         max_depth=depth,
     )
     mask = rng.uniform(0.01, 0.67, size=(8, 8))
-    ours = [float((render_transport(scene, cam, spp=2048, seed=s)[0] * mask).sum()) for s in range(4)]
+    ours = [
+        float((render_transport(scene, cam, spp=2048, seed=s)[0] * mask).sum()) for s in range(4)
+    ]
     ref = [
         render_through_mask_geometry(scene, cam, 0, mask, spp=1 << 19, seed=s, max_depth=depth)
         for s in range(4)
@@ -190,7 +208,9 @@ def test_transport_dot_mask_equals_mitsuba_render_of_mask_geometry(variant, rng,
     # standard errors of the two means from the spread of independent seeds
     sigma = math.hypot(np.std(ours, ddof=1) / 2, np.std(ref, ddof=1) / 2)
     diff = abs(np.mean(ours) - np.mean(ref))
-    assert diff < 4 * sigma + 1e-3 * np.mean(ref), f"{np.mean(ours):.5e} vs {np.mean(ref):.5e} W, sigma {sigma:.2e}"
+    assert diff < 4 * sigma + 1e-3 * np.mean(ref), (
+        f"{np.mean(ours):.5e} vs {np.mean(ref):.5e} W, sigma {sigma:.2e}"
+    )
 
 
 def test_parameter_update_replays_kernel_without_retracing(variant):
@@ -208,7 +228,7 @@ def test_parameter_update_replays_kernel_without_retracing(variant):
     assert key in params
     run = transport._frozen_pass_for(scene.integrator())
     recordings = None
-    for x in (0.0, -0.2, 0.1, 0.3):
+    for i, x in enumerate((0.0, 0.05, -0.2, 0.1, 0.3)):
         params[key] = mi.ScalarTransform4f().translate([x, 0.0, 1.0]).scale(0.05)
         params.update()
         frozen = render_transport(scene, cam, spp=64, seed=0, freeze=True)
@@ -217,8 +237,10 @@ def test_parameter_update_replays_kernel_without_retracing(variant):
         assert transport._frozen_pass_for(scene.integrator()) is run, "recording failed"
         _, col = centroid(frozen[0])
         assert col == pytest.approx(cam.project_to_texel((x, 0.0, 1.0), 0)[1], abs=0.3)
-        # the first update may record once; later updates must replay that recording
-        recordings = run.n_recordings if recordings is None else recordings
+        # the first updates may record anew (literal parameters become opaque);
+        # later updates must replay that recording
+        if i < 2:
+            recordings = run.n_recordings
         assert run.n_recordings == recordings
 
 
@@ -228,16 +250,22 @@ def test_traced_parameter_update_reuses_compiled_kernels(variant):
     cam = single(mask_resolution=(16, 16))
     scene = ms.load_scene(ms.demo_scene())
     params = mi.traverse(scene)
-    render_transport(scene, cam, spp=64, seed=0, freeze=False)  # compile once
+    # history instrumentation changes the kernels' hashes: enable it before compiling
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
-        for x in (0.1, 0.3):
+        # the first update may turn literal parameters into opaque ones: one
+        # recompilation; every later update must reuse the compiled kernels
+        for x in (0.0, 0.1, 0.3):
             params["ball.to_world"] = mi.ScalarTransform4f().translate([x, -0.6, 1.2]).scale(0.3)
             params.update()
             dr.kernel_history()  # clears the history
             render_transport(scene, cam, spp=64, seed=0, freeze=False)
             jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
-            assert jit and all(k["cache_hit"] for k in jit), "a kernel was recompiled"
+            if x == 0.0:
+                continue
+            assert jit and all(k["cache_hit"] for k in jit), [
+                (k["hash"][:6], k["cache_hit"], k["size"]) for k in jit
+            ]
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
 
@@ -283,7 +311,12 @@ def test_bad_scenes_raise_clear_errors(variant, tmp_path):
 
 @pytest.mark.parametrize(
     ("kw", "match"),
-    [({"spp": 0}, "spp"), ({"seed": -1}, "seed"), ({"max_depth": 0}, "max_depth"), ({"spp": 2.5}, "spp")],
+    [
+        ({"spp": 0}, "spp"),
+        ({"seed": -1}, "seed"),
+        ({"max_depth": 0}, "max_depth"),
+        ({"spp": 2.5}, "spp"),
+    ],
 )
 def test_bad_render_arguments(variant, kw, match):
     with pytest.raises(ValueError, match=match):
@@ -293,7 +326,8 @@ def test_bad_render_arguments(variant, kw, match):
 def test_user_xml_scene_renders(variant, tmp_path):
     xml = tmp_path / "sky.xml"
     xml.write_text(
-        "<scene version='3.0.0'><emitter type='constant'><rgb name='radiance' value='3.0'/></emitter></scene>"
+        "<scene version='3.0.0'><emitter type='constant'>"
+        "<rgb name='radiance' value='3.0'/></emitter></scene>"
     )
     cam = single(mask_resolution=(8, 8))
     t = render_transport(xml, cam, spp=16)
