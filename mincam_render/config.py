@@ -161,14 +161,15 @@ def load_toml(cls: type[T], path: str | os.PathLike, overrides: dict | None = No
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
     if overrides:
-        table = _merge(table, overrides)
+        table = merge(table, overrides)
     return parse(cls, table, source=str(path))
 
 
-def _merge(base: dict, over: dict) -> dict:
+def merge(base: dict, over: dict) -> dict:
+    """Recursively overlay ``over`` on ``base`` (new dict)."""
     out = dict(base)
     for k, v in over.items():
-        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
     return out
 
 

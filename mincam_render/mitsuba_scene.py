@@ -322,3 +322,45 @@ def _any_up(position, target):
     d = np.subtract(target, position)
     d = d / np.linalg.norm(d)
     return (0.0, 0.0, 1.0) if abs(d[1]) > 0.9 else (0.0, 1.0, 0.0)
+
+
+def textured_emitter_rectangle(center_m, facing_m, size_m, radiance_w_m2_sr, up=(0.0, 1.0, 0.0)):
+    """A rectangle emitting a radiance image ``L[row, col]`` (W m^-2 sr^-1), nearest filtered.
+
+    Row 0 of the image is the ``up`` edge and column 0 the left edge as seen by
+    a viewer the rectangle faces. Update per frame via ``"<key>.emitter.radiance.data"``
+    with :func:`emitter_image_data`.
+    """
+    import numpy as np
+
+    use_variant()
+    w, h = size_m
+    data = emitter_image_data(np.asarray(radiance_w_m2_sr, dtype=np.float32))
+    return {
+        "type": "rectangle",
+        "to_world": _to_world(center_m, facing_m, up, (w / 2.0, h / 2.0, 1.0)),
+        "bsdf": diffuse(0.0),
+        "emitter": {
+            "type": "area",
+            "radiance": {
+                "type": "bitmap",
+                "bitmap": mi.Bitmap(data.numpy()),
+                "raw": True,
+                "filter_type": "nearest",
+            },
+        },
+    }
+
+
+def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
+    """Tensor for a textured rectangle's ``radiance.data`` from ``L[row, col]``.
+
+    Mitsuba's bitmap rows start at the rectangle's local -y (bottom) edge, so the
+    image is flipped vertically; columns already run left to right for a viewer
+    the rectangle faces (checked by ``tests/test_generators.py``).
+    """
+    import numpy as np
+
+    use_variant()
+    img = np.asarray(radiance_w_m2_sr, dtype=np.float32)
+    return mi.TensorXf(np.ascontiguousarray(img[::-1, :])[..., None])
