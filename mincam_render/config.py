@@ -131,7 +131,7 @@ def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") 
     unknown = sorted(set(table) - set(fields))
     if unknown:
         raise ConfigError(
-            f"{source}: unknown key {prefix}{unknown[0]!r} in {cls.__name__}; allowed: "
+            f"{source}: unknown key '{prefix}{unknown[0]}' in {cls.__name__}; allowed: "
             f"{', '.join(sorted(fields))}"
         )
     kwargs = {}

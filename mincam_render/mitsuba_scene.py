@@ -364,3 +364,23 @@ def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
     use_variant()
     img = np.asarray(radiance_w_m2_sr, dtype=np.float32)
     return mi.TensorXf(np.ascontiguousarray(img[::-1, :])[..., None])
+
+
+def perspective_sensor(position_m, look_at_m, up, fov_deg: float, width: int, height: int):
+    """A pinhole camera (loaded ``mi.Sensor``) for previews: ``fov_deg`` is horizontal."""
+    use_variant()
+    return mi.load_dict(
+        {
+            "type": "perspective",
+            "to_world": _to_world(position_m, look_at_m, up),
+            "fov": float(fov_deg),
+            "fov_axis": "x",
+            "film": {
+                "type": "hdrfilm",
+                "width": int(width),
+                "height": int(height),
+                "rfilter": {"type": "box"},
+                "pixel_format": "luminance",
+            },
+        }
+    )

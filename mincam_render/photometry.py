@@ -36,9 +36,9 @@ def irradiance_to_lux(irradiance_w_m2: float) -> float:
 
 
 def lambertian_radiance(power_w: float, area_m2: float) -> float:
-    """Radiance (W m^-2 sr^-1) of a one-sided Lambertian emitter of ``power_w`` over ``area_m2``.
+    r"""Radiance (W m^-2 sr^-1) of a one-sided Lambertian emitter of ``power_w`` on ``area_m2``.
 
-    .. math:: L = \\Phi / (\\pi A)
+    .. math:: L = \Phi / (\pi A)
     """
     if area_m2 <= 0:
         raise ValueError(f"area_m2 = {area_m2!r} must be > 0")

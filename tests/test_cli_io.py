@@ -70,3 +70,30 @@ def test_cli_missing_scene_file(variant, tmp_path):
         main, ["transport", str(tmp_path / "nope.xml"), "--out", str(tmp_path / "o")]
     )
     assert res.exit_code != 0 and "does not exist" in res.output
+
+
+def test_cli_preview_writes_a_png(variant, tmp_path):
+    res = CliRunner().invoke(
+        main,
+        [
+            "preview",
+            "patches",
+            "--out",
+            str(tmp_path),
+            "--frames",
+            "2",
+            "--spp",
+            "2",
+            "--duration-s",
+            "1",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    png = (tmp_path / "preview_patches.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10000
+
+
+def test_cli_preview_unknown_family(variant, tmp_path):
+    res = CliRunner().invoke(main, ["preview", "nosuch", "--out", str(tmp_path / "p")])
+    assert res.exit_code != 0 and "not found" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "p").exists()

@@ -61,6 +61,9 @@ class CameraMount:
     detectors: int = spec(8, range=(1, 64), doc="number of freeform pixels")
     mask_resolution: int = spec(32, range=(1, 512), doc="texels per mask side")
 
+    def __post_init__(self) -> None:
+        self.camera()  # validates the pose; FreeformCamera's ValueError names the field
+
     def camera(self) -> FreeformCamera:
         """The default prototype camera with this pose, detectors in a 2-row grid."""
         from ..camera import MM, DetectorLayout

@@ -62,7 +62,12 @@ class PatchesConfig:
     )
 
     def __post_init__(self) -> None:
-        for name in ("patch_size", "patch_radiance_w_m2_sr", "illumination_amplitude", "illumination_period"):
+        for name in (
+            "patch_size",
+            "patch_radiance_w_m2_sr",
+            "illumination_amplitude",
+            "illumination_period",
+        ):
             lo, hi = getattr(self, name)
             if lo > hi:
                 raise ValueError(f"{name} = {[lo, hi]}: min must not exceed max")
@@ -89,7 +94,11 @@ class PatchesFamily(SceneFamily):
         cam = self.camera()
         right, up, fwd = cam.frame
         centre = np.asarray(cam.position) + self.config.plane_distance_m * fwd
-        side = 2.0 * self.config.plane_distance_m * math.tan(math.radians(self.config.plane_fov_deg) / 2)
+        side = (
+            2.0
+            * self.config.plane_distance_m
+            * math.tan(math.radians(self.config.plane_fov_deg) / 2)
+        )
         return centre, up, np.asarray(cam.position), side
 
     def image(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
@@ -113,11 +122,18 @@ class PatchesFamily(SceneFamily):
         period = rng.uniform(*c.illumination_period)
         orient = rng.uniform(0.0, math.pi)
         phase = rng.uniform(0.0, 2 * math.pi)
-        illum = 1.0 + amp * np.sin(2 * math.pi * (xs * math.cos(orient) + ys * math.sin(orient)) / period + phase)
+        illum = 1.0 + amp * np.sin(
+            2 * math.pi * (xs * math.cos(orient) + ys * math.sin(orient)) / period + phase
+        )
         state = {
             "count": count,
             "patches": patches,
-            "illumination": {"amplitude": amp, "period": period, "orientation_rad": orient, "phase_rad": phase},
+            "illumination": {
+                "amplitude": amp,
+                "period": period,
+                "orientation_rad": orient,
+                "phase_rad": phase,
+            },
         }
         return (img * illum).astype(np.float32), state
 
@@ -126,7 +142,11 @@ class PatchesFamily(SceneFamily):
         img, _ = self.image(0)
         scene = ms.load_scene(
             ms.scene_dict(
-                {_PLANE_KEY: ms.textured_emitter_rectangle(centre, cam_pos, (side, side), img, up=up)},
+                {
+                    _PLANE_KEY: ms.textured_emitter_rectangle(
+                        centre, cam_pos, (side, side), img, up=up
+                    )
+                },
                 max_depth=1,
             )
         )

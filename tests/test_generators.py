@@ -1,0 +1,154 @@
+"""Scene description loading, the family registry and the patches family."""
+
+import dataclasses
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+from mincam_render import mitsuba_scene as ms
+from mincam_render import render_transport
+from mincam_render.config import ConfigError, parse, spec
+from mincam_render.generators import load_family
+from mincam_render.generators.patches import PLANE_RADIANCE_PARAM, PatchesConfig
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Inner:
+    size_m: float = spec(1.0, unit="m", range=(0.0, 10.0))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class Outer:
+    count: int = spec(3, range=(0, 8))
+    name: str = spec("x")
+    inner: Inner = spec(default_factory=Inner)
+    pair: tuple[float, float] = spec((0.0, 1.0))
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"cuont": 3}, r"f.toml: unknown key 'cuont' in Outer; allowed: count, inner, name, pair"),
+        ({"count": 9}, r"f.toml: count = 9: allowed range \[0, 8\]"),
+        ({"count": 2.5}, r"f.toml: count = 2.5: expected an integer"),
+        ({"count": True}, r"f.toml: count = True: expected an integer"),
+        ({"inner": {"size_m": "4e-3"}}, r"f.toml: inner.size_m = '4e-3': expected a number in m"),
+        ({"inner": {"size_m": -1.0}}, r"inner.size_m = -1.0: allowed range \[0.0, 10.0\] m"),
+        ({"inner": {"size": 1.0}}, r"unknown key 'inner.size'"),
+        ({"pair": [1.0]}, r"pair = \[1.0\]: expected an array of 2 values"),
+        ({"name": 3}, r"name = 3: expected a string"),
+    ],
+)
+def test_parse_rejects_bad_values_naming_file_field_and_reason(table, message):
+    with pytest.raises(ConfigError, match=message):
+        parse(Outer, table, source="f.toml")
+
+
+def test_parse_builds_nested_defaults():
+    out = parse(Outer, {"inner": {"size_m": 2}, "pair": [1, 2]}, source="f.toml")
+    assert out == Outer(inner=Inner(size_m=2.0), pair=(1.0, 2.0))
+    assert isinstance(out.inner.size_m, float)
+
+
+def test_shipped_patches_description_matches_defaults():
+    fam = load_family("patches", seed=0, num_frames=3)
+    assert fam.config == PatchesConfig()
+
+
+@pytest.mark.parametrize(
+    ("toml", "message"),
+    [
+        ('family = "patches"\nmax_patches = -1\n', r"max_patches = -1: allowed range"),
+        ('family = "patches"\npatch_size = [0.3, 0.1]\n', r"patch_size .*min must not exceed max"),
+        (
+            'family = "patches"\nplane_distance_m = "1 m"\n',
+            r"plane_distance_m = '1 m': expected a number",
+        ),
+        ('family = "patches"\n[camera]\nposition = [0, 0, 0]\nlook_at = [0, 0, 0]\n', r"look_at"),
+        ('family = "nope"\n', r"unknown scene family 'nope'"),
+        ("max_patches = 3\n", r"missing top-level key family"),
+        ('family = "patches"\nmax_patches = [\n', r"not valid TOML"),
+    ],
+)
+def test_bad_descriptions_are_rejected(tmp_path, toml, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(toml)
+    with pytest.raises((ConfigError, ValueError), match=message):
+        load_family(path, seed=0, num_frames=2)
+
+
+def test_missing_description_file(tmp_path):
+    with pytest.raises(ConfigError, match="not found"):
+        load_family(tmp_path / "none.toml", seed=0, num_frames=2)
+
+
+def test_patches_labels_come_from_the_generated_state():
+    fam = load_family("patches", seed=3, num_frames=200)
+    counts = [fam.frame_state(i)["count"] for i in range(200)]
+    assert set(counts) == set(range(0, 11))  # uniform over 0..10
+    img, state = fam.image(5)
+    assert len(state["patches"]) == state["count"]
+    c = fam.config
+    for p in state["patches"]:
+        assert c.patch_size[0] <= min(p["size"]) and max(p["size"]) <= c.patch_size[1]
+        assert c.patch_radiance_w_m2_sr[0] <= p["radiance"] <= c.patch_radiance_w_m2_sr[1]
+    # the illumination only modulates: radiance stays within (1 +- A) of the painted levels
+    amp = state["illumination"]["amplitude"]
+    assert img.max() <= c.patch_radiance_w_m2_sr[1] * (1 + amp) + 1e-4
+    assert img.min() >= 0.0
+
+
+def test_patches_deterministic_for_a_seed_and_order_independent():
+    a = load_family("patches", seed=1, num_frames=10)
+    b = load_family("patches", seed=1, num_frames=10)
+    c = load_family("patches", seed=2, num_frames=10)
+    forward = [a.image(i)[0] for i in range(10)]
+    backward = [b.image(i)[0] for i in reversed(range(10))][::-1]
+    for x, y in zip(forward, backward, strict=True):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(forward[0], c.image(0)[0])
+    with pytest.raises(IndexError):
+        a.image(10)
+
+
+def test_patch_image_orientation_on_the_plane(variant):
+    """A bright top-right quadrant of the plane image lands top-right in T."""
+    fam = load_family("patches", seed=0, num_frames=1, overrides={"camera": {"detectors": 1}})
+    scene = fam.build_scene()
+    n = fam.config.image_resolution
+    img = np.zeros((n, n), np.float32)
+    img[: n // 2, n // 2 :] = 10.0
+    params = mi.traverse(scene)
+    params[PLANE_RADIANCE_PARAM] = ms.emitter_image_data(img)
+    params.update()
+    t = render_transport(scene, fam.camera(), spp=16)[0]
+    rows, cols = t.shape
+    assert t[: rows // 2, cols // 2 :].sum() > 0.95 * t.sum()
+
+
+def test_set_frame_updates_in_place_and_more_patches_mean_more_light(variant):
+    fam = load_family(
+        "patches",
+        seed=0,
+        num_frames=60,
+        overrides={
+            "illumination_amplitude": [0.0, 0.0],
+            "patch_radiance_w_m2_sr": [5.0, 5.0],
+            "patch_size": [0.1, 0.1],
+            "camera": {"detectors": 1, "mask_resolution": 16},
+        },
+    )
+    scene = fam.build_scene()
+    cam = fam.camera()
+    by_count = {}
+    for i in range(60):
+        labels = fam.set_frame(scene, i)
+        assert labels["count"].dtype == np.float32 and labels["count"].shape == (1,)
+        by_count.setdefault(int(labels["count"][0]), []).append(i)
+    lo, hi = min(by_count), max(by_count)
+    fam.set_frame(scene, by_count[lo][0])
+    p_lo = render_transport(scene, cam, spp=8)
+    fam.set_frame(scene, by_count[hi][0])
+    p_hi = render_transport(scene, cam, spp=8)
+    assert p_hi.sum() > p_lo.sum()
