@@ -14,9 +14,12 @@ in watts, where ``L`` is radiance (W m^-2 sr^-1) arriving from the scene along
 cosine. The measurement for any thin mask ``M`` is ``P_k = sum_uv T_k M_k``
 (paper eq. 2 with the blur ``b`` arising from the integral over ``q``).
 
-The Monte Carlo estimator samples ``q`` uniformly on the detector and ``x``
-uniformly in the texel, traces the ray from ``x`` along ``x - q`` into the scene
-with the scene's integrator, and weights radiance by ``A_d A_t d^2 / |x-q|^4 f``.
+The Monte Carlo estimator samples ``x`` uniformly in the texel and ``q`` on the
+detector, traces the ray from ``x`` along ``x - q`` into the scene with the
+scene's integrator, and weights radiance by ``A_t d^2 / |x-q|^4 f / p(q)``.
+``q`` comes from a one-sample mixture of uniform area sampling and
+cosine-weighted directions from ``x`` (see :func:`cosine_sampling_fraction`); for
+the prototype this is plain area sampling, ``p = 1 / A_d``.
 All detectors, texels and samples of a pass form one wavefront (one kernel
 launch); the pass is a frozen Dr.Jit function, so repeated calls on a scene
 whose parameters changed replay the recorded kernel instead of re-tracing it
@@ -56,11 +59,12 @@ class _PassGeometry:
     changes the kernel hash and forces needless recompilation.
     """
 
-    params: mi.Float  # [a_det, w_mask, d, right xyz, up xyz, fwd xyz, centres xyz * K] (m)
+    params: mi.Float  # [a_det, w_mask, d, right xyz, up xyz, fwd xyz, c, 0, 0, centres xyz * K] (m)
     response: mi.Float  # f(theta) on a uniform grid over [0, pi/2]
 
 
-_CENTERS_OFFSET = 12
+_COSINE_FRACTION_INDEX = 12
+_CENTERS_OFFSET = 15
 
 
 def _transport_pass(
@@ -96,14 +100,19 @@ def _transport_pass(
         dr.gather(mi.Float, geo.params, base + 2),
     )
 
-    xi_q = sampler.next_2d()
     xi_x = sampler.next_2d()
-    # Board-frame coordinates (right, up) of q on the detector and x on the mask,
+    xi_q = sampler.next_2d()
+    pick_cosine = sampler.next_1d() < scalar(_COSINE_FRACTION_INDEX)
+    # Board-frame coordinates (right, up) of x on the mask and q on the detector,
     # relative to the detector centre: differences stay exact in float32.
-    q_s = (xi_q.x - 0.5) * a_det
-    q_t = (xi_q.y - 0.5) * a_det
     x_s = (mi.Float(u) + xi_x.x) * (w_mask / cols) - 0.5 * w_mask
     x_t = 0.5 * w_mask - (mi.Float(v) + xi_x.y) * (w_mask / rows)
+    # q: uniform on the detector, or (one-sample MIS) through a cosine-weighted
+    # direction from x, which tames d^2/r^4 when the mask is close to the diode.
+    w_cos = mi.warp.square_to_cosine_hemisphere(xi_q)
+    q_s = dr.select(pick_cosine, x_s - w_cos.x / w_cos.z * dist, (xi_q.x - 0.5) * a_det)
+    q_t = dr.select(pick_cosine, x_t - w_cos.y / w_cos.z * dist, (xi_q.y - 0.5) * a_det)
+    on_detector = (dr.abs(q_s) <= 0.5 * a_det) & (dr.abs(q_t) <= 0.5 * a_det)
     ds, dt = x_s - q_s, x_t - q_t
     r2 = dr.fma(ds, ds, dr.fma(dt, dt, dist * dist))
     inv_r = dr.rsqrt(r2)
@@ -112,7 +121,7 @@ def _transport_pass(
     direction = dr.normalize((right * ds + up * dt + fwd * dist) * inv_r)
     ray = mi.Ray3f(origin, direction)
 
-    radiance, _, _ = integrator.sample(scene, sampler, ray)
+    radiance, _, _ = integrator.sample(scene, sampler, ray, active=on_detector)
 
     cos_theta = dist * inv_r
     theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))
@@ -124,10 +133,14 @@ def _transport_pass(
     f_dir = dr.lerp(
         dr.gather(mi.Float, geo.response, i0), dr.gather(mi.Float, geo.response, i1), frac
     )
-    area = (a_det * a_det) * (w_mask * w_mask / (rows * cols))
-    # cos_q cos_x / r^2 = d^2 / r^4
+    # cos_q cos_x / r^2 = d^2 / r^4, per unit detector area and unit mask area
     g = (cos_theta * cos_theta) * (inv_r * inv_r)
-    value = mi.Float(radiance[0]) * (area * g * f_dir)
+    # pdf of q per unit detector area under the two-technique mixture
+    c = scalar(_COSINE_FRACTION_INDEX)
+    pdf_q = (1.0 - c) / (a_det * a_det) + c * g * (1.0 / math.pi)
+    texel_area = w_mask * w_mask / (rows * cols)
+    weight = dr.select(on_detector, g * f_dir * texel_area / pdf_q, 0.0)
+    value = mi.Float(radiance[0]) * weight
     return dr.block_sum(value, spp) * (1.0 / spp)
 
 
@@ -164,8 +177,20 @@ def _geometry(camera: FreeformCamera) -> _PassGeometry:
     else:
         table = camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE)
     sizes = [camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m]
-    flat = np.concatenate([sizes, right, up, fwd, camera.detector_centers_m.ravel()])
+    extra = [cosine_sampling_fraction(camera), 0.0, 0.0]
+    flat = np.concatenate([sizes, right, up, fwd, extra, camera.detector_centers_m.ravel()])
     return _PassGeometry(params=mi.Float(flat.astype(np.float32)), response=mi.Float(table))
+
+
+def cosine_sampling_fraction(camera: FreeformCamera) -> float:
+    """Share of detector points drawn through cosine-weighted directions from the mask.
+
+    About the detector's projected solid angle seen from the mask, A_d / (pi d^2),
+    capped at 1/2: ~0.002 for the prototype (area sampling dominates), 1/2 when
+    the mask nearly touches the diode (d^2/r^4 is then too peaked for area sampling).
+    """
+    a, d = camera.detector_size_m, camera.mask_distance_m
+    return min(0.5, a * a / (math.pi * d * d))
 
 
 def _pass_seed(seed: int, pass_index: int) -> int:

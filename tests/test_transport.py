@@ -147,10 +147,10 @@ def test_mirrored_scene_gives_mirrored_transport(variant):
 
     a = render_transport(scene(+1), cam, spp=4096, seed=0)
     b = render_transport(scene(-1), cam, spp=4096, seed=1)
-    # column sums: texels half-covered by the lamp's edge have ~1.5 % MC noise at 4096 spp
-    np.testing.assert_allclose(
-        a.sum(axis=1), b[:, :, ::-1].sum(axis=1), rtol=0.06, atol=2e-3 * a.max()
-    )
+    # column sums; the column that only the detector-area blur reaches sees the lamp
+    # in ~2 % of samples (~8 % noise at 4096 spp), hence the absolute tolerance
+    cols_a, cols_b = a.sum(axis=1), b[:, :, ::-1].sum(axis=1)
+    np.testing.assert_allclose(cols_a, cols_b, rtol=0.03, atol=0.01 * cols_a.max())
     assert float(a.sum()) == pytest.approx(float(b.sum()), rel=0.01)
 
 
@@ -213,35 +213,49 @@ def test_transport_dot_mask_equals_mitsuba_render_of_mask_geometry(variant, rng,
     )
 
 
+_REPLAY_SCRIPT = """
+import mitsuba as mi, numpy as np
+from mincam_render import DetectorLayout, FreeformCamera, render_transport, transport
+from mincam_render import mitsuba_scene as ms
+cam = FreeformCamera(layout=DetectorLayout(positions_m=((0.0, 0.0),)), mask_resolution=(8, 8))
+scene = ms.load_scene(ms.scene_dict(
+    {"bulb": ms.sphere((0.0, 0.0, 1.0), 0.05, radiance_w_m2_sr=1e4)}, max_depth=1))
+params = mi.traverse(scene)
+run = transport._frozen_pass_for(scene.integrator())
+for i, x in enumerate((0.0, 0.05, -0.2, 0.1, 0.3)):
+    params["bulb.to_world"] = mi.ScalarTransform4f().translate([x, 0.0, 1.0]).scale(0.05)
+    params.update()
+    frozen = render_transport(scene, cam, spp=64, seed=0, freeze=True)
+    traced = render_transport(scene, cam, spp=64, seed=0, freeze=False)
+    assert transport._frozen_pass_for(scene.integrator()) is run, "recording failed"
+    w = frozen[0] / frozen[0].sum()
+    col = float((w * (np.arange(8) + 0.5)).sum())
+    print(i, x, run.n_recordings, bool(np.array_equal(frozen, traced)), col,
+          cam.project_to_texel((x, 0.0, 1.0), 0)[1])
+"""
+
+
 def test_parameter_update_replays_kernel_without_retracing(variant):
-    import gc
+    """Frozen replay equals tracing after parameter updates, without re-recording.
 
-    from mincam_render import transport
+    Runs in a fresh process: recording a frozen function refuses virtual calls
+    on instances outside its inputs, and other tests' scenes may still be alive.
+    """
+    import subprocess
+    import sys
 
-    gc.collect()  # scenes of earlier tests must not linger in Mitsuba's registry
-    cam = single(mask_resolution=(8, 8))
-    scene = ms.load_scene(
-        ms.scene_dict({"bulb": ms.sphere((0.0, 0.0, 1.0), 0.05, radiance_w_m2_sr=1e4)}, max_depth=1)
+    out = subprocess.run(
+        [sys.executable, "-c", _REPLAY_SCRIPT], capture_output=True, text=True, timeout=300
     )
-    params = mi.traverse(scene)
-    key = "bulb.to_world"
-    assert key in params
-    run = transport._frozen_pass_for(scene.integrator())
-    recordings = None
-    for i, x in enumerate((0.0, 0.05, -0.2, 0.1, 0.3)):
-        params[key] = mi.ScalarTransform4f().translate([x, 0.0, 1.0]).scale(0.05)
-        params.update()
-        frozen = render_transport(scene, cam, spp=64, seed=0, freeze=True)
-        traced = render_transport(scene, cam, spp=64, seed=0, freeze=False)
-        np.testing.assert_array_equal(frozen, traced)
-        assert transport._frozen_pass_for(scene.integrator()) is run, "recording failed"
-        _, col = centroid(frozen[0])
-        assert col == pytest.approx(cam.project_to_texel((x, 0.0, 1.0), 0)[1], abs=0.3)
-        # the first updates may record anew (literal parameters become opaque);
-        # later updates must replay that recording
-        if i < 2:
-            recordings = run.n_recordings
-        assert run.n_recordings == recordings
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = [line.split() for line in out.stdout.strip().splitlines()]
+    assert len(rows) == 5
+    for i, x, recordings, equal, col, expected_col in rows:
+        assert equal == "True", f"frozen != traced at x = {x}"
+        assert float(col) == pytest.approx(float(expected_col), abs=0.3)
+    # the first updates may record anew (literal parameters become opaque);
+    # later updates must replay that recording
+    assert len({r[2] for r in rows[1:]}) == 1, rows
 
 
 def test_traced_parameter_update_reuses_compiled_kernels(variant):
