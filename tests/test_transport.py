@@ -250,7 +250,7 @@ def test_parameter_update_replays_kernel_without_retracing(variant):
     assert out.returncode == 0, out.stderr[-2000:]
     rows = [line.split() for line in out.stdout.strip().splitlines()]
     assert len(rows) == 5
-    for i, x, recordings, equal, col, expected_col in rows:
+    for _i, x, _recordings, equal, col, expected_col in rows:
         assert equal == "True", f"frozen != traced at x = {x}"
         assert float(col) == pytest.approx(float(expected_col), abs=0.3)
     # the first updates may record anew (literal parameters become opaque);
