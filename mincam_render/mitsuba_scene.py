@@ -384,3 +384,33 @@ def perspective_sensor(position_m, look_at_m, up, fov_deg: float, width: int, he
             },
         }
     )
+
+
+def directional_light_to_world(direction) -> mi.ScalarTransform4f:
+    """``to_world`` of a distant light travelling along ``direction``, for per-frame updates.
+
+    Set it as ``"<key>.to_world"`` of a :func:`directional_light` (e.g. the sun
+    moving over a day); the light's local +z becomes ``direction``.
+    """
+    import numpy as np
+
+    use_variant()
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    up = (0.0, 1.0, 0.0) if abs(d[2]) > 0.99 else (0.0, 0.0, 1.0)
+    return mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, 0.0], target=list(d), up=list(up))
+
+
+def environment_map_data(radiance_w_m2_sr) -> mi.TensorXf:
+    """Tensor for an :func:`environment_map`'s ``"<key>.data"`` from a lat-long map ``L[row, col]``.
+
+    Mitsuba stores the map with one wrap-around column on each side and three
+    channels (also in monochrome variants); the new map must have the size the
+    emitter was built with.
+    """
+    import numpy as np
+
+    use_variant()
+    m = np.asarray(radiance_w_m2_sr, dtype=np.float32)
+    padded = np.concatenate([m[:, -1:], m, m[:, :1]], axis=1)
+    return mi.TensorXf(np.ascontiguousarray(np.repeat(padded[..., None], 3, axis=-1)))
