@@ -151,6 +151,11 @@ def _transport_pass(
 #: kernels still come from Dr.Jit's cache, not recompiled, when only parameters
 #: changed).
 FREEZE_MAX_RAYS = 1 << 19
+#: In automatic mode, a configuration whose kernel had to be recorded more often
+#: than this is traced from then on: some scene updates (e.g. many meshes whose
+#: vertices all move) change the recorded kernel's structure every frame, and
+#: re-recording costs more than tracing.
+MAX_AUTO_RECORDINGS = 4
 
 #: Frozen passes keyed by the integrator's configuration: scene parameters are
 #: traced inputs of a recording, but scalar integrator settings (max_depth,
@@ -225,7 +230,9 @@ def render_transport(
         freeze: True replays a recorded kernel (Dr.Jit frozen function) instead
             of re-tracing Python on every call; False traces (the compiled
             kernel is still reused from Dr.Jit's cache); None (default) freezes
-            passes of at most ``FREEZE_MAX_RAYS`` rays, where tracing dominates.
+            passes of at most ``FREEZE_MAX_RAYS`` rays, where tracing dominates,
+            and falls back to tracing for scenes whose updates keep forcing new
+            recordings (``MAX_AUTO_RECORDINGS``).
 
     Returns:
         ``T[detector, row, col]``, float32 numpy array (W per unit transmittance).
@@ -275,7 +282,8 @@ def render_transport(
     geo = _geometry(camera)
     shape = (camera.num_detectors, rows, cols, spp_pass)
 
-    if freeze is None:
+    auto = freeze is None
+    if auto:
         freeze = n_texels * spp_pass <= FREEZE_MAX_RAYS
     run_pass = (_frozen_pass_for(integrator) if freeze else None) or _transport_pass
     total = np.zeros(n_texels, dtype=np.float64)
@@ -292,6 +300,13 @@ def render_transport(
             _frozen_passes[_integrator_key(integrator)] = None
             run_pass = _transport_pass
             mean = run_pass(*args)
+        if auto and run_pass is not _transport_pass and run_pass.n_recordings > MAX_AUTO_RECORDINGS:
+            log.info(
+                "transport kernel re-recorded %d times; tracing it from now on",
+                run_pass.n_recordings,
+            )
+            _frozen_passes[_integrator_key(integrator)] = None
+            run_pass = _transport_pass
         total += mean.numpy().astype(np.float64)
     log.debug("render_transport: %d pass(es) of %d spp, %d texels", n_pass, spp_pass, n_texels)
     return (total / n_pass).astype(np.float32).reshape(camera.num_detectors, rows, cols)

@@ -1,0 +1,228 @@
+"""Workspace family (paper Sec. 7.1): labels from geometry, determinism, continuity, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mincam_render.config import ConfigError
+from mincam_render.generators.base import LabelKind
+from mincam_render.generators.indoor import (
+    Appearance,
+    IndoorState,
+    Pose,
+    inside_room,
+    zone_overlaps,
+)
+from mincam_render.generators.registry import load_family
+from mincam_render.generators.workspace import WorkspaceFamily
+
+pytestmark = pytest.mark.usefixtures("variant")
+
+NUM_FRAMES = 150
+#: Local solar midnight for the default daylight (start 7.5 h, 0.003 h/s): no daylight.
+MIDNIGHT_S = (24.0 - 7.5) / 0.003
+PERSON = Appearance(
+    height_m=1.75, build=1.0, upper_albedo=0.5, lower_albedo=0.2, skin_albedo=0.4, speed_m_s=1.2
+)
+
+
+def _family(seed: int = 3, num_frames: int = NUM_FRAMES, **over) -> WorkspaceFamily:
+    return load_family(
+        "workspace", seed=seed, num_frames=num_frames, overrides={"burn_in_s": 120.0, **over}
+    )
+
+
+@pytest.fixture(scope="module")
+def family() -> WorkspaceFamily:
+    return _family()
+
+
+@pytest.fixture(scope="module")
+def scene(family):
+    return family.build_scene()
+
+
+def _small_camera(family, detectors=2, res=8):
+    from dataclasses import replace
+
+    return replace(family.config.camera, detectors=detectors, mask_resolution=res).camera()
+
+
+def test_label_specs(family):
+    specs = {s.name: s for s in family.labels}
+    assert specs["people_count"].kind is LabelKind.COUNT
+    assert specs["people_count"].median_filter_s == 2.0
+    assert specs["zones"].kind is LabelKind.BINARY
+    assert specs["zones"].element_names == ("entrance", "desks_south", "desks_north", "meeting")
+    assert specs["zones"].size == 4 and specs["zones"].median_filter_s == 0.5
+    assert specs["door_open"].kind is LabelKind.BINARY and specs["door_open"].median_filter_s == 0.5
+
+
+@pytest.mark.parametrize("zone_index", range(4))
+def test_person_in_zone_sets_that_zone_only(family, zone_index):
+    zone = family.config.zones[zone_index]
+    x0, y0, x1, y1 = zone.rect_m
+    state = IndoorState(
+        people=((PERSON, Pose(0.5 * (x0 + x1), 0.5 * (y0 + y1))),), lights_on=(True, True)
+    )
+    labels = family.labels_for(state)
+    expected = np.zeros(4, dtype=np.float32)
+    expected[zone_index] = 1.0
+    np.testing.assert_array_equal(labels["zones"], expected)
+    assert labels["people_count"][0] == 1.0
+
+
+def test_footprint_overlap_at_zone_edge(family):
+    zone = family.config.zones[1]  # desks_south, x from 1.0
+    r = PERSON.radius_m
+    y = 0.5 * (zone.rect_m[1] + zone.rect_m[3])
+    assert zone_overlaps(zone, zone.rect_m[0] - 0.9 * r, y, r)
+    assert not zone_overlaps(zone, zone.rect_m[0] - 1.1 * r, y, r)
+
+
+def test_person_in_corridor_is_not_counted(family):
+    corridor, doorway, _ = family.rig.door.waypoints()
+    state = IndoorState(people=((PERSON, Pose(*corridor)),), lights_on=(True, True))
+    labels = family.labels_for(state)
+    assert labels["people_count"][0] == 0.0
+    assert labels["zones"].sum() == 0.0
+
+
+@pytest.mark.parametrize(("angle_deg", "is_open"), [(0.0, 0), (5.0, 0), (15.0, 1), (90.0, 1)])
+def test_door_label_from_angle(family, angle_deg, is_open):
+    state = IndoorState(door_angle_rad=math.radians(angle_deg), lights_on=(True, True))
+    assert family.labels_for(state)["door_open"][0] == is_open
+
+
+def test_door_geometry_swings_into_room(family):
+    door = family.rig.door
+    closed = door.vertices(0.0)
+    opened = door.vertices(math.radians(90.0))
+    d = family.config.room.size_m[1]  # the default door is in the north wall (y = D)
+    assert np.all(np.abs(closed[:, 1] - d) <= door.THICKNESS_M + 1e-6)
+    assert opened[:, 1].min() < d - 0.8  # the leaf now sticks ~0.9 m into the room
+    hinge_x = door.hinge[0]
+    assert np.all(np.abs(opened[:, 0] - hinge_x) <= door.THICKNESS_M + 1e-6)
+
+
+def test_people_count_equals_people_inside(family):
+    for index in range(0, NUM_FRAMES, 10):
+        state = family.state(index)
+        inside = sum(inside_room(family.config.room, p.x, p.y) for _, p in state.people)
+        assert family.labels_for(state)["people_count"][0] == inside
+    counts = [family.labels_for(family.state(i))["people_count"][0] for i in range(NUM_FRAMES)]
+    assert 0 <= min(counts) and max(counts) <= family.config.max_people
+
+
+def test_set_frame_updates_geometry_and_returns_labels(family, scene):
+    import mitsuba as mi
+
+    labels = family.set_frame(scene, 7)
+    expected = family.labels_for(family.state(7))
+    for k, v in expected.items():
+        np.testing.assert_array_equal(labels[k], v)
+        assert labels[k].dtype == np.float32
+    params = mi.traverse(scene)
+    v = np.asarray(params["door.vertex_positions"]).reshape(-1, 3)
+    np.testing.assert_allclose(
+        v, family.rig.door.vertices(family.state(7).door_angle_rad), atol=1e-5
+    )
+
+
+def test_continuity_between_frames(family):
+    tr = family.track
+    vmax = family.config.people.walk_speed_m_s[1]
+    same = tr.active[1:] & tr.active[:-1] & (tr.visit[1:] == tr.visit[:-1])
+    step = np.linalg.norm(tr.pose[1:, :, :2] - tr.pose[:-1, :, :2], axis=-1)
+    assert same.any()
+    assert np.all(step[same] <= vmax / family.fps + 1e-9)
+    dmax = math.radians(family.config.door.speed_deg_s) / family.fps
+    assert np.all(np.abs(np.diff(tr.door_angle_rad)) <= dmax + 1e-9)
+
+
+def test_deterministic_for_a_seed(family, scene):
+    from mincam_render.transport import render_transport
+
+    other = _family()
+    np.testing.assert_array_equal(family.track.pose, other.track.pose)
+    np.testing.assert_array_equal(family.lights_on, other.lights_on)
+    cam = _small_camera(family)
+    # visiting frames out of order gives the same frame
+    family.set_frame(scene, 40)
+    a = render_transport(scene, cam, spp=4, seed=1)
+    family.set_frame(scene, 90)
+    family.set_frame(scene, 40)
+    b = render_transport(scene, cam, spp=4, seed=1)
+    np.testing.assert_array_equal(a, b)
+    assert a.sum() > 0
+    different = _family(seed=4)
+    assert not np.array_equal(family.track.pose, different.track.pose)
+
+
+def test_ceiling_light_brightens_transport(family, scene):
+    from mincam_render.transport import render_transport
+
+    cam = _small_camera(family)
+    dark = IndoorState(lights_on=(False, False), daylight_time_s=MIDNIGHT_S)
+    lit = IndoorState(lights_on=(True, False), daylight_time_s=MIDNIGHT_S)
+    family.apply_state(scene, dark)
+    t_dark = render_transport(scene, cam, spp=4, seed=0)
+    family.apply_state(scene, lit)
+    t_lit = render_transport(scene, cam, spp=4, seed=0)
+    assert t_lit.sum() > 10 * max(t_dark.sum(), 1e-15)
+
+
+def test_desk_illuminance_is_indoor_level(family, scene):
+    """Both banks on at night: a desk top gets 300-600 lux (office lighting)."""
+    import mitsuba as mi
+
+    from mincam_render.photometry import irradiance_to_lux
+
+    family.apply_state(scene, IndoorState(lights_on=(True, True), daylight_time_s=MIDNIGHT_S))
+    meter = mi.load_dict(
+        {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f().translate([1.9, 1.7, 0.76]).scale([0.05, 0.05, 1.0]),
+            "sensor": {
+                "type": "irradiancemeter",
+                "film": {
+                    "type": "hdrfilm",
+                    "width": 1,
+                    "height": 1,
+                    "rfilter": {"type": "box"},
+                    "pixel_format": "luminance",
+                },
+            },
+        }
+    )
+    e = float(np.asarray(mi.render(scene, sensor=meter.sensor(), spp=1024)).ravel()[0])
+    assert 300.0 < irradiance_to_lux(e) < 600.0
+
+
+def _write(tmp_path, text):
+    path = tmp_path / "bad.toml"
+    path.write_text('family = "workspace"\n' + text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("colour = 3\n", "colour"),
+        ("max_people = 'eight'\n", "max_people"),
+        ("max_people = 20\n", "max_people"),
+        ("[[zones]]\nname = 'outside'\nrect_m = [5.0, 4.0, 7.5, 5.0]\n", "zones[0].rect_m"),
+        ("[camera]\nposition = [7.0, 1.0, 2.0]\nlook_at = [2.0, 2.0, 0.5]\n", "camera.position"),
+        ("[door]\ncenter_m = 5.9\n", "door.center_m"),
+        ("[room]\nsize_m = [6.0, 'x', 2.8]\n", "room.size_m[1]"),
+    ],
+)
+def test_bad_descriptions_are_rejected(tmp_path, text, field):
+    path = _write(tmp_path, text)
+    with pytest.raises(ConfigError) as err:
+        load_family(path, seed=0, num_frames=1)
+    assert str(path) in str(err.value)
+    assert field in str(err.value)
