@@ -87,12 +87,15 @@ def main() -> None:
     for name in args.families:
         row = bench(name, args.frames, args.spp, args.repeats)
         rows.append(row)
+        res = row["mask_resolution"]
+        ms = {k: row[k] * 1e3 for k in row if k.endswith("seconds_median") or "render_seconds" in k}
         print(
-            f"{name:10s} {row['detectors']} det {row['mask_resolution'][0]}x{row['mask_resolution'][1]} "
-            f"{args.spp} spp: construct {row['construct_seconds']:.2f} s ({args.frames} frames), "
-            f"build {row['build_scene_seconds']:.2f} s, set_frame {row['set_frame_seconds_median'] * 1e3:.1f} ms, "
-            f"render {row['render_seconds_median'] * 1e3:.1f} ms "
-            f"[{row['render_seconds_min'] * 1e3:.0f}, {row['render_seconds_max'] * 1e3:.0f}]"
+            f"{name:10s} {row['detectors']} det {res[0]}x{res[1]} {args.spp} spp: "
+            f"construct {row['construct_seconds']:.2f} s ({args.frames} frames), "
+            f"build {row['build_scene_seconds']:.2f} s, "
+            f"set_frame {ms['set_frame_seconds_median']:.1f} ms, "
+            f"render {ms['render_seconds_median']:.1f} ms "
+            f"[{ms['render_seconds_min']:.0f}, {ms['render_seconds_max']:.0f}]"
         )
     result = {
         "benchmark": "scene families: generate and render one frame at the default camera",
