@@ -1,0 +1,373 @@
+r"""Trainable cameras: a minimalist camera of freeform pixels and a box-pixel baseline.
+
+Both cameras map transport images ``T[batch, time, detector, row, col]`` (torch,
+watts per unit transmittance, see :mod:`mincam_render.transport`) to task
+outputs through the same :class:`Head` (paper Sec. 5: two hidden layers of 128
+units, leaky ReLU with slope 0.1).
+
+* :class:`MincamCamera` -- ``K`` mask logits -> :func:`~mincam_render.maskplane.mask_power`
+  (Dr.Jit op) -> :func:`~mincam_render.sensor.detector_voltage` (paper eqs. 3-5) -> head.
+  Pixel ``j`` of the camera reads detector ``detectors[j]`` of the data, so a
+  camera may use a subset of the rendered detectors (pruning) or reuse one
+  detector's transport for several masks (more pixels than were rendered;
+  this ignores the parallax between the reused and the real position, which is
+  sub-texel for the 20 mm pitch at scene depths beyond ~1 m).
+* :class:`BaselineCamera` -- a traditional camera of ``R x C`` square pixels
+  that box-integrate the light: the transport images averaged over the
+  rendered detectors (approximating one central camera, the paper's auxiliary
+  camera in the middle of the board) and box-summed into ``R x C`` pixels,
+  then an 8-bit camera's read-out: a fixed exposure (set once from the
+  training data so that the 99.5th percentile of pixel power maps to 255 DN),
+  Gaussian read noise (1 DN), additive uniform quantisation noise of one DN
+  (the usual differentiable model of rounding) and clipping to [0, 255].
+
+Targets of COUNT and REGRESSION labels are standardised with the training
+set's mean and standard deviation (buffers of the head) so that one learning
+rate suits every task; :meth:`Head.predict` returns physical values.
+
+Losses per :class:`~mincam_render.generators.base.LabelKind`: mean squared
+error for COUNT and REGRESSION (in standardised units), binary cross-entropy
+with logits per element for BINARY; the total is their sum.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from .camera import FreeformCamera
+from .generators.base import LabelKind, LabelSpec
+from .maskplane import logits_for_transmittance, mask_power, transmittance
+from .sensor import detector_voltage
+
+#: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
+INIT_TRANSMITTANCE = (0.08, 0.12)
+#: Head width and activation slope (paper Sec. 5).
+HIDDEN_UNITS = 128
+LEAKY_SLOPE = 0.1
+#: 8-bit baseline camera read-out (not from the paper: a typical machine-vision
+#: sensor at unit gain has ~1 DN of read noise).
+BASELINE_BITS = 8
+BASELINE_READ_NOISE_DN = 1.0
+#: Percentile of training pixel power that the baseline's fixed exposure maps to full scale.
+BASELINE_EXPOSURE_PERCENTILE = 99.5
+
+
+def _as_5d(transport: torch.Tensor) -> torch.Tensor:
+    """``T[batch, detector, row, col]`` -> ``T[batch, 1, detector, row, col]``; 5-D unchanged."""
+    if transport.ndim == 4:
+        return transport[:, None]
+    if transport.ndim != 5:
+        raise ValueError(
+            f"transport has shape {tuple(transport.shape)}: expected (batch, detector, row, col) "
+            "or (batch, time, detector, row, col)"
+        )
+    return transport
+
+
+def temporal_features(features: torch.Tensor) -> torch.Tensor:
+    """Flatten ``x[batch, time, feature]`` for the head; forward differences when time > 1.
+
+    The paper (supplement, traffic) feeds the head a 1-s stack of measurements
+    after forward differencing in time: ``x[t+1] - x[t]``.
+    """
+    if features.shape[1] > 1:
+        features = features[:, 1:] - features[:, :-1]
+    return features.reshape(features.shape[0], -1)
+
+
+class Head(nn.Module):
+    """Inference network: input standardisation, 2 x 128 leaky-ReLU layers, one output per label.
+
+    Args:
+        in_features: number of inputs (pixels x time steps).
+        label_specs: the task's labels; one output group of ``spec.size`` each.
+        target_mean: ``{name: [size]}`` training-set mean of COUNT/REGRESSION labels.
+        target_std: ``{name: [size]}`` training-set standard deviation (> 0).
+        hidden: hidden width.
+
+    """
+
+    def __init__(
+        self,
+        in_features: int,
+        label_specs: Sequence[LabelSpec],
+        *,
+        target_mean: Mapping[str, np.ndarray] | None = None,
+        target_std: Mapping[str, np.ndarray] | None = None,
+        hidden: int = HIDDEN_UNITS,
+    ) -> None:
+        super().__init__()
+        if in_features < 1:
+            raise ValueError(f"in_features = {in_features}: need at least 1 input")
+        self.label_specs = tuple(label_specs)
+        if not self.label_specs:
+            raise ValueError("label_specs is empty: a head needs at least one label")
+        # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
+        # brightness or the scene's light level; it rescales, so SNR is untouched.
+        self.input_norm = nn.BatchNorm1d(in_features, affine=False)
+        self.body = nn.Sequential(
+            nn.Linear(in_features, hidden),
+            nn.LeakyReLU(LEAKY_SLOPE),
+            nn.Linear(hidden, hidden),
+            nn.LeakyReLU(LEAKY_SLOPE),
+        )
+        self.out = nn.Linear(hidden, sum(s.size for s in self.label_specs))
+        for s in self.label_specs:
+            mean = np.zeros(s.size, np.float32)
+            std = np.ones(s.size, np.float32)
+            if s.kind is not LabelKind.BINARY:
+                if target_mean is not None and s.name in target_mean:
+                    mean = np.asarray(target_mean[s.name], np.float32).reshape(s.size)
+                if target_std is not None and s.name in target_std:
+                    std = np.maximum(np.asarray(target_std[s.name], np.float32), 1e-6)
+                    std = std.reshape(s.size)
+            self.register_buffer(f"mean_{s.name}", torch.from_numpy(mean))
+            self.register_buffer(f"std_{s.name}", torch.from_numpy(std))
+
+    @property
+    def in_features(self) -> int:
+        """Number of inputs."""
+        return self.body[0].in_features
+
+    def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Raw outputs ``{name: [batch, size]}``: standardised values or logits (BINARY)."""
+        y = self.out(self.body(self.input_norm(x)))
+        return dict(zip([s.name for s in self.label_specs],
+                        torch.split(y, [s.size for s in self.label_specs], dim=1), strict=True))
+
+    def standardise(self, name: str, value: torch.Tensor) -> torch.Tensor:
+        """Physical label -> the head's output units (identity for BINARY)."""
+        return (value - getattr(self, f"mean_{name}")) / getattr(self, f"std_{name}")
+
+    def predict(self, outputs: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Raw outputs -> physical predictions: values (COUNT, REGRESSION), P(state=1) (BINARY)."""
+        pred = {}
+        for s in self.label_specs:
+            y = outputs[s.name]
+            if s.kind is LabelKind.BINARY:
+                pred[s.name] = torch.sigmoid(y)
+            else:
+                pred[s.name] = y * getattr(self, f"std_{s.name}") + getattr(self, f"mean_{s.name}")
+        return pred
+
+
+def task_loss(
+    head: Head, outputs: Mapping[str, torch.Tensor], labels: Mapping[str, torch.Tensor]
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Sum over labels of MSE (COUNT, REGRESSION; standardised) or BCE with logits (BINARY).
+
+    Args:
+        head: supplies the label specs and the target standardisation.
+        outputs: ``{name: [batch, size]}`` raw head outputs.
+        labels: ``{name: [batch, size]}`` physical labels (0/1 for BINARY).
+
+    Returns:
+        ``(total, {name: loss})``, scalars.
+
+    """
+    parts = {}
+    for s in head.label_specs:
+        if s.name not in labels:
+            raise KeyError(f"labels lack {s.name!r}; have {sorted(labels)}")
+        y = labels[s.name].to(outputs[s.name].dtype)
+        if s.kind is LabelKind.BINARY:
+            parts[s.name] = F.binary_cross_entropy_with_logits(outputs[s.name], y)
+        else:
+            parts[s.name] = F.mse_loss(outputs[s.name], head.standardise(s.name, y))
+    return torch.stack(list(parts.values())).sum(), parts
+
+
+class MincamCamera(nn.Module):
+    """A minimalist camera: trainable masks, the detector model, and a head.
+
+    Args:
+        camera: geometry, electronics and printable transmittance range.
+        head: inference network with ``len(detectors) * max(history - 1, 1)`` inputs.
+        detectors: data detector read by each pixel (default: all of ``camera``).
+        sensor_model: apply :func:`detector_voltage` (noise, saturation); False
+            feeds the head noiseless power scaled to volts (supplement A's ablation).
+        history: frames per sample (1 = static task; 30 for traffic).
+        init_seed: seed of the U(0.08, 0.12) mask initialisation.
+
+    """
+
+    def __init__(
+        self,
+        camera: FreeformCamera,
+        head: Head,
+        *,
+        detectors: Sequence[int] | None = None,
+        sensor_model: bool = True,
+        history: int = 1,
+        init_seed: int = 0,
+    ) -> None:
+        super().__init__()
+        self.camera = camera
+        dets = tuple(range(camera.num_detectors)) if detectors is None else tuple(detectors)
+        if not dets:
+            raise ValueError("detectors is empty: a minimalist camera needs at least one pixel")
+        self.register_buffer("detectors", torch.tensor(dets, dtype=torch.long))
+        self.sensor_model = bool(sensor_model)
+        self.history = int(history)
+        rows, cols = camera.mask_resolution
+        g = torch.Generator().manual_seed(int(init_seed))
+        lo, hi = INIT_TRANSMITTANCE
+        m0 = lo + (hi - lo) * torch.rand((len(dets), rows, cols), generator=g)
+        self.logits = nn.Parameter(logits_for_transmittance(m0, camera.transmittance_range))
+        expected = len(dets) * max(self.history - 1, 1)
+        if head.in_features != expected:
+            raise ValueError(
+                f"head has {head.in_features} inputs; this camera gives {expected} "
+                f"({len(dets)} pixels x {max(self.history - 1, 1)} time steps)"
+            )
+        self.head = head
+
+    @property
+    def num_pixels(self) -> int:
+        """Number of freeform pixels ``K``."""
+        return int(self.detectors.numel())
+
+    def transmittance(self) -> torch.Tensor:
+        """``M[pixel, row, col]`` in the printable range (torch, differentiable)."""
+        return transmittance(self.logits, self.camera.transmittance_range)
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel outputs ``[batch, time, pixel]`` (V) of ``T[batch, (time,) detector, row, col]``.
+
+        Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
+        """
+        t = _as_5d(transport)
+        b, h = t.shape[:2]
+        t = t.index_select(2, self.detectors).reshape(b * h, self.num_pixels, *t.shape[3:])
+        # dr.wrap converts plain tensors only: pass a view, not the nn.Parameter itself
+        logits = self.logits.view(self.logits.shape)
+        power = mask_power(t.contiguous(), logits, self.camera.transmittance_range)
+        power = power.reshape(b, h, self.num_pixels)
+        if gain is not None:
+            power = power * gain.reshape(b, 1, 1)
+        e = self.camera.electronics
+        if not self.sensor_model:
+            return power * (e.responsivity_a_per_w * e.gain_v_per_a)
+        return detector_voltage(power, e, noise=noise, generator=generator)
+
+    def forward(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> dict[str, torch.Tensor]:
+        """Raw head outputs ``{name: [batch, size]}``."""
+        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
+        return self.head(temporal_features(v))
+
+
+def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """Box-sum ``image[..., row, col]`` into ``grid = (R, C)`` pixels (sums power; torch).
+
+    Rows/columns that do not divide evenly use adaptive pooling (overlapping
+    boxes at the seams) scaled by the mean box area, so totals hold only
+    approximately; even divisions are exact box sums.
+    """
+    rows, cols = image.shape[-2:]
+    r, c = grid
+    if not (1 <= r <= rows and 1 <= c <= cols):
+        raise ValueError(f"baseline grid {r}x{c} must lie within the transport's {rows}x{cols}")
+    lead = image.shape[:-2]
+    flat = image.reshape(-1, 1, rows, cols)
+    pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
+    return pooled.reshape(*lead, r, c)
+
+
+class BaselineCamera(nn.Module):
+    """A traditional ``R x C`` camera (box pixels, 8-bit read-out) feeding a :class:`Head`.
+
+    Args:
+        grid: ``(R, C)`` pixels.
+        head: inference network with ``R * C * max(history - 1, 1)`` inputs.
+        exposure_w: pixel power mapped to 255 DN (W), see :meth:`exposure_from`.
+        history: frames per sample.
+        read_noise_dn: Gaussian read noise (DN).
+
+    """
+
+    def __init__(
+        self,
+        grid: tuple[int, int],
+        head: Head,
+        *,
+        exposure_w: float,
+        history: int = 1,
+        read_noise_dn: float = BASELINE_READ_NOISE_DN,
+    ) -> None:
+        super().__init__()
+        self.grid = (int(grid[0]), int(grid[1]))
+        if not exposure_w > 0:
+            raise ValueError(f"exposure_w = {exposure_w!r} W: need a positive pixel power")
+        self.register_buffer("exposure_w", torch.tensor(float(exposure_w)))
+        self.history = int(history)
+        self.read_noise_dn = float(read_noise_dn)
+        expected = self.num_pixels * max(self.history - 1, 1)
+        if head.in_features != expected:
+            raise ValueError(f"head has {head.in_features} inputs; this camera gives {expected}")
+        self.head = head
+
+    @property
+    def num_pixels(self) -> int:
+        """``R * C``."""
+        return self.grid[0] * self.grid[1]
+
+    @staticmethod
+    def exposure_from(transport: np.ndarray, grid: tuple[int, int]) -> float:
+        """Fixed exposure (W at 255 DN) from training transport ``[N, K, R, C]`` (numpy)."""
+        sample = np.asarray(transport[: min(len(transport), 2048)], np.float32)
+        pix = box_pixels(torch.from_numpy(sample).mean(dim=1), grid).numpy()
+        value = float(np.percentile(pix, BASELINE_EXPOSURE_PERCENTILE))
+        return value if value > 0 else 1.0
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1)."""
+        t = _as_5d(transport)
+        b, h = t.shape[:2]
+        pix = box_pixels(t.mean(dim=2), self.grid).reshape(b, h, self.num_pixels)
+        if gain is not None:
+            pix = pix * gain.reshape(b, 1, 1)
+        full = 2**BASELINE_BITS - 1
+        dn = pix / self.exposure_w * full
+        if noise:
+            kw = {"dtype": dn.dtype, "device": dn.device, "generator": generator}
+            dn = dn + self.read_noise_dn * torch.randn(dn.shape, **kw)
+            dn = dn + (torch.rand(dn.shape, **kw) - 0.5)
+        return torch.clamp(dn, 0.0, float(full)) / full
+
+    def forward(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> dict[str, torch.Tensor]:
+        """Raw head outputs ``{name: [batch, size]}``."""
+        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
+        return self.head(temporal_features(v))

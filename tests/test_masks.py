@@ -1,0 +1,103 @@
+"""Mask export: true-size print sheet, 16-bit PNGs, EXR, sidecar, printable range."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import OpenEXR
+import pytest
+from PIL import Image
+
+from mincam_render.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.masks import SHEET_MARGIN_MM, export_masks, sheet_layout
+
+
+@pytest.fixture
+def camera() -> FreeformCamera:
+    return FreeformCamera(mask_resolution=(8, 12),
+                          layout=DetectorLayout.grid(rows=2, cols=3, pitch_m=20 * MM))
+
+
+@pytest.fixture
+def exported(tmp_path, camera, rng):
+    m = rng.uniform(-0.1, 1.1, (6, 8, 12))  # partly outside the printable range
+    return m, export_masks(m, camera, tmp_path / "task", task="demo",
+                           provenance={"run": "runs/x", "dataset": "data/y"})
+
+
+def test_sheet_size_in_mm(camera):
+    w, h, corners = sheet_layout(camera)
+    assert w == pytest.approx(2 * 20 + 16 + 2 * SHEET_MARGIN_MM)
+    assert h == pytest.approx(20 + 16 + 2 * SHEET_MARGIN_MM)
+    # detector 0 is top-left on the board (seen from the detector side)
+    np.testing.assert_allclose(corners[0], [SHEET_MARGIN_MM, SHEET_MARGIN_MM])
+    np.testing.assert_allclose(corners[5] - corners[0], [40.0, 20.0])
+
+
+def test_svg_true_size_and_masks(exported, camera):
+    _, paths = exported
+    svg = paths["svg"].read_text()
+    w, h, _ = sheet_layout(camera)
+    head = re.search(r'<svg [^>]*width="([\d.]+)mm" height="([\d.]+)mm" viewBox="0 0 ([\d.]+) '
+                     r'([\d.]+)"', svg)
+    assert head is not None
+    assert float(head.group(1)) == pytest.approx(w) and float(head.group(2)) == pytest.approx(h)
+    assert float(head.group(3)) == pytest.approx(w)  # 1 user unit = 1 mm
+    sizes = re.findall(r'<image [^>]*width="([\d.]+)" height="([\d.]+)"', svg)
+    assert len(sizes) == 6
+    assert all(float(a) == pytest.approx(16.0) and float(b) == pytest.approx(16.0)
+               for a, b in sizes)
+    assert svg.count("<path") >= 6 * 4  # cut marks at every corner
+    assert "pixel 5" in svg and "0.01-0.67" in svg
+
+
+def test_png_is_16_bit_within_printable_range(exported, camera):
+    m, paths = exported
+    lo, hi = camera.transmittance_range
+    assert len(paths["png"]) == 6
+    img = Image.open(paths["png"][2])
+    assert img.mode.startswith("I;16") and img.size == (12, 8)
+    a = np.asarray(img).astype(np.float64) / 65535.0
+    assert a.min() >= lo - 1e-5 and a.max() <= hi + 1e-5
+    np.testing.assert_allclose(a, np.clip(m[2], lo, hi), atol=1 / 65535)
+
+
+def test_exr_holds_exact_values(exported):
+    m, paths = exported
+    ch = OpenEXR.File(str(paths["exr"])).channels()
+    np.testing.assert_allclose(np.asarray(ch["mask0003"].pixels), m[3].astype(np.float32))
+
+
+def test_sidecar(exported, camera):
+    m, paths = exported
+    side = json.loads(paths["json"].read_text())
+    assert side["camera"]["mask_size_m"] == pytest.approx(16 * MM)
+    assert side["printable_transmittance_range"] == [0.01, 0.67]
+    assert side["texels_clipped_to_printable_range"] == int(np.count_nonzero((m < 0.01)
+                                                                             | (m > 0.67)))
+    assert side["provenance"]["dataset"] == "data/y"
+    assert side["units"]["lengths"] == "m"
+
+
+def test_pdf_page_is_true_size(exported, camera):
+    _, paths = exported
+    raw = paths["pdf"].read_bytes()
+    box = re.search(rb"/MediaBox \[\s*([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+)\s*\]", raw)
+    w, h, _ = sheet_layout(camera)
+    assert float(box.group(3)) == pytest.approx(w / 25.4 * 72, rel=1e-3)
+    assert float(box.group(4)) == pytest.approx(h / 25.4 * 72, rel=1e-3)
+
+
+def test_more_masks_than_board_positions(tmp_path, camera):
+    paths = export_masks(np.full((8, 8, 12), 0.3), camera, tmp_path, pdf=False)
+    assert len(paths["png"]) == 8
+    assert len(json.loads(paths["json"].read_text())["mask_corners_on_sheet_mm"]) == 8
+
+
+def test_bad_input(tmp_path, camera):
+    with pytest.raises(ValueError, match="shape"):
+        export_masks(np.zeros((8, 12)), camera, tmp_path)
+    with pytest.raises(ValueError, match="NaN"):
+        export_masks(np.full((1, 8, 12), np.nan), camera, tmp_path)

@@ -1,0 +1,150 @@
+"""Models: shapes, losses per label kind, gradients reaching the mask logits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from mincam_render.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.generators.base import LabelKind, LabelSpec
+from mincam_render.maskplane import transmittance
+from mincam_render.models import (
+    INIT_TRANSMITTANCE,
+    BaselineCamera,
+    Head,
+    MincamCamera,
+    box_pixels,
+    task_loss,
+    temporal_features,
+)
+
+SPECS = (
+    LabelSpec(name="count", kind=LabelKind.COUNT),
+    LabelSpec(name="zones", kind=LabelKind.BINARY, size=3, median_filter_s=0.5),
+    LabelSpec(name="speed", kind=LabelKind.REGRESSION, size=2, unit="mph"),
+)
+
+
+def _camera(k: int = 3, res: int = 8) -> FreeformCamera:
+    return FreeformCamera(mask_resolution=(res, res),
+                          layout=DetectorLayout.row(count=k, pitch_m=20 * MM))
+
+
+def _labels(b: int, rng) -> dict[str, torch.Tensor]:
+    return {"count": torch.tensor(rng.integers(0, 5, (b, 1)), dtype=torch.float32),
+            "zones": torch.tensor(rng.integers(0, 2, (b, 3)), dtype=torch.float32),
+            "speed": torch.tensor(rng.uniform(0, 30, (b, 2)), dtype=torch.float32)}
+
+
+@pytest.mark.parametrize("history", [1, 4])
+def test_mincam_shapes_and_init(variant, rng, history):
+    cam = _camera()
+    head = Head(3 * max(history - 1, 1), SPECS)
+    model = MincamCamera(cam, head, history=history)
+    m = model.transmittance().detach().numpy()
+    assert m.shape == (3, 8, 8)
+    assert INIT_TRANSMITTANCE[0] - 1e-5 <= m.min() and m.max() <= INIT_TRANSMITTANCE[1] + 1e-5
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (5, history, 3, 8, 8)).astype(np.float32))
+    out = model(t, noise=True, generator=torch.Generator().manual_seed(0))
+    assert {k: tuple(v.shape) for k, v in out.items()} == {
+        "count": (5, 1), "zones": (5, 3), "speed": (5, 2)}
+
+
+def test_head_input_count_is_checked():
+    with pytest.raises(ValueError, match="inputs"):
+        MincamCamera(_camera(3), Head(4, SPECS))
+
+
+def test_temporal_features_are_forward_differences():
+    x = torch.arange(12.0).reshape(1, 4, 3) ** 2
+    f = temporal_features(x)
+    expected = (x[:, 1:] - x[:, :-1]).reshape(1, -1)
+    torch.testing.assert_close(f, expected)
+    assert temporal_features(x[:, :1]).shape == (1, 3)
+
+
+def test_loss_per_kind_closed_form():
+    head = Head(2, SPECS, target_mean={"count": np.array([2.0]), "speed": np.array([10.0, 20.0])},
+                target_std={"count": np.array([2.0]), "speed": np.array([5.0, 5.0])})
+    out = {"count": torch.tensor([[0.5]]), "zones": torch.tensor([[0.0, 2.0, -1.0]]),
+           "speed": torch.tensor([[1.0, -1.0]])}
+    lab = {"count": torch.tensor([[4.0]]), "zones": torch.tensor([[1.0, 0.0, 0.0]]),
+           "speed": torch.tensor([[10.0, 20.0]])}
+    total, parts = task_loss(head, out, lab)
+    # count: standardised target (4-2)/2 = 1 -> (0.5-1)^2
+    assert parts["count"].item() == pytest.approx(0.25, rel=1e-6)
+    bce = [np.log(2.0), np.log1p(np.exp(2.0)), np.log1p(np.exp(-1.0))]
+    assert parts["zones"].item() == pytest.approx(np.mean(bce), rel=1e-6)
+    assert parts["speed"].item() == pytest.approx(1.0, rel=1e-6)
+    assert total.item() == pytest.approx(0.25 + np.mean(bce) + 1.0, rel=1e-6)
+    pred = head.predict(out)
+    assert pred["count"].item() == pytest.approx(3.0)
+    torch.testing.assert_close(pred["zones"], torch.sigmoid(out["zones"]))
+    torch.testing.assert_close(pred["speed"], torch.tensor([[15.0, 15.0]]))
+
+
+def test_gradients_reach_logits_by_value(variant, rng):
+    """d(sum of noiseless voltages)/d logits equals the closed form."""
+    cam = _camera(2, 4)
+    model = MincamCamera(cam, Head(2, SPECS[:1]))
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (3, 2, 4, 4)).astype(np.float32))
+    v = model.measure(t, noise=False)
+    v.sum().backward()
+    e = cam.electronics
+    lo, hi = cam.transmittance_range
+    s = torch.sigmoid(model.logits.detach())
+    expected = e.responsivity_a_per_w * e.gain_v_per_a * t.sum(0) * (hi - lo) * s * (1 - s)
+    torch.testing.assert_close(model.logits.grad, expected, rtol=1e-4, atol=0)
+    assert float(model.logits.grad.abs().min()) > 0
+
+
+def test_mincam_power_matches_dot_product(variant, rng):
+    cam = _camera(2, 4)
+    model = MincamCamera(cam, Head(2, SPECS[:1]), sensor_model=False)
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (3, 2, 4, 4)).astype(np.float32))
+    m = transmittance(model.logits.detach(), cam.transmittance_range)
+    e = cam.electronics
+    expected = (t * m).sum((2, 3)) * e.responsivity_a_per_w * e.gain_v_per_a
+    torch.testing.assert_close(model.measure(t)[:, 0], expected, rtol=1e-5, atol=0)
+
+
+def test_detector_subset_and_reuse(variant, rng):
+    cam = _camera(2, 4)
+    model = MincamCamera(cam, Head(3, SPECS[:1]), detectors=[1, 1, 0], sensor_model=False)
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (2, 2, 4, 4)).astype(np.float32))
+    with torch.no_grad():
+        model.logits[:] = 0.0
+    v = model.measure(t)[:, 0]
+    torch.testing.assert_close(v[:, 0], v[:, 1])
+    assert not torch.allclose(v[:, 0], v[:, 2])
+
+
+@pytest.mark.parametrize("grid", [(1, 1), (2, 2), (4, 2), (8, 8)])
+def test_box_pixels_preserve_power(rng, grid):
+    img = torch.from_numpy(rng.uniform(0, 1, (2, 8, 8)))
+    b = box_pixels(img, grid)
+    assert b.shape == (2, *grid)
+    torch.testing.assert_close(b.sum((1, 2)), img.sum((1, 2)), rtol=1e-9, atol=0)
+    torch.testing.assert_close(box_pixels(img, (2, 2))[:, 0, 0], img[:, :4, :4].sum((1, 2)))
+
+
+def test_baseline_shapes_and_8bit_range(rng):
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (6, 3, 8, 8)).astype(np.float32))
+    exposure = BaselineCamera.exposure_from(t.numpy(), (2, 2))
+    model = BaselineCamera((2, 2), Head(4, SPECS), exposure_w=exposure)
+    v = model.measure(t, noise=True, generator=torch.Generator().manual_seed(0))
+    assert v.shape == (6, 1, 4)
+    assert float(v.min()) >= 0.0 and float(v.max()) <= 1.0
+    clean = model.measure(t, noise=False)
+    # read noise 1 DN + uniform quantisation: the noisy image stays within a few DN
+    assert float((v - clean).abs().max()) * 255 < 8
+    out = model(t)
+    assert out["zones"].shape == (6, 3)
+
+
+def test_baseline_grid_larger_than_transport_is_refused(rng):
+    t = torch.zeros(1, 1, 1, 4, 4)
+    model = BaselineCamera((8, 8), Head(64, SPECS[:1]), exposure_w=1.0)
+    with pytest.raises(ValueError, match="grid"):
+        model.measure(t)
