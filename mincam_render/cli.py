@@ -237,5 +237,679 @@ def preview_cmd(scene, out, seed, n_shown, duration_s, spp):
     click.echo(f"wrote {path}")
 
 
+# ---- training, sweeps, pruning, mask export (mincam_render.train / .masks) ----------
+
+
+def _int_list(ctx, param, value):
+    try:
+        out = [int(v) for v in value.split(",") if v.strip()]
+    except ValueError:
+        raise click.BadParameter(
+            f"{value!r} is not comma-separated integers, e.g. 1,2,4,8"
+        ) from None
+    if not out or min(out) < 1:
+        raise click.BadParameter(f"{value!r}: need integers >= 1")
+    return out
+
+
+def _grid_list(ctx, param, value):
+    try:
+        return [_grid(ctx, param, v.strip()) for v in value.split(",") if v.strip()]
+    except click.BadParameter:
+        raise click.BadParameter(f"{value!r} is not a list of ROWSxCOLS, e.g. 2x2,4x4") from None
+
+
+def _training_options(f):
+    """Options shared by train, sweep and prune (the paper's recipe as defaults)."""
+    opts = [
+        click.argument("dataset", required=False, type=click.Path(file_okay=False, path_type=Path)),
+        click.option(
+            "--family",
+            default=None,
+            help="Without DATASET: render this scene family in memory (name or .toml).",
+        ),
+        click.option(
+            "--frames",
+            type=click.IntRange(10),
+            default=2000,
+            show_default=True,
+            help="With --family: frames rendered (split 70/10/20 in time).",
+        ),
+        click.option(
+            "--spp",
+            type=click.IntRange(1, 1 << 20),
+            default=4,
+            show_default=True,
+            help="With --family: samples per texel.",
+        ),
+        click.option(
+            "--steps",
+            type=click.IntRange(1),
+            default=3000,
+            show_default=True,
+            help="Maximum training steps (early stopping may end sooner).",
+        ),
+        click.option("--batch-size", type=click.IntRange(2), default=64, show_default=True),
+        click.option(
+            "--lr",
+            type=click.FloatRange(0, 1, min_open=True, max_open=True),
+            default=None,
+            help="Head learning rate [default: 1e-3*min(1,sqrt(16/inputs))].",
+        ),
+        click.option(
+            "--mask-lr",
+            type=click.FloatRange(0, 10),
+            default=0.05,
+            show_default=True,
+            help="Adam learning rate of the mask logits.",
+        ),
+        click.option("--eval-every", type=click.IntRange(1), default=100, show_default=True),
+        click.option(
+            "--patience",
+            type=click.IntRange(1),
+            default=8,
+            show_default=True,
+            help="Evaluations without validation improvement before stopping.",
+        ),
+        click.option("--seed", type=click.IntRange(0), default=0, show_default=True),
+    ]
+    for o in reversed(opts):
+        f = o(f)
+    return f
+
+
+def _config(steps, batch_size, lr, mask_lr, eval_every, patience, seed):
+    from .train import TrainConfig
+
+    return TrainConfig(
+        max_steps=steps,
+        batch_size=batch_size,
+        lr=lr,
+        mask_lr=mask_lr,
+        eval_every=eval_every,
+        patience=patience,
+        seed=seed,
+    )
+
+
+def _splits(dataset, family, frames, spp, seed):
+    """(train, val, test) TrainingData from a dataset directory or an in-memory render."""
+    from .train import TrainingData
+
+    if dataset is not None:
+        from .dataset import open_dataset
+
+        ds = open_dataset(dataset)
+        return tuple(TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
+    if family is None:
+        raise click.ClickException("give a DATASET directory (mincam-render render) or --family")
+    from .generators import load_family
+
+    fam = load_family(family, seed=seed, num_frames=frames)
+    log.info("rendering %d frames of %s in memory (%d spp)", frames, fam.name, spp)
+    data = TrainingData.render(fam, range(frames), spp=spp, seed=seed, progress=True)
+    return data.split((0.7, 0.1, 0.2))
+
+
+_TRAIN_ERRORS = (ValueError, KeyError, RuntimeError, FileNotFoundError)
+
+
+@main.command("train")
+@_training_options
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/train"),
+    show_default=True,
+    help="Run directory (created; an existing checkpoint there is resumed).",
+)
+@click.option(
+    "--pixels",
+    type=click.IntRange(1, 4096),
+    default=8,
+    show_default=True,
+    help="Freeform pixels of the minimalist camera.",
+)
+@click.option(
+    "--baseline",
+    "baseline",
+    default=None,
+    callback=lambda c, p, v: None if v is None else _grid(c, p, v),
+    help="Train a ROWSxCOLS baseline camera instead.",
+)
+@click.option(
+    "--no-sensor-model",
+    is_flag=True,
+    help="Train without noise/saturation (supplement A's ablation).",
+)
+@click.option(
+    "--on-the-fly", is_flag=True, help="With --family: render fresh training frames every batch."
+)
+@click.option(
+    "--export-masks",
+    "export_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="After training, export printable masks into this directory.",
+)
+@click.option("--no-resume", is_flag=True, help="Start afresh even if a checkpoint exists.")
+def train_cmd(
+    dataset,
+    family,
+    frames,
+    spp,
+    steps,
+    batch_size,
+    lr,
+    mask_lr,
+    eval_every,
+    patience,
+    seed,
+    out,
+    pixels,
+    baseline,
+    no_sensor_model,
+    on_the_fly,
+    export_dir,
+    no_resume,
+):
+    """Train a minimalist (or baseline) camera end to end; metrics on the test split.
+
+    Reads a dataset written by `mincam-render render`, or renders --frames of a
+    scene family in memory. Writes checkpoint.pt (resumable), TensorBoard event
+    files, history.jsonl, mask_evolution.png, run.json and metrics.json
+    (test RMSE/accuracy after rounding and median filtering) into --out.
+
+    \b
+    Example:
+      mincam-render train --family patches --frames 300 --pixels 4 --steps 200 \\
+          --out runs/patches4
+    """
+    from .train import RenderedBatches, run_masks, train_run
+
+    try:
+        config = _config(steps, batch_size, lr, mask_lr, eval_every, patience, seed)
+        if no_resume and (out / "checkpoint.pt").exists():
+            (out / "checkpoint.pt").unlink()
+        train, val, test = _splits(dataset, family, frames, spp, seed)
+        stream = None
+        if on_the_fly:
+            if family is None:
+                raise click.ClickException("--on-the-fly needs --family (frames are rendered)")
+            from .generators import load_family
+
+            n = steps * batch_size * train.history
+            stream = RenderedBatches(
+                load_family(family, seed=seed + 1, num_frames=n), batch_size, spp=spp, seed=seed + 1
+            )
+        metrics = train_run(
+            train,
+            val,
+            test,
+            out,
+            pixels=pixels,
+            baseline_grid=baseline,
+            sensor_model=not no_sensor_model,
+            config=config,
+            on_the_fly=stream,
+            resume=not no_resume,
+            progress=True,
+        )
+        if export_dir is not None and baseline is None:
+            from .masks import export_masks
+
+            m, camera, run = run_masks(out)
+            export_masks(
+                m,
+                camera,
+                export_dir,
+                task=str(train.source.get("family", "")),
+                provenance={"run": str(out), "data": run["data"]},
+            )
+    except _TRAIN_ERRORS as err:
+        raise click.ClickException(str(err)) from None
+    t = metrics["test"]
+    click.echo(
+        f"{metrics['model']['kind']} {metrics['model']['pixels']} px: test "
+        f"{t['error_name']} = {t['error']:.4f} after {metrics['steps']} steps "
+        f"({metrics['train_wall_time_s']:.1f} s); wrote {out / 'metrics.json'}"
+    )
+
+
+@main.command("sweep")
+@_training_options
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/sweep"),
+    show_default=True,
+    help="Output directory (created).",
+)
+@click.option(
+    "--pixels",
+    "pixel_counts",
+    default="1,2,4,8",
+    show_default=True,
+    callback=_int_list,
+    help="Minimalist-camera pixel counts.",
+)
+@click.option(
+    "--baselines",
+    default="1x1,2x2,4x4,8x8,16x16",
+    show_default=True,
+    callback=_grid_list,
+    help="Baseline resolutions ROWSxCOLS.",
+)
+def sweep_cmd(
+    dataset,
+    family,
+    frames,
+    spp,
+    steps,
+    batch_size,
+    lr,
+    mask_lr,
+    eval_every,
+    patience,
+    seed,
+    out,
+    pixel_counts,
+    baselines,
+):
+    """Task error against pixel count: minimalist cameras vs baselines (log axis).
+
+    Every camera gets the same training budget. Writes sweep.png, sweep.md,
+    sweep.json and one resumable run directory per camera into --out.
+
+    \b
+    Example:
+      mincam-render sweep --family patches --frames 300 --steps 100 --pixels 1,4 \\
+          --baselines 2x2,8x8 --out runs/sweep_patches
+    """
+    from .train import sweep
+
+    try:
+        config = _config(steps, batch_size, lr, mask_lr, eval_every, patience, seed)
+        train, val, test = _splits(dataset, family, frames, spp, seed)
+        rows = sweep(
+            train,
+            val,
+            test,
+            pixel_counts=pixel_counts,
+            baseline_grids=baselines,
+            config=config,
+            out_dir=out,
+            progress=True,
+        )
+    except _TRAIN_ERRORS as err:
+        raise click.ClickException(str(err)) from None
+    from .train import sweep_table
+
+    click.echo(sweep_table(rows))
+    click.echo(f"wrote {out / 'sweep.png'}, sweep.md, sweep.json")
+
+
+@main.command("prune")
+@_training_options
+@click.option(
+    "--run",
+    "run_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="A minimalist-camera run directory from `mincam-render train`.",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/prune"),
+    show_default=True,
+    help="Output directory (created).",
+)
+def prune_cmd(
+    dataset,
+    family,
+    frames,
+    spp,
+    steps,
+    batch_size,
+    lr,
+    mask_lr,
+    eval_every,
+    patience,
+    seed,
+    run_dir,
+    out,
+):
+    """Greedy pruning (supplement C): drop the least useful pixel, retrain the head, repeat.
+
+    Use the same data as the run. Writes prune.json and prune.png (test error
+    against pixel count) into --out.
+
+    \b
+    Example:
+      mincam-render prune --family patches --frames 300 --steps 100 \\
+          --run runs/patches4 --out runs/patches4_prune
+    """
+    from .train import build_mincam, greedy_prune, load_run, write_sweep
+
+    try:
+        config = _config(steps, batch_size, lr, mask_lr, eval_every, patience, seed)
+        run, state = load_run(run_dir)
+        if run["model"]["kind"] != "mincam":
+            raise ValueError(f"{run_dir}: only minimalist-camera runs can be pruned")
+        train, val, test = _splits(dataset, family, frames, spp, seed)
+        model = build_mincam(
+            train, detectors=run["model"]["detectors"], sensor_model=run["model"]["sensor_model"]
+        )
+        model.load_state_dict(state)
+        records = greedy_prune(model, train, val, test, config, progress=True)
+    except _TRAIN_ERRORS as err:
+        raise click.ClickException(str(err)) from None
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "prune.json").write_text(json.dumps(records, indent=2, default=str))
+    rows = [
+        {
+            "name": f"pruned_{r['pixels']}px",
+            "kind": "mincam",
+            "pixels": r["pixels"],
+            "error": r["test"]["error"],
+            "error_name": r["test"]["error_name"],
+            "steps": 0,
+            "train_wall_time_s": 0.0,
+        }
+        for r in records
+    ]
+    write_sweep(rows, out, title="greedy pruning")
+    (out / "sweep.png").replace(out / "prune.png")
+    for r in records:
+        click.echo(
+            f"{r['pixels']:3d} px  removed {r['removed']}  "
+            f"test {r['test']['error_name']} = {r['test']['error']:.4f}"
+        )
+    click.echo(f"wrote {out / 'prune.json'}, prune.png")
+
+
+@main.command("export-masks")
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--task", default=None, help="Task name [default: the run's scene family].")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("masks"),
+    show_default=True,
+    help="Masks go into OUT/<task>/.",
+)
+@click.option("--no-pdf", is_flag=True, help="Skip the PDF print sheet.")
+def export_masks_cmd(run_dir, task, out, no_pdf):
+    """Export a trained camera's masks for printing.
+
+    Writes into OUT/<task>/: mask_NN.png (16-bit transmittance), masks.exr,
+    print_sheet.svg/.pdf at true size with cut marks and labels, masks.json.
+
+    \b
+    Example:
+      mincam-render export-masks runs/patches4 --task patches --out masks
+    """
+    from .masks import export_masks
+    from .train import run_masks
+
+    try:
+        m, camera, run = run_masks(run_dir)
+        task = task or str(run["data"]["train"].get("family") or "task")
+        paths = export_masks(
+            m,
+            camera,
+            out / task,
+            task=task,
+            pdf=not no_pdf,
+            provenance={"run": str(run_dir), "data": run["data"]},
+        )
+    except _TRAIN_ERRORS as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(
+        f"wrote {len(paths['png'])} masks to {out / task} "
+        f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
+    )
+
+
+def _render_splits(ctx, param, value):
+    try:
+        parts = tuple(float(p) for p in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not three fractions, e.g. 0.7,0.15,0.15") from None
+    if len(parts) != 3:
+        raise click.BadParameter(f"{value!r}: expected three fractions train,val,test")
+    return parts
+
+
+def _render_settings(ctx, param, values):
+    import tomllib
+
+    out: dict = {}
+    for item in values:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise click.BadParameter(f"{item!r} is not KEY=VALUE, e.g. camera.detectors=8")
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw  # a bare string
+        node = out
+        parts = key.strip().split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = value
+    return out
+
+
+@main.command("render")
+@click.argument("family")
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Dataset directory (created; an unfinished one is resumed).",
+)
+@click.option("--frames", type=click.IntRange(1), required=True, help="Frames to render.")
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=0,
+    show_default=True,
+    help="Dataset seed (scene trajectories and per-frame render seeds).",
+)
+@click.option(
+    "--shard-frames",
+    type=click.IntRange(1, 1 << 20),
+    default=256,
+    show_default=True,
+    help="Frames per shard file.",
+)
+@click.option(
+    "--splits",
+    callback=_render_splits,
+    default="0.7,0.15,0.15",
+    show_default=True,
+    help="Train,val,test fractions (contiguous in time).",
+)
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    callback=_render_settings,
+    metavar="KEY=VALUE",
+    help="Override a scene description value (TOML syntax), repeatable.",
+)
+@click.option(
+    "--detectors",
+    type=click.IntRange(1, 64),
+    default=None,
+    help="Number of freeform pixels (same as --set camera.detectors=N).",
+)
+@click.option(
+    "--fidelity",
+    type=click.Choice(["auto", "full"]),
+    default="auto",
+    show_default=True,
+    help="auto: measure what the scene needs; full: no shortcuts.",
+)
+@click.option(
+    "--spp",
+    type=click.IntRange(1, 1 << 20),
+    default=None,
+    help="Samples per texel (default: from --target-error).",
+)
+@click.option(
+    "--max-depth",
+    type=click.IntRange(0, 64),
+    default=None,
+    help="Path depth (2 = direct light, 0 = the scene's integrator).",
+)
+@click.option(
+    "--shared-render/--per-detector",
+    default=None,
+    help="One render for all detectors, or one per detector (default: by parallax).",
+)
+@click.option(
+    "--mask-res",
+    type=click.IntRange(1, 4096),
+    default=None,
+    help="Mask texels per side (default: the family camera's).",
+)
+@click.option(
+    "--dtype",
+    type=click.Choice(["float16", "float32"]),
+    default=None,
+    help="Storage type (default: float16 if within --dtype-error).",
+)
+@click.option(
+    "--target-error",
+    type=click.FloatRange(1e-6, 1.0),
+    default=0.01,
+    show_default=True,
+    help="Target relative measurement error (chooses spp).",
+)
+@click.option(
+    "--dtype-error",
+    type=click.FloatRange(1e-9, 1.0),
+    default=1e-3,
+    show_default=True,
+    help="Largest relative measurement error float16 may add.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(0, 256),
+    default=1,
+    show_default=True,
+    help="Local worker processes (0 = in this process).",
+)
+@click.option(
+    "--ray",
+    "ray_address",
+    default=None,
+    metavar="ADDRESS",
+    help="Render on a Ray cluster ('local' starts one; needs the ray extra).",
+)
+@click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
+def render_cmd(
+    family,
+    out,
+    frames,
+    seed,
+    shard_frames,
+    splits,
+    overrides,
+    detectors,
+    fidelity,
+    spp,
+    max_depth,
+    shared_render,
+    mask_res,
+    dtype,
+    target_error,
+    dtype_error,
+    workers,
+    ray_address,
+    no_progress,
+):
+    """Render a dataset of transport images T[frame, detector, row, col] with labels.
+
+    FAMILY is a scene family name (patches, workspace, lighting, traffic) or a
+    scene TOML file. The same command after an interruption resumes and gives
+    the same bytes as an uninterrupted run; a different configuration into a
+    non-empty --out is refused. Format: docs/dataset_format.md.
+
+    \b
+    Example:
+      mincam-render render patches --out runs/patches-ds --frames 512 --workers 2
+      mincam-render render patches --out runs/tiny --frames 40 --shard-frames 8 \\
+          --detectors 2 --mask-res 8 --spp 4
+    """
+    from .dataset import DatasetError
+    from .render_job import RenderError, RenderRequest, render_dataset
+
+    if detectors is not None:
+        overrides = {**overrides, "camera": {**overrides.get("camera", {}), "detectors": detectors}}
+    try:
+        request = RenderRequest(
+            family=str(family),
+            num_frames=frames,
+            seed=seed,
+            overrides=overrides or None,
+            shard_frames=shard_frames,
+            splits=splits,
+            fidelity=fidelity,
+            spp=spp,
+            max_depth=max_depth,
+            shared_render=shared_render,
+            mask_res=mask_res,
+            dtype=dtype,
+            target_error=target_error,
+            dtype_error_bound=dtype_error,
+        )
+        summary = render_dataset(
+            request, out, workers=workers, ray_address=ray_address, progress=not no_progress
+        )
+    except (ValueError, DatasetError, RenderError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(
+        f"{out}: {summary.num_frames} frames in {summary.shards_total} shards; rendered "
+        f"{len(summary.shards_rendered)}, kept {len(summary.shards_kept)}, repaired "
+        f"{len(summary.shards_repaired)}; {summary.seconds:.1f} s "
+        f"({summary.frames_per_s:.1f} frames/s)"
+    )
+
+
+@main.command("export-exr")
+@click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--frames",
+    "frame_list",
+    required=True,
+    help="Frame indices, e.g. 0,5,10-12 (ranges inclusive).",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Directory for frame-NNNNNN.exr files (created).",
+)
+def export_exr_cmd(dataset, frame_list, out):
+    """Write chosen frames of a rendered dataset as OpenEXR (one channel per detector, W).
+
+    \b
+    Example:
+      mincam-render export-exr runs/tiny --frames 0,5,10-12 --out runs/tiny-exr
+    """
+    from .dataset import DatasetError, open_dataset, parse_frame_list
+
+    try:
+        ds = open_dataset(dataset)
+        paths = ds.export_exr(parse_frame_list(frame_list, ds.num_frames), out)
+    except (ValueError, DatasetError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
+
+
 if __name__ == "__main__":
     main()

@@ -1,0 +1,226 @@
+"""Throughput and memory of dataset rendering, next to a plain Mitsuba render.
+
+Usage:
+    python benchmarks/bench_render.py [--out benchmarks/results/render.json]
+        [--families patches workspace] [--frames 64] [--repeats 3]
+        [--memory-frames 2000] [--rss-every 100] [--threads 0]
+
+For each available scene family at its default camera: plans the render with
+``--fidelity auto`` (the decisions and their measured errors go into the JSON),
+warms up (JIT compilation and kernel recording are not timed), then times
+``--repeats`` passes over ``--frames`` frames of :func:`render_shard` (scene
+update, labels, transport render, float16 encoding: everything but the disk
+write) and reports frames/s and detector-samples/s (median and spread). A plain
+``mi.render`` of the same scene, updated to the same frames, with a perspective
+sensor of as many pixels as rendered texels and the same spp and integrator, is
+timed alongside: ``overhead = ours / plain - 1``.
+
+Memory: renders ``--memory-frames`` frames of the first family in ONE process
+(no worker recycling, the harshest case) and samples the resident set size
+every ``--rss-every`` frames; growth is measured from the first sample after
+warm-up to the last. ``--memory-frames 10000`` reproduces the issue's target.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+
+from mincam_render import backend
+from mincam_render.generators.registry import FAMILY_NAMES
+from mincam_render.render_job import (
+    RenderRequest,
+    _load_family,
+    _render_camera,
+    frame_seed,
+    plan_render,
+    render_shard,
+)
+
+
+def git_revision() -> str:
+    try:
+        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def rss_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def bench_family(name: str, frames: int, repeats: int) -> dict:
+    request = RenderRequest(family=name, num_frames=max(frames, 8), shard_frames=frames)
+    t0 = time.perf_counter()
+    manifest = plan_render(request)
+    plan_s = time.perf_counter() - t0
+    job = manifest["job"]
+    r = job["render"]
+    camera, render_cam = _render_camera(job)
+    rows, cols = camera.mask_resolution
+    rendered_texels = render_cam.num_detectors * rows * cols
+    detector_samples = camera.num_detectors * rows * cols * r["spp"]
+
+    render_shard(job, 0)  # warm-up: scene build, JIT, kernel recording
+    ours = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        render_shard(job, 0)
+        ours.append(time.perf_counter() - t0)
+
+    # plain Mitsuba: same scene and frames, same rays per frame, same integrator
+    family = _load_family(job)
+    scene = family.build_scene()
+    integrator = (
+        mi.load_dict({"type": "path", "max_depth": r["max_depth"]}) if r["max_depth"] else None
+    )
+    sensor = mi.load_dict(
+        {
+            "type": "perspective",
+            "fov": camera.fov_deg,
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=list(camera.position), target=list(camera.look_at), up=list(camera.up)
+            ),
+            "film": {
+                "type": "hdrfilm",
+                "width": cols * render_cam.num_detectors,
+                "height": rows,
+                "rfilter": {"type": "box"},
+                "pixel_format": "luminance",
+            },
+        }
+    )
+
+    def plain_pass():
+        for i in range(frames):
+            family.set_frame(scene, i)
+            kw = {"integrator": integrator} if integrator is not None else {}
+            mi.render(
+                scene, sensor=sensor, spp=r["spp"], seed=frame_seed(0, i) & 0xFFFFFFFF, **kw
+            ).numpy()
+
+    plain_pass()
+    plain = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        plain_pass()
+        plain.append(time.perf_counter() - t0)
+    med, pmed = statistics.median(ours), statistics.median(plain)
+    return {
+        "family": name,
+        "detectors": camera.num_detectors,
+        "mask_resolution": [rows, cols],
+        "spp": r["spp"],
+        "max_depth": r["max_depth"],
+        "shared_render": r["shared_render"],
+        "dtype": r["dtype"],
+        "fidelity": manifest["fidelity"],
+        "plan_seconds": plan_s,
+        "frames": frames,
+        "rays_per_frame": rendered_texels * r["spp"],
+        "frames_per_s": frames / med,
+        "frames_per_s_min_max": [frames / max(ours), frames / min(ours)],
+        "detector_samples_per_s": frames * detector_samples / med,
+        "plain_mitsuba_frames_per_s": frames / pmed,
+        "overhead_ratio": med / pmed,
+        "seconds_ours": ours,
+        "seconds_plain": plain,
+    }
+
+
+def bench_memory(name: str, frames: int, every: int) -> dict:
+    request = RenderRequest(family=name, num_frames=frames, shard_frames=every)
+    job = plan_render(request)["job"]
+    samples = []
+    t0 = time.perf_counter()
+    for shard in range(-(-frames // every)):
+        render_shard(job, shard)
+        samples.append(
+            {
+                "frames": min(frames, (shard + 1) * every),
+                "rss_mb": rss_bytes() / 2**20,
+                "seconds": time.perf_counter() - t0,
+            }
+        )
+    base = samples[min(1, len(samples) - 1)]["rss_mb"]
+    return {
+        "family": name,
+        "frames": frames,
+        "rss_every": every,
+        "samples": samples,
+        "rss_growth_fraction": samples[-1]["rss_mb"] / base - 1.0,
+        "rss_peak_mb": max(s["rss_mb"] for s in samples),
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/render.json"))
+    ap.add_argument("--families", nargs="*", default=None)
+    ap.add_argument("--frames", type=int, default=64)
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--memory-frames", type=int, default=2000)
+    ap.add_argument("--rss-every", type=int, default=100)
+    ap.add_argument("--threads", type=int, default=0, help="Dr.Jit threads (0 = all cores)")
+    args = ap.parse_args()
+    info = backend.describe()
+    if args.threads:
+        dr.set_thread_count(args.threads)
+    results, skipped = [], {}
+    for name in args.families or FAMILY_NAMES:
+        try:
+            row = bench_family(name, args.frames, args.repeats)
+        except Exception as err:  # a family still being written, missing SUMO, ...
+            skipped[name] = f"{type(err).__name__}: {err}"
+            print(f"{name}: skipped ({skipped[name][:160]})")
+            continue
+        results.append(row)
+        print(
+            f"{name}: {row['detectors']} det x {row['mask_resolution'][0]}x"
+            f"{row['mask_resolution'][1]} x {row['spp']} spp (shared={row['shared_render']}, "
+            f"max_depth={row['max_depth']}, {row['dtype']}): {row['frames_per_s']:.1f} frames/s, "
+            f"{row['detector_samples_per_s'] / 1e6:.2f} M detector-samples/s; plain Mitsuba "
+            f"{row['plain_mitsuba_frames_per_s']:.1f} frames/s; ratio {row['overhead_ratio']:.2f}"
+        )
+    memory = None
+    if args.memory_frames > 0 and results:
+        memory = bench_memory(results[0]["family"], args.memory_frames, args.rss_every)
+        print(
+            f"memory ({memory['family']}, {memory['frames']} frames, one process): RSS "
+            f"{memory['samples'][0]['rss_mb']:.0f} -> {memory['samples'][-1]['rss_mb']:.0f} MB, "
+            f"growth after warm-up {100 * memory['rss_growth_fraction']:+.1f} %"
+        )
+    report = {
+        "benchmark": "bench_render",
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor(),
+            "cpu_count": os.cpu_count(),
+        },
+        "variant": info["variant"],
+        "versions": info,
+        "git_revision": git_revision(),
+        "dr_thread_count": dr.thread_count(),
+        "frames": args.frames,
+        "repeats": args.repeats,
+        "results": results,
+        "skipped": skipped,
+        "memory": memory,
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(report, indent=1, default=str))
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

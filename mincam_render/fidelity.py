@@ -1,0 +1,294 @@
+"""Leaving out what a scene does not need, each choice decided from a measured error.
+
+:func:`decide_fidelity` renders a few probe frames of a family (spread over the
+sequence, at fixed seeds) and decides:
+
+- **shared render**: one render at the board centre replicated to all detectors,
+  when the largest parallax between a detector and the board centre,
+  ``|b| d / z_min`` on the mask plane, stays below ``parallax_fraction`` of a
+  texel (``b`` the detector offset, ``d`` the mask distance, ``z_min`` the
+  nearest scene depth from a grid of rays cast from the board centre);
+- **direct light only** (``max_depth = 2``) when indirect light changes
+  measurements by less than ``indirect_fraction`` (probe renders at depth 2 and
+  at the scene's depth with common random numbers, so the difference is the
+  indirect light, not noise);
+- **samples per texel** from the target measurement error: the Monte Carlo
+  error of measurements, estimated from two renders with different seeds at a
+  pilot sample count, falls as ``1/sqrt(spp)``; the choice is then checked
+  against a reference at 8x the samples;
+- **storage float16** when the relative measurement error it adds (per-frame
+  power-of-two scaling, see :mod:`mincam_render.dataset`) stays below
+  ``dtype_error_bound`` for random printable masks, else float32;
+- **mask resolution**: kept at the camera's. A transport image at a coarser
+  resolution gives *exact* measurements for masks of that resolution (its
+  texels are sums of the finer ones), so resolution is a design choice of the
+  mask (swept in training), not an accuracy knob of the render;
+- **monochrome variant** (photodiodes are single-channel) and **no temporal
+  history** unless the family ``needs_history``: recorded, nothing to measure.
+
+Errors are relative errors of measurements ``P = sum T M`` for random printable
+masks (:func:`mincam_render.dataset.measurement_relative_error`), RMS and max
+over probe frames, detectors and masks. Every decision records its value, its
+source (``flag``, ``auto`` or ``full``), the bound and the measured figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import re
+from typing import Any
+
+import numpy as np
+
+from .dataset import decode_transport, encode_transport, measurement_relative_error
+
+log = logging.getLogger(__name__)
+
+#: Probe frames rendered for the measurements.
+PROBE_FRAMES = 3
+#: Samples per texel of the pilot renders.
+PILOT_SPP = 4
+#: spp chosen automatically stays in [1, MAX_AUTO_SPP].
+MAX_AUTO_SPP = 1024
+#: Reference renders for the spp check use this many times the chosen spp.
+REFERENCE_SPP_FACTOR = 8
+#: Path depth of the reference when the scene's integrator is unbounded (-1).
+DEEP_REFERENCE_DEPTH = 16
+#: spp of FULL fidelity when --spp is not given.
+FULL_SPP = 64
+#: Rays per side of the grid cast to estimate scene depth.
+DEPTH_GRID = 16
+
+
+def _scene_max_depth(scene) -> int | None:
+    integ = scene.integrator()
+    if integ is None:
+        return None
+    m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
+    return int(m.group(1)) if m else None
+
+
+def _probe_indices(num_frames: int) -> list[int]:
+    n = min(PROBE_FRAMES, num_frames)
+    return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, n)})
+
+
+def nearest_depth_m(scene, camera) -> dict[str, float]:
+    """Nearest and farthest scene depth (m, along the board normal) seen from the board centre.
+
+    Casts a ``DEPTH_GRID^2`` grid of rays from the board centre through the mask's
+    field of view. Misses count as infinitely far.
+    """
+    import mitsuba as mi
+
+    right, up, fwd = camera.frame
+    n = DEPTH_GRID
+    s = ((np.arange(n) + 0.5) / n - 0.5) * camera.mask_size_m
+    ss, tt = np.meshgrid(s, -s)
+    dirs = ss.reshape(-1, 1) * right + tt.reshape(-1, 1) * up + camera.mask_distance_m * fwd
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origin = np.broadcast_to(np.asarray(camera.position), dirs.shape)
+    ray = mi.Ray3f(
+        mi.Point3f(*[mi.Float(origin[:, i]) for i in range(3)]),
+        mi.Vector3f(*[mi.Float(dirs[:, i]) for i in range(3)]),
+    )
+    si = scene.ray_intersect(ray)
+    t = np.asarray(si.t.numpy(), dtype=np.float64)
+    valid = np.isfinite(t) & (t < 1e30)
+    depth = t[valid] * (dirs[valid] @ fwd)
+    if depth.size == 0:
+        return {"min": math.inf, "max": math.inf}
+    return {"min": float(depth.min()), "max": float(depth.max())}
+
+
+def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, dict]]:
+    """Choose render settings for ``family`` seen by ``camera`` (see the module doc).
+
+    Args:
+        family: a :class:`~mincam_render.generators.base.SceneFamily`.
+        camera: the camera to render (mask resolution already final).
+        request: a :class:`~mincam_render.render_job.RenderRequest`; its explicit
+            settings win, its bounds drive the automatic choices.
+
+    Returns:
+        ``(settings, decisions)``: settings ``{"spp", "max_depth" (0 = scene
+        integrator), "shared_render", "mask_resolution", "dtype"}`` and per
+        setting a decision record ``{"value", "source", "reason", ...measured}``.
+    """
+    from . import backend
+    from .camera import DetectorLayout
+    from .render_job import Fidelity, frame_seed
+    from .transport import render_transport
+
+    auto = request.fidelity is Fidelity.AUTO
+    scene = family.build_scene()
+    probes = _probe_indices(family.num_frames)
+    k = camera.num_detectors
+    rows, cols = camera.mask_resolution
+    lo_hi = camera.transmittance_range
+    decisions: dict[str, dict] = {}
+
+    def render(cam, *, spp, seed_offset=0, max_depth=None, shared=False):
+        out = []
+        for i in probes:
+            family.set_frame(scene, i)
+            seed = (frame_seed(request.seed, i) + 7919 * seed_offset) % 2**63
+            t = render_transport(scene, cam, spp=spp, seed=seed, max_depth=max_depth or None)
+            out.append(np.repeat(t, k, axis=0) if shared else t)
+        return np.stack(out)
+
+    centre_cam = dataclasses.replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+
+    # ---- shared render ------------------------------------------------------------------
+    offsets = np.asarray(camera.layout.positions_m)
+    baseline = float(np.linalg.norm(offsets, axis=1).max())
+    texel_m = camera.mask_size_m / max(rows, cols)
+    depths = []
+    for i in probes:
+        family.set_frame(scene, i)
+        depths.append(nearest_depth_m(scene, camera))
+    z_min = min(d["min"] for d in depths)
+    z_max = max(d["max"] for d in depths)
+    parallax = (
+        0.0 if not math.isfinite(z_min) else baseline * camera.mask_distance_m / z_min / texel_m
+    )
+    measured: dict[str, Any] = {
+        "parallax_texels": parallax,
+        "depth_range_m": [z_min, z_max],
+        "largest_detector_offset_m": baseline,
+        "bound_texels": request.parallax_fraction,
+    }
+    if request.shared_render is not None:
+        shared, source = bool(request.shared_render), "flag"
+        reason = "set by --shared-render/--per-detector"
+    elif not auto:
+        shared, source, reason = False, "full", "full fidelity renders every detector"
+    elif k == 1:
+        shared, source, reason = False, "auto", "one detector: nothing to share"
+    else:
+        shared = parallax < request.parallax_fraction
+        source = "auto"
+        reason = (
+            f"parallax {parallax:.3g} texel {'<' if shared else '>='} bound "
+            f"{request.parallax_fraction:g} texel over depths {z_min:.3g}-{z_max:.3g} m"
+        )
+    if k > 1 and (shared or source == "auto"):
+        per_det = render(camera, spp=PILOT_SPP)
+        other = render(camera, spp=PILOT_SPP, seed_offset=1)
+        shared_t = render(centre_cam, spp=PILOT_SPP, shared=True)
+        measured["error_shared_vs_per_detector"] = measurement_relative_error(
+            shared_t, per_det, lo_hi
+        )
+        measured["noise_floor_two_seeds"] = measurement_relative_error(other, per_det, lo_hi)
+        measured["probe_spp"] = PILOT_SPP
+    decisions["shared_render"] = {"value": shared, "source": source, "reason": reason, **measured}
+    render_cam = centre_cam if shared else camera
+
+    # ---- direct light only ---------------------------------------------------------------
+    scene_depth = _scene_max_depth(scene)
+    measured = {"scene_integrator_max_depth": scene_depth, "bound": request.indirect_fraction}
+    if request.max_depth is not None:
+        max_depth, source, reason = request.max_depth, "flag", "set by --max-depth"
+    elif not auto:
+        max_depth, source, reason = 0, "full", "full fidelity uses the scene's integrator"
+    elif scene_depth is not None and 1 <= scene_depth <= 2:
+        max_depth, source = 0, "auto"
+        reason = f"the scene's integrator is already direct-only (max_depth = {scene_depth})"
+        measured["indirect_change"] = {"rms": 0.0, "max": 0.0}
+    else:
+        ref_depth = scene_depth if scene_depth and scene_depth > 2 else DEEP_REFERENCE_DEPTH
+        # same seeds: direct light uses the same samples, the difference is indirect light
+        direct = render(render_cam, spp=PILOT_SPP, max_depth=2, shared=shared)
+        deep = render(render_cam, spp=PILOT_SPP, max_depth=ref_depth, shared=shared)
+        change = measurement_relative_error(direct, deep, lo_hi)
+        measured.update({"indirect_change": change, "reference_depth": ref_depth})
+        max_depth = 2 if change["rms"] < request.indirect_fraction else 0
+        source = "auto"
+        reason = (
+            f"indirect light changes measurements by {change['rms']:.3g} (rms) "
+            f"{'<' if max_depth == 2 else '>='} bound {request.indirect_fraction:g}"
+        )
+    decisions["max_depth"] = {"value": max_depth, "source": source, "reason": reason, **measured}
+
+    # ---- samples per texel -------------------------------------------------------------
+    measured = {"target_error": request.target_error}
+    if request.spp is not None:
+        spp, source, reason = request.spp, "flag", "set by --spp"
+    elif not auto:
+        spp, source, reason = FULL_SPP, "full", f"full fidelity default {FULL_SPP} spp"
+    else:
+        a = render(render_cam, spp=PILOT_SPP, max_depth=max_depth, shared=shared)
+        b = render(render_cam, spp=PILOT_SPP, seed_offset=1, max_depth=max_depth, shared=shared)
+        # the difference of two independent renders has twice the variance of one
+        e_pilot = measurement_relative_error(a, b, lo_hi)["rms"] / math.sqrt(2.0)
+        need = PILOT_SPP * (e_pilot / request.target_error) ** 2
+        spp = int(min(MAX_AUTO_SPP, 2 ** max(0, math.ceil(math.log2(max(need, 1.0))))))
+        source = "auto"
+        measured.update(
+            {
+                "pilot_spp": PILOT_SPP,
+                "pilot_error_rms": e_pilot,
+                "predicted_error_rms": e_pilot * math.sqrt(PILOT_SPP / spp),
+            }
+        )
+        reason = (
+            f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); "
+            f"{spp} spp meets target {request.target_error:g}"
+            + (" (capped)" if spp == MAX_AUTO_SPP and need > MAX_AUTO_SPP else "")
+        )
+    chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)
+    if source == "auto":
+        ref_spp = min(spp * REFERENCE_SPP_FACTOR, 1 << 16)
+        ref = render(render_cam, spp=ref_spp, seed_offset=3, max_depth=max_depth, shared=shared)
+        measured["error_vs_reference"] = measurement_relative_error(chosen, ref, lo_hi)
+        measured["reference_spp"] = ref_spp
+    decisions["spp"] = {"value": spp, "source": source, "reason": reason, **measured}
+
+    # ---- storage type ------------------------------------------------------------------
+    stored, scales = encode_transport(chosen, "float16")
+    f16_err = measurement_relative_error(decode_transport(stored, scales), chosen, lo_hi)
+    measured = {"float16_error": f16_err, "bound": request.dtype_error_bound}
+    if request.dtype is not None:
+        dtype, source, reason = request.dtype, "flag", "set by --dtype"
+    elif not auto:
+        dtype, source, reason = "float32", "full", "full fidelity stores float32"
+    else:
+        dtype = "float16" if f16_err["max"] < request.dtype_error_bound else "float32"
+        source = "auto"
+        reason = (
+            f"float16 changes measurements by at most {f16_err['max']:.3g} "
+            f"{'<' if dtype == 'float16' else '>='} bound {request.dtype_error_bound:g}"
+        )
+    decisions["dtype"] = {"value": dtype, "source": source, "reason": reason, **measured}
+
+    # ---- recorded, nothing to measure --------------------------------------------------
+    decisions["mask_resolution"] = {
+        "value": rows,
+        "source": "flag" if request.mask_res is not None else "camera",
+        "reason": "a coarser transport image is exact for masks of that resolution (block "
+        "sums), so resolution is a mask design choice, not reduced automatically",
+    }
+    decisions["variant"] = {
+        "value": backend.describe()["variant"],
+        "source": "auto",
+        "reason": "photodiodes are single-channel: monochrome variant",
+    }
+    decisions["temporal_history"] = {
+        "value": bool(family.needs_history),
+        "source": "auto",
+        "reason": "the family's task needs a time history"
+        if family.needs_history
+        else "static task: frames are used without history",
+    }
+    decisions["probe_frames"] = probes
+    settings = {
+        "spp": spp,
+        "max_depth": max_depth,
+        "shared_render": shared,
+        "mask_resolution": rows,
+        "dtype": dtype,
+    }
+    log.info("fidelity: %s", {k_: v["value"] for k_, v in decisions.items() if isinstance(v, dict)})
+    return settings, decisions

@@ -1,0 +1,758 @@
+"""Rendering a dataset: planning shards, worker processes or Ray, resume, progress.
+
+A render is described by a :class:`RenderRequest` (scene family, frames, seed,
+sharding, fidelity settings). :func:`render_dataset` turns it into a dataset
+directory (format: :mod:`mincam_render.dataset`):
+
+1. **Plan.** A new directory gets a manifest with the resolved configuration,
+   the fidelity decisions (measured once, :mod:`mincam_render.fidelity`) and one
+   empty record per shard. An existing directory must hold a manifest of the
+   *same* request (compared field by field), whose plan is then reused as is, so
+   a resumed render is identical to an uninterrupted one.
+2. **Check.** Every shard is verified against its sha256: intact shards are kept
+   (never re-rendered); corrupted or truncated ones are re-rendered.
+3. **Render.** Missing shards are rendered by worker processes (``spawn``; each
+   replaced after a few shards so Mitsuba/Dr.Jit memory cannot accumulate; each
+   limited to ``cores / workers`` Dr.Jit threads), in-process (``workers=0``), or
+   as Ray tasks (``ray_address``). Workers return arrays; only this process
+   writes files, each atomically, then updates the manifest.
+
+Frame ``i`` is rendered with seed :func:`frame_seed` ``(seed, i)`` and the family's
+scene state ``i`` (a pure function of ``i``), so any frame re-renders
+bit-identically whatever the order, worker count or interruption.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import hashlib
+import json
+import logging
+import os
+import queue as queue_mod
+import threading
+import time
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import dataset as ds
+
+log = logging.getLogger(__name__)
+
+#: Shards a local worker process renders before it is replaced by a fresh one.
+DEFAULT_SHARDS_PER_WORKER = 4
+#: Test hook: seconds to sleep after each frame (slows renders so a test can kill
+#: one mid-way). Read by workers from the environment; unset in normal use.
+FRAME_DELAY_ENV = "MINCAM_RENDER_TEST_FRAME_DELAY_S"
+
+
+class Fidelity(enum.Enum):
+    """How render settings not given explicitly are chosen."""
+
+    AUTO = "auto"  # measured from scene and camera (mincam_render.fidelity)
+    FULL = "full"  # no shortcuts: per-detector renders, scene integrator, float32
+
+
+class RenderError(RuntimeError):
+    """A render could not run (worker crash, Ray unavailable)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RenderRequest:
+    """What to render; equal requests give byte-identical datasets.
+
+    Args:
+        family: a family name (``"patches"``) or a scene TOML path.
+        num_frames: frames of the sequence, >= 1.
+        seed: dataset seed (scene trajectories and frame render seeds), >= 0.
+        overrides: nested dict replacing values of the scene description.
+        shard_frames: frames per shard file, >= 1.
+        splits: train/val/test fractions of the sequence (contiguous).
+        fidelity: AUTO measures each choice below that is None; FULL takes the
+            expensive option (per-detector, scene integrator, float32, 64 spp).
+        spp: samples per texel, or None to decide.
+        max_depth: path depth (2 = direct light), 0 = the scene's integrator, or
+            None to decide.
+        shared_render: one render for all detectors, or None to decide.
+        mask_res: mask texels per side, or None for the family camera's.
+        dtype: ``"float16"``/``"float32"`` storage, or None to decide.
+        target_error: target relative measurement error (Monte Carlo) for spp.
+        dtype_error_bound: largest relative measurement error float16 may add.
+        indirect_fraction: drop indirect light when it changes measurements less.
+        parallax_fraction: share one render when parallax is below this many texels.
+    """
+
+    family: str
+    num_frames: int
+    seed: int = 0
+    overrides: dict | None = None
+    shard_frames: int = 256
+    splits: tuple[float, float, float] = (0.7, 0.15, 0.15)
+    fidelity: Fidelity = Fidelity.AUTO
+    spp: int | None = None
+    max_depth: int | None = None
+    shared_render: bool | None = None
+    mask_res: int | None = None
+    dtype: str | None = None
+    target_error: float = 0.01
+    dtype_error_bound: float = 1e-3
+    indirect_fraction: float = 0.005
+    parallax_fraction: float = 0.25
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ValueError:
+            return ValueError(
+                f"RenderRequest.{name} = {getattr(self, name)!r} is invalid: allowed {allowed}"
+            )
+
+        def is_int(v: Any) -> bool:
+            return isinstance(v, int) and not isinstance(v, bool)
+
+        if not is_int(self.num_frames) or self.num_frames < 1:
+            raise bad("num_frames", "an integer >= 1")
+        if not is_int(self.seed) or not 0 <= self.seed < 2**63:
+            raise bad("seed", "an integer in [0, 2^63)")
+        if not is_int(self.shard_frames) or not 1 <= self.shard_frames <= 1 << 20:
+            raise bad("shard_frames", "an integer in [1, 2^20]")
+        ds.split_ranges(self.num_frames, self.splits)
+        object.__setattr__(self, "splits", tuple(float(f) for f in self.splits))
+        object.__setattr__(self, "fidelity", Fidelity(self.fidelity))
+        if self.spp is not None and (not is_int(self.spp) or not 1 <= self.spp <= 1 << 20):
+            raise bad("spp", "None or an integer in [1, 2^20]")
+        if self.max_depth is not None and (
+            not is_int(self.max_depth) or not 0 <= self.max_depth <= 64
+        ):
+            raise bad("max_depth", "None, 0 (scene integrator) or an integer in [1, 64]")
+        if self.mask_res is not None and (
+            not is_int(self.mask_res) or not 1 <= self.mask_res <= 4096
+        ):
+            raise bad("mask_res", "None or an integer in [1, 4096]")
+        if self.dtype is not None and self.dtype not in ds.DTYPES:
+            raise bad("dtype", f"None or one of {', '.join(ds.DTYPES)}")
+        for name, lo, hi in (
+            ("target_error", 1e-6, 1.0),
+            ("dtype_error_bound", 1e-9, 1.0),
+            ("indirect_fraction", 0.0, 1.0),
+            ("parallax_fraction", 0.0, 100.0),
+        ):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+                raise bad(name, f"a number in [{lo:g}, {hi:g}]")
+
+    def identity(self, description: dict) -> dict:
+        """JSON-ready identity: the request with the *resolved* scene description.
+
+        Two renders into one directory must have equal identities; the resolved
+        description (not the file name) makes an edited TOML count as different.
+        """
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["family"] = str(self.family)
+        d["fidelity"] = self.fidelity.value
+        d["splits"] = list(self.splits)
+        d["overrides"] = self.overrides or {}
+        d["description"] = description
+        return json.loads(json.dumps(d, sort_keys=True, default=ds._json_default))
+
+
+@dataclass
+class RenderSummary:
+    """What a call of :func:`render_dataset` did."""
+
+    path: Path
+    num_frames: int
+    shards_total: int
+    shards_rendered: list[int]
+    shards_kept: list[int]
+    shards_repaired: list[int]
+    seconds: float
+    frames_per_s: float
+
+
+def frame_seed(dataset_seed: int, index: int) -> int:
+    """Render seed of frame ``index``: splitmix64 of ``(dataset_seed, index)``, in [0, 2^63)."""
+    mask = 2**64 - 1
+
+    def mix(z: int) -> int:
+        z = (z + 0x9E3779B97F4A7C15) & mask
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        return z ^ (z >> 31)
+
+    return mix(mix(dataset_seed) ^ index) & (2**63 - 1)
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the packages that determine the output, and the git revision."""
+    import importlib.metadata as md
+    import subprocess
+
+    out = {}
+    for name in ("mitsuba", "drjit", "torch", "numpy", "mincam_render"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            out[name] = "not installed"
+    try:
+        repo = Path(__file__).resolve().parents[1]
+        rev = subprocess.run(
+            ["git", "-C", str(repo), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        out["git_revision"] = rev or "unknown"
+    except (OSError, subprocess.SubprocessError):
+        out["git_revision"] = "unknown"
+    return out
+
+
+# ---- family construction (parent and workers) ----------------------------------------
+
+
+def _load_family(job: dict):
+    """The scene family of a job, rebuilt from the manifest's resolved description."""
+    from .config import parse
+    from .generators.registry import family_class, load_family
+
+    fam = job["family"]
+    if fam.get("rebuild_from_description", True):
+        cls = family_class(fam["name"])
+        config = parse(cls.config_type, fam["description"], source="manifest")
+        return cls(config, seed=job["seed"], num_frames=job["num_frames"])
+    return load_family(
+        fam["source"], seed=job["seed"], num_frames=job["num_frames"], overrides=fam["overrides"]
+    )
+
+
+def _render_camera(job: dict):
+    """``(camera of the dataset, camera actually rendered)``; they differ for shared renders."""
+    from .camera import DetectorLayout
+
+    camera = ds.camera_from_dict(job["camera"])
+    if job["render"]["shared_render"]:
+        # one representative detector at the board centre, replicated to all K
+        return camera, dataclasses.replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+    return camera, camera
+
+
+# ---- worker side -----------------------------------------------------------------------
+
+_WORKER: dict[str, Any] = {"progress": None, "parent": None, "cache": {}}
+
+
+def _worker_init(threads: int, progress_queue, parent_pid: int | None) -> None:
+    """Initializer of a worker process: limit Dr.Jit threads, remember the progress queue."""
+    import drjit as dr
+
+    from .backend import use_variant
+
+    use_variant()
+    dr.set_thread_count(max(1, int(threads)))
+    _WORKER["progress"] = progress_queue
+    _WORKER["parent"] = parent_pid
+
+
+def render_shard(job: dict, shard: int) -> tuple[int, np.ndarray, dict, float]:
+    """Render one shard of a job (in whatever process calls it).
+
+    Args:
+        job: the ``job`` section of a manifest (family, camera, render settings).
+        shard: shard number.
+
+    Returns:
+        ``(shard, stored T[frame, detector, row, col], shard metadata, seconds)``.
+    """
+    from .backend import use_variant
+    from .transport import render_transport
+
+    use_variant()
+    t0 = time.perf_counter()
+    key = job["request_sha256"]
+    cached = _WORKER["cache"].get(key)
+    if cached is None:
+        _WORKER["cache"].clear()  # one job per process: free the previous scene
+        family = _load_family(job)
+        cached = (family, family.build_scene(), *_render_camera(job))
+        _WORKER["cache"][key] = cached
+    family, scene, camera, render_cam = cached
+    r = job["render"]
+    start = shard * job["shard_frames"]
+    stop = min(job["num_frames"], start + job["shard_frames"])
+    max_depth = r["max_depth"] or None
+    delay = float(os.environ.get(FRAME_DELAY_ENV, "0") or 0)
+    k = camera.num_detectors
+    frames, images = [], []
+    labels: dict[str, list] = {s.name: [] for s in family.labels}
+    for i in range(start, stop):
+        if _WORKER["parent"] is not None and os.getppid() != _WORKER["parent"]:
+            os._exit(1)  # the render was killed: do not linger as an orphan
+        lab = family.set_frame(scene, i)
+        seed = frame_seed(job["seed"], i)
+        t = render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)
+        if r["shared_render"]:
+            t = np.repeat(t, k, axis=0)
+        images.append(t)
+        for name in labels:
+            labels[name].append(np.asarray(lab[name], dtype=np.float32).reshape(-1).tolist())
+        frames.append(
+            {"index": i, "time_s": family.time_s(i), "seed": seed, "state": family.frame_state(i)}
+        )
+        if _WORKER["progress"] is not None:
+            _WORKER["progress"].put(1)
+        if delay:
+            time.sleep(delay)
+    stored, scales = ds.encode_transport(np.stack(images), r["dtype"])
+    for f, s in zip(frames, scales, strict=True):
+        f["scale"] = float(s)
+    meta = {
+        "format": ds.FORMAT_NAME,
+        "format_version": ds.FORMAT_VERSION,
+        "request_sha256": key,
+        "shard": shard,
+        "start": start,
+        "stop": stop,
+        "dtype": r["dtype"],
+        "shape": list(stored.shape),
+        "frames": frames,
+        "labels": labels,
+    }
+    # JSON round trip now, so the parent writes exactly what a reader will parse
+    meta = json.loads(json.dumps(meta, default=ds._json_default))
+    return shard, stored, meta, time.perf_counter() - t0
+
+
+def _ray_render_shard(job: dict, shard: int, threads: int):
+    import drjit as dr
+
+    from .backend import use_variant
+
+    use_variant()
+    dr.set_thread_count(max(1, int(threads)))
+    return render_shard(job, shard)
+
+
+# ---- planning ----------------------------------------------------------------------------
+
+
+def _describe_family(request: RenderRequest):
+    """``(family, description dict, rebuild flag)`` for a request."""
+    from .config import parse, to_dict
+    from .generators.registry import load_family
+
+    family = load_family(
+        request.family,
+        seed=request.seed,
+        num_frames=request.num_frames,
+        overrides=request.overrides,
+    )
+    description = json.loads(json.dumps(to_dict(family.config), default=ds._json_default))
+    try:
+        rebuilt = parse(type(family.config), description, source="manifest")
+        rebuild = rebuilt == family.config
+    except ValueError:
+        rebuild = False
+    return family, description, rebuild
+
+
+def plan_render(request: RenderRequest) -> dict:
+    """The manifest of a new render: configuration, fidelity decisions, empty shards.
+
+    Runs the fidelity measurements of ``request.fidelity == AUTO`` (a few small
+    renders). Pure planning: writes nothing.
+    """
+    from . import backend
+    from .fidelity import decide_fidelity
+
+    backend.use_variant()
+    family, description, rebuild = _describe_family(request)
+    identity = request.identity(description)
+    request_sha = hashlib.sha256(ds.json_bytes(identity)).hexdigest()
+    base_camera = family.camera()
+    if request.mask_res is not None:
+        base_camera = dataclasses.replace(
+            base_camera, mask_resolution=(request.mask_res, request.mask_res)
+        )
+    settings, decisions = decide_fidelity(family, base_camera, request)
+    camera = base_camera
+    num_shards = -(-request.num_frames // request.shard_frames)
+    job = {
+        "request_sha256": request_sha,
+        "family": {
+            "name": family.name,
+            "source": str(request.family),
+            "overrides": request.overrides or {},
+            "description": description,
+            "rebuild_from_description": rebuild,
+        },
+        "seed": request.seed,
+        "num_frames": request.num_frames,
+        "shard_frames": request.shard_frames,
+        "camera": ds.camera_to_dict(camera),
+        "render": {
+            "spp": settings["spp"],
+            "max_depth": settings["max_depth"],
+            "shared_render": settings["shared_render"],
+            "mask_resolution": settings["mask_resolution"],
+            "dtype": settings["dtype"],
+        },
+    }
+    info = backend.describe()
+    return {
+        "format": ds.FORMAT_NAME,
+        "format_version": ds.FORMAT_VERSION,
+        "request": identity,
+        "family": {
+            "name": family.name,
+            "fps": float(family.fps),
+            "needs_history": bool(family.needs_history),
+            "description": description,
+        },
+        "num_frames": request.num_frames,
+        "shard_frames": request.shard_frames,
+        "num_shards": num_shards,
+        "splits": {
+            k: list(v) for k, v in ds.split_ranges(request.num_frames, request.splits).items()
+        },
+        "camera": job["camera"],
+        "label_specs": [ds.label_spec_to_dict(s) for s in family.labels],
+        "fidelity": decisions,
+        "job": job,
+        "transport": {
+            "units": "W per unit transmittance",
+            "axes": "T[frame, detector, row, col]; row 0 = up side of the view, col 0 = left",
+            "stored_as": "stored * scale = T, scale a per-frame power of two (frames[i].scale)",
+            "dtype": settings["dtype"],
+        },
+        "frame_seed": "splitmix64(splitmix64(seed) ^ index) & (2^63 - 1)",
+        "variant": info["variant"],
+        "versions": package_versions(),
+        "shards": [None] * num_shards,
+        "complete": False,
+    }
+
+
+def _identity_diff(old: dict, new: dict, prefix: str = "") -> list[str]:
+    diffs = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key, "<absent>"), new.get(key, "<absent>")
+        if isinstance(a, dict) and isinstance(b, dict):
+            diffs += _identity_diff(a, b, f"{prefix}{key}.")
+        elif a != b:
+            diffs.append(f"{prefix}{key}: {a!r} (on disk) != {b!r} (now)")
+    return diffs
+
+
+def _open_or_plan(request: RenderRequest, out: Path) -> dict:
+    """Reuse the manifest of ``out`` if it is the same request; plan a new one if empty."""
+    manifest_path = out / ds.MANIFEST_NAME
+    if out.exists() and not out.is_dir():
+        raise ds.DatasetError(f"--out {out} exists and is not a directory")
+    if manifest_path.is_file():
+        manifest = ds.read_manifest(out)
+        _, description, _ = _describe_family(request)
+        identity = request.identity(description)
+        if manifest["request"] != identity:
+            diffs = _identity_diff(manifest["request"], identity)
+            raise ds.DatasetError(
+                f"{out} holds a dataset rendered with a different configuration "
+                f"({'; '.join(diffs[:3])}{' ...' if len(diffs) > 3 else ''}); "
+                "render into another --out directory or delete this one"
+            )
+        versions = package_versions()
+        if versions != manifest["versions"]:
+            log.warning(
+                "resuming a dataset started with other package versions %s (now %s)",
+                manifest["versions"],
+                versions,
+            )
+        return manifest
+    if out.is_dir() and any(out.iterdir()):
+        raise ds.DatasetError(
+            f"{out} is not empty and holds no {ds.MANIFEST_NAME}; refusing to render into it"
+        )
+    manifest = plan_render(request)
+    (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
+    ds.write_manifest(out, manifest)
+    return manifest
+
+
+# ---- running -----------------------------------------------------------------------------
+
+
+def _append_log(out: Path, entry: dict) -> None:
+    with open(out / ds.LOG_NAME, "a") as f:
+        f.write(json.dumps(entry, default=ds._json_default) + "\n")
+
+
+def _threads_per_worker(workers: int) -> int:
+    cores = os.cpu_count() or 1
+    return max(1, cores // max(1, workers))
+
+
+def render_dataset(
+    request: RenderRequest,
+    out: str | os.PathLike,
+    *,
+    workers: int = 1,
+    ray_address: str | None = None,
+    progress: bool = False,
+    shards_per_worker: int = DEFAULT_SHARDS_PER_WORKER,
+) -> RenderSummary:
+    """Render (or finish) the dataset of ``request`` into directory ``out``.
+
+    Args:
+        request: what to render.
+        out: dataset directory; created, or resumed if it holds the same request.
+        workers: local worker processes (>= 1), or 0 to render in this process.
+        ray_address: run shards as Ray tasks on this cluster (``"local"`` starts a
+            single-node cluster, ``"auto"`` joins the running one); needs the
+            ``ray`` extra. ``workers`` is then ignored.
+        progress: show a tqdm progress bar (frames/s, ETA) on stderr.
+        shards_per_worker: shards a worker process renders before it is replaced.
+
+    Returns:
+        A :class:`RenderSummary`.
+
+    Raises:
+        DatasetError: ``out`` holds another configuration or is not a dataset.
+        RenderError: a worker died or Ray is unavailable.
+        ValueError: invalid arguments.
+    """
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 0 <= workers <= 256:
+        raise ValueError(f"workers = {workers!r}: allowed an integer in [0, 256]")
+    if not isinstance(shards_per_worker, int) or shards_per_worker < 1:
+        raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
+    out = Path(out)
+    t_start = time.perf_counter()
+    manifest = _open_or_plan(request, out)
+    (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
+    job = manifest["job"]
+    num_shards = manifest["num_shards"]
+
+    kept, repaired, todo = [], [], []
+    changed = False
+    for i in range(num_shards):
+        rec = manifest["shards"][i]
+        found, reason = ds.verify_shard(out, i, rec)
+        if found is not None and rec is None:
+            # finished by a previous run that was killed before updating the manifest
+            meta = json.loads(ds.shard_paths(out, i)[1].read_text())
+            if meta.get("request_sha256") != job["request_sha256"]:
+                found, reason = None, "belongs to another configuration"
+        if found is not None:
+            kept.append(i)
+            if rec != found:
+                manifest["shards"][i] = found
+                changed = True
+            continue
+        if rec is not None or reason != "missing":
+            log.warning("shard %d: %s; re-rendering it", i, reason)
+            repaired.append(i)
+            manifest["shards"][i] = None
+            changed = True
+        todo.append(i)
+    if changed or (not todo and not manifest["complete"]):
+        manifest["complete"] = not todo
+        ds.write_manifest(out, manifest)
+
+    frames_of = {
+        i: min(job["num_frames"], (i + 1) * job["shard_frames"]) - i * job["shard_frames"]
+        for i in range(num_shards)
+    }
+    done_frames = sum(frames_of[i] for i in kept)
+    _append_log(
+        out,
+        {
+            "event": "start",
+            "pid": os.getpid(),
+            "time": time.time(),
+            "kept": kept,
+            "repaired": repaired,
+            "todo": todo,
+            "workers": workers,
+            "ray": ray_address,
+        },
+    )
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=job["num_frames"],
+            initial=done_frames,
+            unit="frame",
+            desc=f"render {out.name}",
+            dynamic_ncols=True,
+            smoothing=0.1,
+        )
+
+    rendered: list[int] = []
+
+    def finish(result: tuple[int, np.ndarray, dict, float], per_frame_progress: bool) -> None:
+        shard, stored, meta, seconds = result
+        record = ds.write_shard(out, shard, stored, meta)
+        manifest["shards"][shard] = record
+        manifest["complete"] = all(s is not None for s in manifest["shards"])
+        ds.write_manifest(out, manifest)
+        rendered.append(shard)
+        _append_log(
+            out,
+            {
+                "event": "shard",
+                "shard": shard,
+                "frames": [meta["start"], meta["stop"]],
+                "seconds": seconds,
+                "pid": os.getpid(),
+                "time": time.time(),
+            },
+        )
+        if bar is not None and not per_frame_progress:
+            bar.update(meta["stop"] - meta["start"])
+
+    try:
+        if not todo:
+            pass
+        elif ray_address is not None:
+            _run_ray(ray_address, job, todo, finish, shards_per_worker)
+        elif workers == 0:
+            for i in todo:
+                finish(render_shard(job, i), False)
+        else:
+            _run_processes(job, todo, finish, workers, shards_per_worker, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    seconds = time.perf_counter() - t_start
+    n_rendered = sum(frames_of[i] for i in rendered)
+    _append_log(
+        out,
+        {
+            "event": "end",
+            "pid": os.getpid(),
+            "time": time.time(),
+            "rendered": rendered,
+            "seconds": seconds,
+        },
+    )
+    return RenderSummary(
+        path=out,
+        num_frames=job["num_frames"],
+        shards_total=num_shards,
+        shards_rendered=sorted(rendered),
+        shards_kept=kept,
+        shards_repaired=repaired,
+        seconds=seconds,
+        frames_per_s=n_rendered / seconds if seconds > 0 else 0.0,
+    )
+
+
+def _run_processes(
+    job: dict,
+    todo: list[int],
+    finish: Callable[[tuple, bool], None],
+    workers: int,
+    shards_per_worker: int,
+    bar,
+) -> None:
+    import multiprocessing as mp
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("spawn")
+    progress_q = ctx.Queue() if bar is not None else None
+    stop = threading.Event()
+
+    def drain() -> None:
+        while not stop.is_set():
+            try:
+                n = progress_q.get(timeout=0.2)
+            except queue_mod.Empty:
+                continue
+            except (EOFError, OSError):
+                return
+            bar.update(n)
+
+    drainer = None
+    if progress_q is not None:
+        drainer = threading.Thread(target=drain, daemon=True)
+        drainer.start()
+    threads = _threads_per_worker(workers)
+    executor = ProcessPoolExecutor(
+        max_workers=min(workers, len(todo)),
+        mp_context=ctx,
+        initializer=_worker_init,
+        initargs=(threads, progress_q, os.getpid()),
+        max_tasks_per_child=shards_per_worker,
+    )
+    try:
+        pending = {executor.submit(render_shard, job, i): i for i in todo}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                shard = pending.pop(fut)
+                try:
+                    result = fut.result()
+                except BrokenProcessPool as err:
+                    raise RenderError(
+                        f"a render worker died while rendering shard {shard} ({err}); "
+                        "finished shards are kept: run the same command again to resume"
+                    ) from None
+                finish(result, True)
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
+        stop.set()
+        if drainer is not None:
+            drainer.join(timeout=2)
+
+
+def _run_ray(
+    address: str,
+    job: dict,
+    todo: list[int],
+    finish: Callable[[tuple, bool], None],
+    shards_per_worker: int,
+) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise RenderError(
+            "--ray needs the optional dependency ray: pip install 'mincam_render[ray]'"
+        ) from None
+    pkg_dir = str(Path(__file__).resolve().parent)
+    init_kwargs: dict[str, Any] = {
+        "ignore_reinit_error": True,
+        "log_to_driver": False,
+        "include_dashboard": False,
+        # ship this package to the workers (other nodes may not have it installed)
+        "runtime_env": {"py_modules": [pkg_dir], "excludes": ["__pycache__"]},
+    }
+    if address != "local":
+        init_kwargs["address"] = address
+    started = not ray.is_initialized()
+    try:
+        ray.init(**init_kwargs)
+    except Exception as err:  # ray raises ConnectionError, RuntimeError, ValueError ...
+        raise RenderError(f"could not connect to Ray at {address!r}: {err}") from None
+    try:
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
+        task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
+        job_ref = ray.put(job)
+        pending = [task.remote(job_ref, i, 1) for i in todo]
+        log.info("Ray: %d shard tasks on %d CPUs", len(pending), cpus)
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            try:
+                result = ray.get(done[0])
+            except Exception as err:
+                raise RenderError(f"a Ray render task failed: {err}") from None
+            finish(result, False)
+    finally:
+        if started:
+            ray.shutdown()

@@ -1,0 +1,243 @@
+"""Rendering datasets: resume after SIGKILL, repair, refusal, fidelity choices, Ray."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mincam_render import dataset as ds
+from mincam_render.render_job import (
+    FRAME_DELAY_ENV,
+    RenderRequest,
+    frame_seed,
+    plan_render,
+    render_dataset,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+TINY = {"camera": {"detectors": 2, "mask_resolution": 8}}
+CLI_TINY = [
+    "render",
+    "patches",
+    "--frames",
+    "40",
+    "--shard-frames",
+    "8",
+    "--detectors",
+    "2",
+    "--mask-res",
+    "8",
+    "--spp",
+    "4",
+    "--seed",
+    "5",
+    "--no-progress",
+]
+
+
+def _cli(args, **kwargs):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env.update(kwargs.pop("env", {}))
+    return subprocess.Popen(
+        [sys.executable, "-m", "mincam_render.cli", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kwargs,
+    )
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != ds.LOG_NAME
+    }
+
+
+def _log(root: Path) -> list[dict]:
+    return [json.loads(line) for line in (root / ds.LOG_NAME).read_text().splitlines()]
+
+
+def test_frame_seed_is_deterministic_and_distinct():
+    seeds = {frame_seed(0, i) for i in range(1000)} | {frame_seed(1, i) for i in range(1000)}
+    assert len(seeds) == 2000 and all(0 <= s < 2**63 for s in seeds)
+    assert frame_seed(7, 3) == frame_seed(7, 3)
+
+
+def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
+    ref, killed = tmp_path / "ref", tmp_path / "killed"
+    # uninterrupted reference, rendered in the CLI's own process
+    p = _cli([*CLI_TINY, "--out", str(ref), "--workers", "0"])
+    out, err = p.communicate(timeout=240)
+    assert p.returncode == 0, err
+
+    # the same command in a worker process, slowed down, killed mid-way
+    p = _cli(
+        [*CLI_TINY, "--out", str(killed), "--workers", "1"],
+        env={FRAME_DELAY_ENV: "0.1"},
+        start_new_session=True,
+    )
+    deadline = time.monotonic() + 240
+    while len(list((killed / ds.SHARD_DIR).glob("shard-*.json"))) < 2:
+        assert p.poll() is None, p.communicate()[1]
+        assert time.monotonic() < deadline, "render produced no shards in time"
+        time.sleep(0.02)
+    os.killpg(p.pid, signal.SIGKILL)  # the CLI and its worker, at an arbitrary moment
+    p.wait(timeout=30)
+    finished = sorted((killed / ds.SHARD_DIR).glob("shard-*.json"))
+    assert 2 <= len(finished) < 5
+    before = {
+        q.name: (q.stat().st_ino, q.stat().st_mtime_ns)
+        for f in finished
+        for q in (f, f.with_suffix(".npy"))
+    }
+
+    p = _cli([*CLI_TINY, "--out", str(killed), "--workers", "1"])
+    out, err = p.communicate(timeout=240)
+    assert p.returncode == 0, err
+    assert _files(killed) == _files(ref)
+    after = {
+        n: (
+            (killed / ds.SHARD_DIR / n).stat().st_ino,
+            (killed / ds.SHARD_DIR / n).stat().st_mtime_ns,
+        )
+        for n in before
+    }
+    assert after == before  # finished shards were not rewritten
+    last_start = [e for e in _log(killed) if e["event"] == "start"][-1]
+    kept = {int(f.stem.split("-")[1]) for f in finished}
+    assert kept <= set(last_start["kept"]) and not kept & set(last_start["todo"])
+    assert ds.open_dataset(killed).verify() == []
+
+
+@pytest.fixture
+def tiny_request():
+    return RenderRequest(
+        family="patches", num_frames=24, seed=1, overrides=TINY, shard_frames=8, spp=4
+    )
+
+
+def test_corrupted_and_truncated_shards_are_re_rendered(tmp_path, tiny_request, variant):
+    out = tmp_path / "ds"
+    render_dataset(tiny_request, out, workers=0)
+    good = _files(out)
+    npy1, _ = ds.shard_paths(out, 1)
+    data = bytearray(npy1.read_bytes())
+    data[200] ^= 0x01
+    npy1.write_bytes(bytes(data))
+    npy2, json2 = ds.shard_paths(out, 2)
+    json2.write_bytes(json2.read_bytes()[:50])  # truncated metadata
+    summary = render_dataset(tiny_request, out, workers=0)
+    assert summary.shards_repaired == [1, 2] and summary.shards_rendered == [1, 2]
+    assert summary.shards_kept == [0]
+    assert _files(out) == good
+
+
+def test_shard_finished_but_not_in_manifest_is_kept(tmp_path, tiny_request, variant):
+    out = tmp_path / "ds"
+    render_dataset(tiny_request, out, workers=0)
+    good = _files(out)
+    m = ds.read_manifest(out)  # as if killed between writing shard 2 and the manifest
+    m["shards"][2] = None
+    m["complete"] = False
+    ds.write_manifest(out, m)
+    summary = render_dataset(tiny_request, out, workers=0)
+    assert summary.shards_rendered == [] and summary.shards_kept == [0, 1, 2]
+    assert _files(out) == good
+
+
+def test_mismatched_configuration_is_refused(tmp_path, tiny_request, variant):
+    from click.testing import CliRunner
+
+    from mincam_render.cli import main
+
+    out = tmp_path / "ds"
+    render_dataset(tiny_request, out, workers=0)
+    other = RenderRequest(**{**tiny_request.__dict__, "seed": 2})
+    with pytest.raises(ds.DatasetError, match=r"different configuration.*seed: 1 .* != 2"):
+        render_dataset(other, out, workers=0)
+    res = CliRunner().invoke(
+        main, ["render", "patches", "--out", str(out), "--frames", "24", "--spp", "8"]
+    )
+    assert res.exit_code != 0
+    assert "different configuration" in res.output and "Traceback" not in res.output
+
+
+def test_non_empty_directory_without_manifest_is_refused(tmp_path, tiny_request):
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(ds.DatasetError, match="not empty"):
+        render_dataset(tiny_request, tmp_path, workers=0)
+
+
+@pytest.mark.parametrize(("bound", "expected"), [(1e-9, "float32"), (1e-2, "float16")])
+def test_dtype_chosen_by_error_bound(tiny_request, bound, expected, variant):
+    req = RenderRequest(**{**tiny_request.__dict__, "dtype_error_bound": bound})
+    m = plan_render(req)
+    decision = m["fidelity"]["dtype"]
+    assert decision["value"] == expected == m["job"]["render"]["dtype"]
+    assert decision["source"] == "auto"
+    assert 0 < decision["float16_error"]["max"] < 1e-2  # the measured figure is recorded
+
+
+def test_auto_fidelity_records_measured_decisions(tmp_path, variant):
+    req = RenderRequest(
+        family="patches",
+        num_frames=16,
+        seed=0,
+        overrides=TINY,
+        shard_frames=8,
+        target_error=0.2,
+    )
+    m = plan_render(req)
+    f = m["fidelity"]
+    for key in (
+        "shared_render",
+        "max_depth",
+        "spp",
+        "dtype",
+        "mask_resolution",
+        "temporal_history",
+        "variant",
+    ):
+        assert key in f and "reason" in f[key] and "value" in f[key]
+    # patches: a plane 1 m away, detectors 10 mm off centre -> 0.057 texel of parallax
+    assert f["shared_render"]["parallax_texels"] == pytest.approx(0.057, rel=0.01)
+    assert f["shared_render"]["value"] is True
+    assert f["spp"]["source"] == "auto" and "error_vs_reference" in f["spp"]
+    assert f["temporal_history"]["value"] is False
+
+
+def test_shared_render_replicates_the_centre_render(tmp_path, variant):
+    req = RenderRequest(
+        family="patches",
+        num_frames=8,
+        seed=0,
+        overrides=TINY,
+        shard_frames=8,
+        spp=4,
+        shared_render=True,
+        dtype="float32",
+    )
+    d = ds.open_dataset(render_dataset(req, tmp_path / "ds", workers=0).path)
+    t = d.transport("train")
+    np.testing.assert_array_equal(t[:, 0], t[:, 1])
+    assert d.manifest["fidelity"]["shared_render"]["source"] == "flag"
+
+
+@pytest.mark.slow
+def test_ray_local_cluster_matches_local_workers(tmp_path, tiny_request, variant):
+    pytest.importorskip("ray")
+    a = render_dataset(tiny_request, tmp_path / "local", workers=0)
+    b = render_dataset(tiny_request, tmp_path / "ray", ray_address="local")
+    assert b.shards_rendered == [0, 1, 2]
+    assert _files(a.path) == _files(b.path)
