@@ -7,7 +7,10 @@ sequence, at fixed seeds) and decides:
   when the largest parallax between a detector and the board centre,
   ``|b| d / z_min`` on the mask plane, stays below ``parallax_fraction`` of a
   texel (``b`` the detector offset, ``d`` the mask distance, ``z_min`` the
-  nearest scene depth from a grid of rays cast from the board centre);
+  nearest scene depth from a grid of rays cast from the board centre), or when
+  the parallax changes measurements by less than ``SHARED_ERROR_SHARE`` of the
+  target error (measured with common random numbers: the same samples with every
+  detector moved to the board centre, so noise cancels);
 - **direct light only** (``max_depth = 2``) when indirect light changes
   measurements by less than ``indirect_fraction`` (probe renders at depth 2 and
   at the scene's depth with common random numbers, so the difference is the
@@ -54,8 +57,13 @@ PILOT_SPP = 4
 MAX_AUTO_SPP = 1024
 #: Reference renders for the spp check use this many times the chosen spp.
 REFERENCE_SPP_FACTOR = 8
+#: Cap on the reference's spp (keeps planning a noisy scene to minutes).
+MAX_REFERENCE_SPP = 4096
 #: Path depth of the reference when the scene's integrator is unbounded (-1).
 DEEP_REFERENCE_DEPTH = 16
+#: A shared render is chosen when parallax changes measurements by less than this
+#: share of the target error (or by less than ``parallax_fraction`` texels).
+SHARED_ERROR_SHARE = 0.5
 #: spp of FULL fidelity when --spp is not given.
 FULL_SPP = 64
 #: Rays per side of the grid cast to estimate scene depth.
@@ -130,12 +138,14 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     lo_hi = camera.transmittance_range
     decisions: dict[str, dict] = {}
 
-    def render(cam, *, spp, seed_offset=0, max_depth=None, shared=False):
+    def render(cam, *, spp, seed_offset=0, max_depth=None, shared=False, parallax=True):
         out = []
         for i in probes:
             family.set_frame(scene, i)
             seed = (frame_seed(request.seed, i) + 7919 * seed_offset) % 2**63
-            t = render_transport(scene, cam, spp=spp, seed=seed, max_depth=max_depth or None)
+            t = render_transport(
+                scene, cam, spp=spp, seed=seed, max_depth=max_depth or None, parallax=parallax
+            )
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
@@ -160,6 +170,18 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         "largest_detector_offset_m": baseline,
         "bound_texels": request.parallax_fraction,
     }
+    if k > 1 and request.shared_render is None and auto:
+        # common random numbers: the same samples with every detector moved to the
+        # board centre, so the difference is the parallax alone, not noise
+        per_det = render(camera, spp=PILOT_SPP)
+        no_parallax = render(camera, spp=PILOT_SPP, parallax=False)
+        other = render(camera, spp=PILOT_SPP, seed_offset=1)
+        measured["error_shared_vs_per_detector"] = measurement_relative_error(
+            no_parallax, per_det, lo_hi
+        )
+        measured["noise_floor_two_seeds"] = measurement_relative_error(other, per_det, lo_hi)
+        measured["probe_spp"] = PILOT_SPP
+        measured["error_bound"] = SHARED_ERROR_SHARE * request.target_error
     if request.shared_render is not None:
         shared, source = bool(request.shared_render), "flag"
         reason = "set by --shared-render/--per-detector"
@@ -168,21 +190,15 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     elif k == 1:
         shared, source, reason = False, "auto", "one detector: nothing to share"
     else:
-        shared = parallax < request.parallax_fraction
+        err = measured["error_shared_vs_per_detector"]["rms"]
+        bound = measured["error_bound"]
+        shared = parallax < request.parallax_fraction or err < bound
         source = "auto"
         reason = (
-            f"parallax {parallax:.3g} texel {'<' if shared else '>='} bound "
-            f"{request.parallax_fraction:g} texel over depths {z_min:.3g}-{z_max:.3g} m"
+            f"parallax {parallax:.3g} texel (bound {request.parallax_fraction:g}) over depths "
+            f"{z_min:.3g}-{z_max:.3g} m; it changes measurements by {err:.3g} rms "
+            f"({'<' if err < bound else '>='} {bound:.3g}, a share of the target error)"
         )
-    if k > 1 and (shared or source == "auto"):
-        per_det = render(camera, spp=PILOT_SPP)
-        other = render(camera, spp=PILOT_SPP, seed_offset=1)
-        shared_t = render(centre_cam, spp=PILOT_SPP, shared=True)
-        measured["error_shared_vs_per_detector"] = measurement_relative_error(
-            shared_t, per_det, lo_hi
-        )
-        measured["noise_floor_two_seeds"] = measurement_relative_error(other, per_det, lo_hi)
-        measured["probe_spp"] = PILOT_SPP
     decisions["shared_render"] = {"value": shared, "source": source, "reason": reason, **measured}
     render_cam = centre_cam if shared else camera
 
@@ -240,7 +256,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         )
     chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)
     if source == "auto":
-        ref_spp = min(spp * REFERENCE_SPP_FACTOR, 1 << 16)
+        ref_spp = min(spp * REFERENCE_SPP_FACTOR, MAX_REFERENCE_SPP)
         ref = render(render_cam, spp=ref_spp, seed_offset=3, max_depth=max_depth, shared=shared)
         measured["error_vs_reference"] = measurement_relative_error(chosen, ref, lo_hi)
         measured["reference_spp"] = ref_spp

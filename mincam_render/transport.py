@@ -175,15 +175,18 @@ def _frozen_pass_for(integrator: mi.Integrator):
     return _frozen_passes[key]
 
 
-def _geometry(camera: FreeformCamera) -> _PassGeometry:
+def _geometry(camera: FreeformCamera, parallax: bool = True) -> _PassGeometry:
     right, up, fwd = camera.frame
+    centers = camera.detector_centers_m
+    if not parallax:
+        centers = np.broadcast_to(np.asarray(camera.position, dtype=np.float64), centers.shape)
     if camera.directional_response is None:
         table = np.ones(_RESPONSE_TABLE_SIZE, dtype=np.float32)
     else:
         table = camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE)
     sizes = [camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m]
     extra = [cosine_sampling_fraction(camera), 0.0, 0.0]
-    flat = np.concatenate([sizes, right, up, fwd, extra, camera.detector_centers_m.ravel()])
+    flat = np.concatenate([sizes, right, up, fwd, extra, centers.ravel()])
     return _PassGeometry(params=mi.Float(flat.astype(np.float32)), response=mi.Float(table))
 
 
@@ -214,6 +217,7 @@ def render_transport(
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
     freeze: bool | None = None,
+    parallax: bool = True,
 ) -> np.ndarray:
     """Render the transport images of every detector of ``camera`` in ``scene``.
 
@@ -233,6 +237,11 @@ def render_transport(
             passes of at most ``FREEZE_MAX_RAYS`` rays, where tracing dominates,
             and falls back to tracing for scenes whose updates keep forcing new
             recordings (``MAX_AUTO_RECORDINGS``).
+
+        parallax: False renders every detector from the board centre (the
+            paper's single training camera): same sample streams as with
+            parallax, so the difference of the two renders is the parallax
+            effect alone (common random numbers).
 
     Returns:
         ``T[detector, row, col]``, float32 numpy array (W per unit transmittance).
@@ -279,7 +288,7 @@ def render_transport(
     else:
         integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
     sampler = mi.load_dict({"type": "independent"})
-    geo = _geometry(camera)
+    geo = _geometry(camera, parallax)
     shape = (camera.num_detectors, rows, cols, spp_pass)
 
     auto = freeze is None

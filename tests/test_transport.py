@@ -346,3 +346,19 @@ def test_user_xml_scene_renders(variant, tmp_path):
     cam = single(mask_resolution=(8, 8))
     t = render_transport(xml, cam, spp=16)
     assert float(t.sum()) == pytest.approx(RADIANCE * coupling(cam), rel=0.01)
+
+
+def test_without_parallax_every_detector_sees_from_the_board_centre(variant):
+    baseline, depth = 0.020, 0.3
+    cam = FreeformCamera(
+        layout=DetectorLayout.row(count=2, pitch_m=baseline), mask_resolution=(32, 32)
+    )
+    scene = point_light_scene((0.0, 0.0, depth))
+    with_p = render_transport(scene, cam, spp=128, seed=3)
+    without = render_transport(scene, cam, spp=128, seed=3, parallax=False)
+    (_, c0), (_, c1) = centroid(without[0]), centroid(without[1])
+    assert c0 == pytest.approx(c1, abs=0.05)
+    assert c0 == pytest.approx(16.0, abs=0.1)  # the bulb is on the board's axis
+    # same sample streams: detector 0 moved by 10 mm shifts its image by b d / z
+    shift = (centroid(with_p[0])[1] - c0) * cam.texel_size_m[1]
+    assert shift == pytest.approx(0.010 * cam.mask_distance_m / depth, rel=0.05)
