@@ -21,10 +21,14 @@ scene's integrator, and weights radiance by ``A_t d^2 / |x-q|^4 f / p(q)``.
 cosine-weighted directions from ``x`` (see :func:`cosine_sampling_fraction`); for
 the prototype this is plain area sampling, ``p = 1 / A_d``.
 All detectors, texels and samples of a pass form one wavefront (one kernel
-launch); the pass is a frozen Dr.Jit function, so repeated calls on a scene
-whose parameters changed replay the recorded kernel instead of re-tracing it
-(small passes; large passes are traced, and Dr.Jit's kernel cache then serves
-the already compiled kernel: see ``FREEZE_MAX_RAYS``).
+launch). Repeated calls on a scene whose parameters changed reuse the compiled
+kernel from Dr.Jit's cache (no recompilation; scalars live in arrays so kernel
+hashes stay stable); only the Python trace (~2 ms) is redone. Replaying a
+frozen recording (``freeze=True``) skips that trace too; it is opt-in because
+it saved little here (4.3 vs 6.0 ms for 8x16x16 texels x 4 spp, slower for
+large passes) and recordings are fragile (they refuse scenes while other
+scenes are alive, re-record when many meshes move, and one sequence of renders
+of different shapes was reported to replay wrong values).
 """
 
 from __future__ import annotations
@@ -144,32 +148,20 @@ def _transport_pass(
     return dr.block_sum(value, spp) * (1.0 / spp)
 
 
-#: Passes of at most this many rays replay a frozen recording by default. Measured
-#: on 2 CPU cores (demo scene, LLVM, median of 7): 8x16x16 texels x 4 spp: frozen
-#: 4.3 ms vs traced 6.0 ms; 24x32x32 x 16: 98 vs 104 ms; 24x64x64 x 16: 379 vs
-#: 315 ms (replayed kernels run slower per ray, so large passes are traced; their
-#: kernels still come from Dr.Jit's cache, not recompiled, when only parameters
-#: changed).
-FREEZE_MAX_RAYS = 1 << 19
-#: In automatic mode, a configuration whose kernel had to be recorded more often
-#: than this is traced from then on: some scene updates (e.g. many meshes whose
-#: vertices all move) change the recorded kernel's structure every frame, and
-#: re-recording costs more than tracing.
-MAX_AUTO_RECORDINGS = 4
-
-#: Frozen passes keyed by the integrator's configuration: scene parameters are
-#: traced inputs of a recording, but scalar integrator settings (max_depth,
-#: rr_depth) are baked into it, so each configuration needs its own recording.
-#: None marks a configuration whose recording failed (then it is traced).
+#: Frozen passes keyed by the integrator's configuration and the pass shape:
+#: scene parameters are traced inputs of a recording, but scalar integrator
+#: settings (max_depth, rr_depth) are baked into it, and one recording per shape
+#: keeps replays from ever mixing shapes. None marks a key whose recording
+#: failed (then it is traced).
 _frozen_passes: dict[str, object | None] = {}
 
 
-def _integrator_key(integrator: mi.Integrator) -> str:
-    return f"{type(integrator).__name__}:{integrator}"
+def _pass_key(integrator: mi.Integrator, shape: tuple[int, ...]) -> str:
+    return f"{type(integrator).__name__}:{integrator}:{shape}"
 
 
-def _frozen_pass_for(integrator: mi.Integrator):
-    key = _integrator_key(integrator)
+def _frozen_pass_for(integrator: mi.Integrator, shape: tuple[int, ...]):
+    key = _pass_key(integrator, shape)
     if key not in _frozen_passes:
         _frozen_passes[key] = dr.freeze(_transport_pass)
     return _frozen_passes[key]
@@ -216,7 +208,7 @@ def render_transport(
     seed: int = 0,
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
-    freeze: bool | None = None,
+    freeze: bool = False,
     parallax: bool = True,
 ) -> np.ndarray:
     """Render the transport images of every detector of ``camera`` in ``scene``.
@@ -232,12 +224,9 @@ def render_transport(
         max_rays_per_pass: cap on the rays of one kernel launch; more samples run
             as several passes accumulated in float64.
         freeze: True replays a recorded kernel (Dr.Jit frozen function) instead
-            of re-tracing Python on every call; False traces (the compiled
-            kernel is still reused from Dr.Jit's cache); None (default) freezes
-            passes of at most ``FREEZE_MAX_RAYS`` rays, where tracing dominates,
-            and falls back to tracing for scenes whose updates keep forcing new
-            recordings (``MAX_AUTO_RECORDINGS``).
-
+            of re-tracing Python on every call (opt-in, see the module doc);
+            False (default) traces, and the compiled kernel is reused from
+            Dr.Jit's cache.
         parallax: False renders every detector from the board centre (the
             paper's single training camera): same sample streams as with
             parallax, so the difference of the two renders is the parallax
@@ -291,10 +280,7 @@ def render_transport(
     geo = _geometry(camera, parallax)
     shape = (camera.num_detectors, rows, cols, spp_pass)
 
-    auto = freeze is None
-    if auto:
-        freeze = n_texels * spp_pass <= FREEZE_MAX_RAYS
-    run_pass = (_frozen_pass_for(integrator) if freeze else None) or _transport_pass
+    run_pass = (_frozen_pass_for(integrator, shape) if freeze else None) or _transport_pass
     total = np.zeros(n_texels, dtype=np.float64)
     for i in range(n_pass):
         args = (mi_scene, integrator, sampler, geo, mi.UInt32(_pass_seed(seed, i)), shape)
@@ -306,16 +292,9 @@ def render_transport(
             if run_pass is _transport_pass or "frozen function" not in str(err):
                 raise
             log.info("transport kernel not frozen (%s); tracing it", str(err).splitlines()[0][:120])
-            _frozen_passes[_integrator_key(integrator)] = None
+            _frozen_passes[_pass_key(integrator, shape)] = None
             run_pass = _transport_pass
             mean = run_pass(*args)
-        if auto and run_pass is not _transport_pass and run_pass.n_recordings > MAX_AUTO_RECORDINGS:
-            log.info(
-                "transport kernel re-recorded %d times; tracing it from now on",
-                run_pass.n_recordings,
-            )
-            _frozen_passes[_integrator_key(integrator)] = None
-            run_pass = _transport_pass
         total += mean.numpy().astype(np.float64)
     log.debug("render_transport: %d pass(es) of %d spp, %d texels", n_pass, spp_pass, n_texels)
     return (total / n_pass).astype(np.float32).reshape(camera.num_detectors, rows, cols)

@@ -221,13 +221,13 @@ cam = FreeformCamera(layout=DetectorLayout(positions_m=((0.0, 0.0),)), mask_reso
 scene = ms.load_scene(ms.scene_dict(
     {"bulb": ms.sphere((0.0, 0.0, 1.0), 0.05, radiance_w_m2_sr=1e4)}, max_depth=1))
 params = mi.traverse(scene)
-run = transport._frozen_pass_for(scene.integrator())
+run = transport._frozen_pass_for(scene.integrator(), (1, 8, 8, 64))
 for i, x in enumerate((0.0, 0.05, -0.2, 0.1, 0.3)):
     params["bulb.to_world"] = mi.ScalarTransform4f().translate([x, 0.0, 1.0]).scale(0.05)
     params.update()
     frozen = render_transport(scene, cam, spp=64, seed=0, freeze=True)
     traced = render_transport(scene, cam, spp=64, seed=0, freeze=False)
-    assert transport._frozen_pass_for(scene.integrator()) is run, "recording failed"
+    assert transport._frozen_pass_for(scene.integrator(), (1, 8, 8, 64)) is run, "recording failed"
     w = frozen[0] / frozen[0].sum()
     col = float((w * (np.arange(8) + 0.5)).sum())
     print(i, x, run.n_recordings, bool(np.array_equal(frozen, traced)), col,
