@@ -351,7 +351,9 @@ def _splits(dataset, family, frames, spp, seed):
     return data.split((0.7, 0.1, 0.2))
 
 
-_TRAIN_ERRORS = (ValueError, KeyError, RuntimeError, FileNotFoundError)
+# OSError: a full disk or an unreadable file; ImportError: a missing extra (the
+# traffic family needs SUMO), whose message names the extra
+_TRAIN_ERRORS = (ValueError, KeyError, RuntimeError, OSError, ImportError)
 
 
 @main.command("train")
@@ -870,7 +872,7 @@ def render_cmd(
         summary = render_dataset(
             request, out, workers=workers, ray_address=ray_address, progress=not no_progress
         )
-    except (ValueError, DatasetError, RenderError, OSError) as err:
+    except (ValueError, DatasetError, RenderError, OSError, ImportError) as err:
         raise click.ClickException(str(err)) from None
     click.echo(
         f"{out}: {summary.num_frames} frames in {summary.shards_total} shards; rendered "
@@ -909,6 +911,301 @@ def export_exr_cmd(dataset, frame_list, out):
     except (ValueError, DatasetError, OSError) as err:
         raise click.ClickException(str(err)) from None
     click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
+
+
+@main.command("pipeline")
+@click.option(
+    "--family",
+    default="workspace",
+    show_default=True,
+    help="Scene family name or scene description (.toml).",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/main"),
+    show_default=True,
+    help="Output directory (dataset, runs, figure, metrics, masks).",
+)
+@click.option(
+    "--frames",
+    type=click.IntRange(30),
+    default=900,
+    show_default=True,
+    help="Frames to render (at the family's frame rate; contiguous 70/15/15 splits).",
+)
+@click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Random seed.")
+@click.option(
+    "--pixels",
+    type=click.IntRange(1, 64),
+    default=8,
+    show_default=True,
+    help="Freeform pixels of the minimalist camera.",
+)
+@click.option(
+    "--baseline-grid",
+    default="8x8",
+    show_default=True,
+    help="Baseline camera resolution ROWSxCOLS.",
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(1),
+    default=1500,
+    show_default=True,
+    help="Training steps at most per camera (early stopping may end sooner).",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(0),
+    default=2,
+    show_default=True,
+    help="Render worker processes (0 = in this process).",
+)
+@click.option(
+    "--spp",
+    type=click.IntRange(1, 1 << 20),
+    default=16,
+    show_default=True,
+    help="Samples per texel (ignored with --auto-fidelity).",
+)
+@click.option(
+    "--fps",
+    type=click.FloatRange(0.1, 1000.0),
+    default=2.0,
+    show_default=True,
+    help="Frame rate of the rendered sequence (overrides the family's): at 2 fps, 900 "
+    "frames cover 7.5 minutes of activity.",
+)
+@click.option(
+    "--auto-fidelity",
+    is_flag=True,
+    help="Choose spp, path depth and shared rendering from measured errors against a "
+    "reference before rendering (slower; the manifest records the measurements).",
+)
+def pipeline_cmd(
+    family, out, frames, seed, pixels, baseline_grid, steps, workers, spp, fps, auto_fidelity
+):
+    """The main job: render a dataset, train a minimalist camera and a baseline, export masks.
+
+    Renders FRAMES frames of the family (resumable) into OUT/dataset, by
+    default at a fixed, quick fidelity (SPP samples per texel, every detector
+    rendered, the scene's path depth; the manifest records it), or with
+    --auto-fidelity at settings chosen from measured errors. Then trains a
+    PIXELS-pixel minimalist camera and a baseline
+    camera on the same data (same training budget), evaluates both on the
+    test split with the paper's post-processing, exports the printable masks
+    into OUT/masks/<family>/ and writes OUT/comparison.png and
+    OUT/metrics.json. Killed runs resume where they stopped.
+
+    \b
+    Example:
+      mincam-render pipeline --out runs/main
+      mincam-render pipeline --family patches --frames 3000 --pixels 4 --baseline-grid 2x2
+    """
+    from .config import ConfigError
+    from .dataset import open_dataset
+    from .mitsuba_scene import SceneError
+    from .render_job import RenderError, RenderRequest, render_dataset
+    from .train import TrainConfig, TrainingData, run_pipeline
+
+    try:
+        rows, cols = (int(v) for v in baseline_grid.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(
+            f"{baseline_grid!r} is not ROWSxCOLS, e.g. 8x8", param_hint="--baseline-grid"
+        ) from None
+    try:
+        fixed = {} if auto_fidelity else {"spp": spp, "max_depth": 0, "shared_render": False}
+        request = RenderRequest(
+            family=family, num_frames=frames, seed=seed, overrides={"fps": fps}, **fixed
+        )
+        config = TrainConfig(max_steps=steps, seed=seed)
+        out.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        click.echo(f"[1/3] rendering {frames} frames of {family} into {out / 'dataset'}")
+        render_dataset(request, out / "dataset", workers=workers, progress=True)
+        render_s = time.perf_counter() - t0
+        ds = open_dataset(out / "dataset")
+        splits = [TrainingData.from_dataset(ds, name) for name in ("train", "val", "test")]
+        click.echo(f"[2/3] training a {pixels}-pixel camera and a {rows}x{cols} baseline")
+        name = ds.family if isinstance(ds.family, str) else family
+        task = Path(name).stem
+        result = run_pipeline(
+            *splits,
+            out,
+            pixels=pixels,
+            baseline_grid=(rows, cols),
+            config=config,
+            masks_dir=out / "masks",
+            task=task,
+        )
+    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo("[3/3] results")
+    for kind, run in result["runs"].items():
+        t = run["test"]
+        others = ", ".join(
+            f"{k} acc {v['accuracy']:.3f}" if "accuracy" in v else f"{k} RMSE {v['rmse']:.3f}"
+            for k, v in t["labels"].items()
+        )
+        click.echo(
+            f"  {kind:8s} {run['model']['pixels']:>4} px: {others} "
+            f"(trained {run['train_wall_time_s']:.0f} s)"
+        )
+    click.echo(
+        f"  render {render_s:.0f} s; figure {result['figure']}; masks in {out / 'masks' / task}; "
+        f"metrics {out / 'metrics.json'}"
+    )
+
+
+@main.group("bench")
+def bench_group() -> None:
+    """Benchmarks: measured error against run time."""
+
+
+@bench_group.command("fidelity")
+@click.argument("families", nargs=-1, required=True)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/bench-fidelity"),
+    show_default=True,
+    help="Output directory (created): fidelity.json, pareto_<family>.png, fidelity.html.",
+)
+@click.option(
+    "--frames",
+    type=click.IntRange(1, 1000),
+    default=2,
+    show_default=True,
+    help="Frames rendered per setting, spread over the sequence.",
+)
+@click.option(
+    "--reference-spp",
+    type=click.IntRange(2, 1 << 20),
+    default=256,
+    show_default=True,
+    help="Samples per texel of the converged reference.",
+)
+@click.option(
+    "--base-spp",
+    type=click.IntRange(1, 1 << 20),
+    default=16,
+    show_default=True,
+    help="Samples per texel of the base setting the knobs start from.",
+)
+@click.option(
+    "--mask-res",
+    type=click.IntRange(1, 4096),
+    default=None,
+    help="Mask texels per side (default: the family camera's).",
+)
+@click.option("--no-auto", is_flag=True, help="Skip the automatic fidelity decision.")
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
+def bench_fidelity_cmd(families, out, frames, reference_spp, base_spp, mask_res, no_auto, seed):
+    """Error of detector measurements against run time for every fidelity knob.
+
+    \b
+    Example:
+      mincam-render bench fidelity workspace --out runs/bench-fidelity
+    """
+    from .config import ConfigError
+    from .fidelity_bench import (
+        FidelityBenchConfig,
+        bench_fidelity,
+        pareto_table,
+        write_fidelity_report,
+    )
+
+    try:
+        cfg = FidelityBenchConfig(
+            num_frames=frames,
+            reference_spp=reference_spp,
+            base_spp=base_spp,
+            mask_resolution=mask_res,
+            include_auto=not no_auto,
+            seed=seed,
+        )
+        results = [bench_fidelity(f, cfg) for f in families]
+        paths = write_fidelity_report(results, out)
+    except (ValueError, ConfigError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    for r in results:
+        click.echo(f"== {r['family']}\n{pareto_table(r)}\n" + "\n".join(r["statements"]))
+    click.echo(f"wrote {paths['json']} and {paths['html']}")
+
+
+@main.group("report")
+def report_group() -> None:
+    """Reports comparing simulation with measurements."""
+
+
+@report_group.command("sim2real")
+@click.argument(
+    "measurements", required=False, type=click.Path(file_okay=False, exists=True, path_type=Path)
+)
+@click.option(
+    "--surrogate",
+    "surrogate_family",
+    default=None,
+    help="Generate a SURROGATE-real recording of this family into OUT/surrogate_input "
+    "and report on it (a demo without a prototype).",
+)
+@click.option(
+    "--frames",
+    type=click.IntRange(20, 100000),
+    default=300,
+    show_default=True,
+    help="Frames of the surrogate recording.",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("runs/sim2real"),
+    show_default=True,
+    help="Output directory (created): sim2real.html and sim2real.json.",
+)
+@click.option(
+    "--spp",
+    type=click.IntRange(1, 1 << 20),
+    default=4,
+    show_default=True,
+    help="Samples per texel of the simulation renders.",
+)
+@click.option(
+    "--steps",
+    type=click.IntRange(10, 10**6),
+    default=1500,
+    show_default=True,
+    help="Training steps of each inference head.",
+)
+@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
+def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps, seed):
+    """Compare simulated with measured (or SURROGATE) freeform-pixel recordings.
+
+    Give a recording directory (format: docs/sim2real_format.md), or --surrogate FAMILY.
+
+    \b
+    Example:
+      mincam-render report sim2real --surrogate patches --frames 300 --out runs/s2r
+      mincam-render report sim2real runs/s2r/surrogate_input --out runs/s2r-again
+    """
+    from .config import ConfigError
+    from .sim2real import Sim2RealError, analyze_sim2real, make_surrogate, write_sim2real_report
+
+    if (measurements is None) == (surrogate_family is None):
+        raise click.ClickException("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
+    try:
+        if surrogate_family is not None:
+            measurements = make_surrogate(
+                surrogate_family, out / "surrogate_input", num_frames=frames, spp=spp, seed=seed
+            )
+        result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed)
+        paths = write_sim2real_report(result, out)
+    except (ValueError, ConfigError, Sim2RealError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(result["verdict"]["summary"])
+    click.echo(f"wrote {paths['json']} and {paths['html']}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,128 @@
+"""HTML reports: embedded figures load in a real headless browser; fidelity rows."""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mincam_render.report import Report
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+needs_chromium = pytest.mark.skipif(
+    not CHROMIUM.is_file(),
+    reason="Debian's Chromium is not installed at /usr/bin/chromium "
+    "(apt-get install -y chromium) : the headless-browser check cannot run",
+)
+
+
+def _page(tmp_path: Path) -> Path:
+    from mincam_render.plots import plt
+
+    page = Report("Test report", banner="SURROGATE test page")
+    page.heading("Numbers")
+    page.table(["a", "b"], [[1, "<x>"], [2, "y"]], cell_classes=[[None, "pass"], [None, "fail"]])
+    for i in range(2):
+        fig, ax = plt.subplots(figsize=(3, 2))
+        ax.plot(np.arange(5), np.arange(5) ** (i + 1), label="curve")
+        ax.set_xlabel("x (s)")
+        ax.set_ylabel("y (V)")
+        ax.set_title(f"figure {i}")
+        ax.legend()
+        page.figure(fig, f"caption {i}")
+    return page.write(tmp_path / "page.html")
+
+
+def test_page_is_self_contained_and_escaped(tmp_path):
+    text = _page(tmp_path).read_text()
+    assert text.count('<img src="data:image/png;base64,') == 2
+    assert "&lt;x&gt;" in text and "<x>" not in text
+    assert "SURROGATE test page" in text
+    assert not re.search(r'src="(?!data:)', text), "external resources would break the page"
+
+
+def _chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    profile = tmp_path / "chromium-profile"
+    profile.mkdir(exist_ok=True)
+    return subprocess.run(
+        [str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+@needs_chromium
+def test_headless_browser_loads_figures(tmp_path):
+    path = _page(tmp_path)
+    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", path.as_uri())
+    dom = proc.stdout
+    assert "<h1>Test report</h1>" in dom, proc.stderr[-2000:]
+    loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
+    total = re.search(r'data-figures-total="(\d+)"', dom)
+    assert loaded and total, f"the page script did not run: {dom[:500]}"
+    assert int(total.group(1)) == 2
+    assert int(loaded.group(1)) == 2, "some figures failed to decode (naturalWidth == 0)"
+
+
+@needs_chromium
+def test_headless_screenshot_is_not_blank(tmp_path):
+    from PIL import Image
+
+    path = _page(tmp_path)
+    shot = tmp_path / "shot.png"
+    _chromium(tmp_path, f"--screenshot={shot}", "--window-size=900,1200", path.as_uri())
+    assert shot.is_file()
+    img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
+    # text, tables and plots: many grey levels, not a uniform page
+    assert img.std() > 10 and len(np.unique(img)) > 20
+
+
+def test_fidelity_rows_tiny(variant, tmp_path):
+    from mincam_render.fidelity_bench import (
+        KNOBS,
+        FidelityBenchConfig,
+        bench_fidelity,
+        write_fidelity_report,
+    )
+
+    cfg = FidelityBenchConfig(
+        num_frames=1,
+        sequence_frames=4,
+        reference_spp=8,
+        base_spp=2,
+        spp_levels=(1, 2),
+        mask_res_levels=(4,),
+        depth_levels=(2,),
+        num_masks=2,
+        mask_resolution=8,
+        include_auto=True,
+    )
+    res = bench_fidelity("patches", cfg)
+    assert {r["knob"] for r in res["rows"]} == set(KNOBS)
+    for r in res["rows"]:
+        for key in ("error", "error_random", "error_trained", "effect", "seconds"):
+            assert math.isfinite(r[key]) and r[key] >= 0, (r["knob"], r["level"], key)
+        assert r["family"] == "patches"
+    # float16 adds at most its rounding (2^-11 relative) to the base render
+    base = next(r for r in res["rows"] if r["knob"] == "spp" and r["level"] == 2)
+    f16 = next(r for r in res["rows"] if r["knob"] == "storage")
+    assert abs(f16["error"] - base["error"]) < 1e-3
+    assert res["statements"] and all("patches" in s for s in res["statements"])
+    paths = write_fidelity_report([res], tmp_path)
+    assert Path(paths["html"]).read_text().count("data:image/png;base64,") == 1
