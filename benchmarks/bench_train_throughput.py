@@ -51,8 +51,9 @@ class PaperStyleCamera(torch.nn.Module):
         super().__init__()
         self.cam = mincam.camera
         self.detectors = mincam.detectors
-        self.weight = torch.nn.Parameter(mincam.logits.detach().clone().reshape(
-            mincam.num_pixels, -1))
+        self.weight = torch.nn.Parameter(
+            mincam.logits.detach().clone().reshape(mincam.num_pixels, -1)
+        )
         self.head = Head(mincam.head.in_features, mincam.head.label_specs)
         self.head.load_state_dict(mincam.head.state_dict())
 
@@ -70,9 +71,14 @@ class PaperStyleCamera(torch.nn.Module):
         v = e.gain_v_per_a * cur
         if noise:
             kw = {"generator": generator}
-            v = (v + e.gain_v_per_a * torch.sqrt(1.602e-19 * cur.clamp(min=1e-30)
-                                                 / e.integration_time_s) * torch.randn(v.shape, **kw)
-                 + e.read_noise_v * torch.randn(v.shape, **kw) + e.lsb_v * torch.rand(v.shape, **kw))
+            v = (
+                v
+                + e.gain_v_per_a
+                * torch.sqrt(1.602e-19 * cur.clamp(min=1e-30) / e.integration_time_s)
+                * torch.randn(v.shape, **kw)
+                + e.read_noise_v * torch.randn(v.shape, **kw)
+                + e.lsb_v * torch.rand(v.shape, **kw)
+            )
         over = v - e.full_scale_v
         return torch.where(over > 0, e.full_scale_v + e.saturation_slope * over, v)[:, None]
 
@@ -126,14 +132,18 @@ def main() -> None:
         source = str(a.dataset)
     else:
         rng = np.random.default_rng(0)
-        cam = FreeformCamera(mask_resolution=(a.res, a.res),
-                             layout=DetectorLayout.grid(rows=2, cols=-(-a.pixels // 2),
-                                                        pitch_m=20 * MM))
+        cam = FreeformCamera(
+            mask_resolution=(a.res, a.res),
+            layout=DetectorLayout.grid(rows=2, cols=-(-a.pixels // 2), pitch_m=20 * MM),
+        )
         t = rng.uniform(0, 1e-9, (a.frames, cam.num_detectors, a.res, a.res)).astype(np.float32)
-        data = tr.TrainingData(transport=t, labels={"count": rng.integers(0, 10, (a.frames, 1))
-                                                    .astype(np.float32)},
-                               label_specs=(LabelSpec(name="count", kind=LabelKind.COUNT),),
-                               camera=cam, fps=30.0)
+        data = tr.TrainingData(
+            transport=t,
+            labels={"count": rng.integers(0, 10, (a.frames, 1)).astype(np.float32)},
+            label_specs=(LabelSpec(name="count", kind=LabelKind.COUNT),),
+            camera=cam,
+            fps=30.0,
+        )
         source = "random frames in memory"
     ours = tr.build_mincam(data, a.pixels)
     peer = PaperStyleCamera(ours)
@@ -143,22 +153,34 @@ def main() -> None:
     torch.testing.assert_close(v_ours, v_peer, rtol=1e-4, atol=1e-9)  # same model
     r_ours = step_rate(ours, data, a.batch_size, a.steps, a.repeats)
     r_peer = step_rate(peer, data, a.batch_size, a.steps, a.repeats)
-    res = {"machine": machine(), "data": source, "train_samples": len(data),
-           "pixels": a.pixels, "mask_resolution": list(data.camera.mask_resolution),
-           "batch_size": a.batch_size, "steps_per_repeat": a.steps, "torch_threads": a.threads,
-           "ours_samples_per_s": {"median": statistics.median(r_ours), "all": r_ours},
-           "peer_reimplementation_samples_per_s": {"median": statistics.median(r_peer),
-                                                   "all": r_peer},
-           "ratio_ours_over_peer": statistics.median(r_ours) / statistics.median(r_peer),
-           "wall_time_s": time.perf_counter() - t_start,
-           "note": "peer = our reimplementation of the paper's camera model (torch linear layer "
-                   "on the flattened image with sigmoid masks), not the authors' code"}
-    print(f"{a.pixels} pixels, {a.res}x{a.res} texels, batch {a.batch_size}, "
-          f"{a.threads} torch thread(s), data: {source} ({len(data)} samples)")
-    print(f"  ours (Dr.Jit mask plane): {res['ours_samples_per_s']['median']:9.0f} samples/s "
-          f"(min {min(r_ours):.0f}, max {max(r_ours):.0f})")
-    print(f"  peer (torch reimpl.)    : {res['peer_reimplementation_samples_per_s']['median']:9.0f}"
-          f" samples/s (min {min(r_peer):.0f}, max {max(r_peer):.0f})")
+    res = {
+        "machine": machine(),
+        "data": source,
+        "train_samples": len(data),
+        "pixels": a.pixels,
+        "mask_resolution": list(data.camera.mask_resolution),
+        "batch_size": a.batch_size,
+        "steps_per_repeat": a.steps,
+        "torch_threads": a.threads,
+        "ours_samples_per_s": {"median": statistics.median(r_ours), "all": r_ours},
+        "peer_reimplementation_samples_per_s": {"median": statistics.median(r_peer), "all": r_peer},
+        "ratio_ours_over_peer": statistics.median(r_ours) / statistics.median(r_peer),
+        "wall_time_s": time.perf_counter() - t_start,
+        "note": "peer = our reimplementation of the paper's camera model (torch linear layer "
+        "on the flattened image with sigmoid masks), not the authors' code",
+    }
+    print(
+        f"{a.pixels} pixels, {a.res}x{a.res} texels, batch {a.batch_size}, "
+        f"{a.threads} torch thread(s), data: {source} ({len(data)} samples)"
+    )
+    print(
+        f"  ours (Dr.Jit mask plane): {res['ours_samples_per_s']['median']:9.0f} samples/s "
+        f"(min {min(r_ours):.0f}, max {max(r_ours):.0f})"
+    )
+    print(
+        f"  peer (torch reimpl.)    : {res['peer_reimplementation_samples_per_s']['median']:9.0f}"
+        f" samples/s (min {min(r_peer):.0f}, max {max(r_peer):.0f})"
+    )
     print(f"  ratio ours / peer: {res['ratio_ours_over_peer']:.2f}")
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / "train_throughput.json"

@@ -503,14 +503,28 @@ class TransportDataset:
     def _array(self, shard: int) -> np.ndarray:
         arr = self._arrays.get(shard)
         if arr is None:
-            arr = np.load(shard_paths(self.path, shard)[0], mmap_mode="r", allow_pickle=False)
+            path = shard_paths(self.path, shard)[0]
+            try:
+                arr = np.load(path, mmap_mode="r", allow_pickle=False)
+            except (OSError, ValueError) as err:  # missing, truncated, not a .npy
+                raise DatasetError(
+                    f"{path}: shard unreadable ({str(err).splitlines()[0][:100]}); run the "
+                    "same render command again to repair it"
+                ) from None
             self._arrays[shard] = arr
         return arr
 
     def _metadata(self, shard: int) -> dict:
         meta = self._meta.get(shard)
         if meta is None:
-            raw = json.loads(shard_paths(self.path, shard)[1].read_text())
+            path = shard_paths(self.path, shard)[1]
+            try:
+                raw = json.loads(path.read_text())
+            except (OSError, ValueError) as err:
+                raise DatasetError(
+                    f"{path}: shard metadata unreadable ({str(err).splitlines()[0][:100]}); "
+                    "run the same render command again to repair it"
+                ) from None
             meta = {
                 "start": raw["start"],
                 "frames": raw["frames"],

@@ -39,6 +39,12 @@ CUT_MARK_LENGTH_MM = 1.6
 LABEL_FONT_MM = 1.8
 
 
+def _atomic_write(path: Path, data: bytes) -> None:
+    from .dataset import atomic_write_bytes
+
+    atomic_write_bytes(path, data)
+
+
 def _png16(m: np.ndarray) -> bytes:
     """16-bit grayscale PNG bytes of transmittance ``m[row, col]`` in [0, 1]."""
     arr = np.rint(np.clip(m, 0.0, 1.0) * 65535.0).astype(np.uint16)
@@ -120,8 +126,9 @@ def print_sheet_svg(masks: np.ndarray, camera: FreeformCamera, *, title: str = "
     return "\n".join(parts) + "\n"
 
 
-def print_sheet_pdf(masks: np.ndarray, camera: FreeformCamera, path: str | os.PathLike,
-                    *, title: str = "") -> Path:
+def print_sheet_pdf(
+    masks: np.ndarray, camera: FreeformCamera, path: str | os.PathLike, *, title: str = ""
+) -> Path:
     """The same sheet as a PDF at true size (matplotlib; 1 data unit = 1 mm)."""
     import matplotlib
 
@@ -138,26 +145,47 @@ def print_sheet_pdf(masks: np.ndarray, camera: FreeformCamera, path: str | os.Pa
     pt_per_mm = 72 / 25.4
     o, ln = CUT_MARK_OFFSET_MM, CUT_MARK_LENGTH_MM
     for k, (x, y) in enumerate(corners):
-        ax.imshow(masks[k], cmap="gray", vmin=0, vmax=1, interpolation="nearest",
-                  extent=(x, x + side, y + side, y))
+        ax.imshow(
+            masks[k],
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            interpolation="nearest",
+            extent=(x, x + side, y + side, y),
+        )
         for cx, sx in ((x, -1), (x + side, 1)):
             for cy, sy in ((y, -1), (y + side, 1)):
                 ax.plot([cx + sx * o, cx + sx * (o + ln)], [cy, cy], "k-", lw=0.1 * pt_per_mm)
                 ax.plot([cx, cx], [cy + sy * o, cy + sy * (o + ln)], "k-", lw=0.1 * pt_per_mm)
-        ax.text(x + side / 2, y + side + o + LABEL_FONT_MM, f"pixel {k}", ha="center",
-                fontsize=LABEL_FONT_MM * pt_per_mm)
+        ax.text(
+            x + side / 2,
+            y + side + o + LABEL_FONT_MM,
+            f"pixel {k}",
+            ha="center",
+            fontsize=LABEL_FONT_MM * pt_per_mm,
+        )
     lo, hi = camera.transmittance_range
-    ax.text(SHEET_MARGIN_MM / 2, SHEET_MARGIN_MM / 2,
-            f"{title} | print at 100% | masks {side:g} mm | transmittance {lo:g}-{hi:g} | "
-            "seen from the detector side", fontsize=LABEL_FONT_MM * pt_per_mm)
-    ax.plot([SHEET_MARGIN_MM, SHEET_MARGIN_MM + 10], [h - SHEET_MARGIN_MM / 2] * 2, "k-",
-            lw=0.3 * pt_per_mm)
+    ax.text(
+        SHEET_MARGIN_MM / 2,
+        SHEET_MARGIN_MM / 2,
+        f"{title} | print at 100% | masks {side:g} mm | transmittance {lo:g}-{hi:g} | "
+        "seen from the detector side",
+        fontsize=LABEL_FONT_MM * pt_per_mm,
+    )
+    ax.plot(
+        [SHEET_MARGIN_MM, SHEET_MARGIN_MM + 10],
+        [h - SHEET_MARGIN_MM / 2] * 2,
+        "k-",
+        lw=0.3 * pt_per_mm,
+    )
     ax.set_xlim(0, w)
     ax.set_ylim(h, 0)
     ax.set_aspect("auto")
     path = Path(path)
-    fig.savefig(path, format="pdf")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="pdf")
     plt.close(fig)
+    _atomic_write(path, buf.getvalue())
     return path
 
 
@@ -209,8 +237,9 @@ def export_masks(
             # lay them out on a 2-row grid with the mask size + 4 mm pitch
             k = m.shape[0]
             rows = 1 if k < 4 else 2
-            grid = DetectorLayout.grid(rows=rows, cols=-(-k // rows),
-                                       pitch_m=camera.mask_size_m + 4 * MM)
+            grid = DetectorLayout.grid(
+                rows=rows, cols=-(-k // rows), pitch_m=camera.mask_size_m + 4 * MM
+            )
             layout = DetectorLayout(positions_m=grid.positions_m[:k])
         layout_cam = replace(camera, layout=layout)
     lo, hi = camera.transmittance_range
@@ -218,20 +247,32 @@ def export_masks(
     n_clipped = int(np.count_nonzero(clipped != m))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    # Every file is written atomically and masks.json, which marks a finished
+    # export, last; a stale one goes first, so a killed export never looks complete.
+    (out / "masks.json").unlink(missing_ok=True)
     paths: dict[str, Any] = {"png": []}
     for k in range(m.shape[0]):
         p = out / f"mask_{k:02d}.png"
-        p.write_bytes(_png16(clipped[k]))
+        _atomic_write(p, _png16(clipped[k]))
         paths["png"].append(p)
-    channels = {f"mask{k:04d}": np.ascontiguousarray(m[k].astype(np.float32))
-                for k in range(m.shape[0])}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
-              "mincam_units": "transmittance (0-1), unclipped"}
+    channels = {
+        f"mask{k:04d}": np.ascontiguousarray(m[k].astype(np.float32)) for k in range(m.shape[0])
+    }
+    header = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        "mincam_units": "transmittance (0-1), unclipped",
+    }
     paths["exr"] = out / "masks.exr"
-    OpenEXR.File(header, channels).write(str(paths["exr"]))
+    tmp_exr = out / f".masks.exr.{os.getpid()}.tmp.exr"
+    try:
+        OpenEXR.File(header, channels).write(str(tmp_exr))
+        _atomic_write(paths["exr"], tmp_exr.read_bytes())
+    finally:
+        tmp_exr.unlink(missing_ok=True)
     title = f"mincam_render masks: {task}" if task else "mincam_render masks"
     paths["svg"] = out / "print_sheet.svg"
-    paths["svg"].write_text(print_sheet_svg(clipped, layout_cam, title=title))
+    _atomic_write(paths["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
     if pdf:
         paths["pdf"] = print_sheet_pdf(clipped, layout_cam, out / "print_sheet.pdf", title=title)
     w, h, corners = sheet_layout(layout_cam)
@@ -239,11 +280,14 @@ def export_masks(
         "task": task,
         "masks": m.shape[0],
         "mask_resolution": list(m.shape[1:]),
-        "units": {"lengths": "m", "transmittance": "0-1 (fraction of light passed)",
-                  "png": "uint16, 0..65535 = transmittance 0..1",
-                  "sheet": "mm, origin top-left"},
+        "units": {
+            "lengths": "m",
+            "transmittance": "0-1 (fraction of light passed)",
+            "png": "uint16, 0..65535 = transmittance 0..1",
+            "sheet": "mm, origin top-left",
+        },
         "orientation": "row 0 = up side of the view, col 0 = left, seen from the detector "
-                       "looking out (mirror left-right when viewed from the scene side)",
+        "looking out (mirror left-right when viewed from the scene side)",
         "printable_transmittance_range": [lo, hi],
         "texels_clipped_to_printable_range": n_clipped,
         "transmittance_min_max": [float(m.min()), float(m.max())],
@@ -251,9 +295,13 @@ def export_masks(
         "mask_corners_on_sheet_mm": corners.tolist(),
         "camera": layout_cam.to_dict(),
         "provenance": dict(provenance or {}),
-        "files": {"png": [p.name for p in paths["png"]], "exr": "masks.exr",
-                  "svg": "print_sheet.svg", "pdf": "print_sheet.pdf" if pdf else None},
+        "files": {
+            "png": [p.name for p in paths["png"]],
+            "exr": "masks.exr",
+            "svg": "print_sheet.svg",
+            "pdf": "print_sheet.pdf" if pdf else None,
+        },
     }
     paths["json"] = out / "masks.json"
-    paths["json"].write_text(json.dumps(sidecar, indent=2, default=str))
+    _atomic_write(paths["json"], json.dumps(sidecar, indent=2, default=str).encode())
     return paths

@@ -49,6 +49,11 @@ INIT_TRANSMITTANCE = (0.08, 0.12)
 #: Head width and activation slope (paper Sec. 5).
 HIDDEN_UNITS = 128
 LEAKY_SLOPE = 0.1
+#: Training keeps mask logits in [-MAX_LOGIT, MAX_LOGIT]. At |logit| = 8 the
+#: transmittance is (hi - lo) * sigmoid(-8) ~ 2e-4 from its printable limit (below
+#: what a printer resolves) while sigmoid'(8) ~ 3e-4 keeps the mask gradient above
+#: Adam's epsilon; at |logit| = 50 it is ~1e-22 and a saturated mask never moves again.
+MAX_LOGIT = 8.0
 #: 8-bit baseline camera read-out (not from the paper: a typical machine-vision
 #: sensor at unit gain has ~1 DN of read noise).
 BASELINE_BITS = 8
@@ -137,8 +142,13 @@ class Head(nn.Module):
     def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
         """Raw outputs ``{name: [batch, size]}``: standardised values or logits (BINARY)."""
         y = self.out(self.body(self.input_norm(x)))
-        return dict(zip([s.name for s in self.label_specs],
-                        torch.split(y, [s.size for s in self.label_specs], dim=1), strict=True))
+        return dict(
+            zip(
+                [s.name for s in self.label_specs],
+                torch.split(y, [s.size for s in self.label_specs], dim=1),
+                strict=True,
+            )
+        )
 
     def standardise(self, name: str, value: torch.Tensor) -> torch.Tensor:
         """Physical label -> the head's output units (identity for BINARY)."""
@@ -235,6 +245,11 @@ class MincamCamera(nn.Module):
     def transmittance(self) -> torch.Tensor:
         """``M[pixel, row, col]`` in the printable range (torch, differentiable)."""
         return transmittance(self.logits, self.camera.transmittance_range)
+
+    @torch.no_grad()
+    def project_logits_(self) -> None:
+        """Clamp the logits in place to ``[-MAX_LOGIT, MAX_LOGIT]`` (NaN-free masks stay so)."""
+        self.logits.clamp_(-MAX_LOGIT, MAX_LOGIT)
 
     def measure(
         self,

@@ -17,6 +17,8 @@ gradients flow through it. All tensors are torch; voltages in volts.
 
 from __future__ import annotations
 
+import math
+
 import torch
 
 from .camera import DetectorElectronics
@@ -59,8 +61,12 @@ def detector_voltage(
     voltage_v = e.gain_v_per_a * current_a
     if noise:
         shape, kw = power_w.shape, {"dtype": power_w.dtype, "device": power_w.device}
-        shot_sigma_v = e.gain_v_per_a * torch.sqrt(
-            ELEMENTARY_CHARGE_C * torch.clamp(current_a, min=_MIN_CURRENT_A) / e.integration_time_s
+        # sqrt(q / t) is taken in float64 here: q * I itself underflows float32 for
+        # I < ~1e-20 A, and sqrt'(0) = inf then turned the gradient into inf/NaN.
+        shot_sigma_v = (
+            e.gain_v_per_a
+            * math.sqrt(ELEMENTARY_CHARGE_C / e.integration_time_s)
+            * torch.sqrt(torch.clamp(current_a, min=_MIN_CURRENT_A))
         )
         eps = torch.randn(shape, generator=generator, **kw)
         read = torch.randn(shape, generator=generator, **kw)

@@ -32,6 +32,7 @@ import json
 import logging
 import math
 import os
+import pickle
 import struct
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -166,8 +167,12 @@ class TrainingData:
             camera=cam,
             fps=float(family.fps),
             history=30 if family.needs_history else 1,
-            source={"family": family.name, "seed": family.seed, "spp": spp,
-                    "frames": [int(frames[0]), int(frames[-1]) + 1] if len(frames) else []},
+            source={
+                "family": family.name,
+                "seed": family.seed,
+                "spp": spp,
+                "frames": [int(frames[0]), int(frames[-1]) + 1] if len(frames) else [],
+            },
         )
 
     def subset(self, start: int, stop: int, name: str = "") -> TrainingData:
@@ -201,8 +206,9 @@ class TrainingData:
         frames = last[:, None] - np.arange(self.history - 1, -1, -1)[None, :]
         t = np.asarray(self.transport[frames.reshape(-1)], dtype=np.float32)
         t = torch.from_numpy(t.reshape(len(index), self.history, *self.transport.shape[1:]))
-        labels = {k: torch.from_numpy(np.asarray(v[last], np.float32))
-                  for k, v in self.labels.items()}
+        labels = {
+            k: torch.from_numpy(np.asarray(v[last], np.float32)) for k, v in self.labels.items()
+        }
         return t, labels
 
 
@@ -249,8 +255,13 @@ class TrainConfig:
     torch_threads: int | None = 1
 
     def __post_init__(self) -> None:
-        for name, lo in (("max_steps", 1), ("batch_size", 2), ("eval_every", 1), ("patience", 1),
-                         ("max_eval_samples", 2)):
+        for name, lo in (
+            ("max_steps", 1),
+            ("batch_size", 2),
+            ("eval_every", 1),
+            ("patience", 1),
+            ("max_eval_samples", 2),
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"TrainConfig.{name} = {v!r}: allowed an integer >= {lo}")
@@ -295,12 +306,22 @@ def build_mincam(
     mean, std = data.target_stats()
     ctx = _seeded(seed)
     try:
-        head = Head(len(detectors) * max(data.history - 1, 1), data.label_specs,
-                    target_mean=mean, target_std=std)
+        head = Head(
+            len(detectors) * max(data.history - 1, 1),
+            data.label_specs,
+            target_mean=mean,
+            target_std=std,
+        )
     finally:
         ctx.__exit__(None, None, None)
-    return MincamCamera(data.camera, head, detectors=detectors, sensor_model=sensor_model,
-                        history=data.history, init_seed=seed)
+    return MincamCamera(
+        data.camera,
+        head,
+        detectors=detectors,
+        sensor_model=sensor_model,
+        history=data.history,
+        init_seed=seed,
+    )
 
 
 def build_baseline(data: TrainingData, grid: tuple[int, int], *, seed: int = 0) -> BaselineCamera:
@@ -308,22 +329,39 @@ def build_baseline(data: TrainingData, grid: tuple[int, int], *, seed: int = 0) 
     mean, std = data.target_stats()
     ctx = _seeded(seed)
     try:
-        head = Head(grid[0] * grid[1] * max(data.history - 1, 1), data.label_specs,
-                    target_mean=mean, target_std=std)
+        head = Head(
+            grid[0] * grid[1] * max(data.history - 1, 1),
+            data.label_specs,
+            target_mean=mean,
+            target_std=std,
+        )
     finally:
         ctx.__exit__(None, None, None)
-    return BaselineCamera(grid, head, exposure_w=BaselineCamera.exposure_from(data.transport, grid),
-                          history=data.history)
+    return BaselineCamera(
+        grid,
+        head,
+        exposure_w=BaselineCamera.exposure_from(data.transport, grid),
+        history=data.history,
+    )
 
 
 def describe_model(model: Model) -> dict[str, Any]:
     """A JSON-ready description of a model (kind, pixels, options)."""
     if isinstance(model, MincamCamera):
-        return {"kind": "mincam", "pixels": model.num_pixels,
-                "detectors": model.detectors.tolist(), "sensor_model": model.sensor_model,
-                "history": model.history}
-    return {"kind": "baseline", "pixels": model.num_pixels, "grid": list(model.grid),
-            "exposure_w": float(model.exposure_w), "history": model.history}
+        return {
+            "kind": "mincam",
+            "pixels": model.num_pixels,
+            "detectors": model.detectors.tolist(),
+            "sensor_model": model.sensor_model,
+            "history": model.history,
+        }
+    return {
+        "kind": "baseline",
+        "pixels": model.num_pixels,
+        "grid": list(model.grid),
+        "exposure_w": float(model.exposure_w),
+        "history": model.history,
+    }
 
 
 # ---------------------------------------------------------------------------------------
@@ -396,8 +434,11 @@ class RenderedBatches:
             for h in range(self.history):
                 i = self.next_frame + b * self.history + h
                 lab = self.family.set_frame(self._scene, i)
-                ts.append(render_transport(self._scene, self.camera, spp=self.spp,
-                                           seed=self.seed * 1_000_003 + i))
+                ts.append(
+                    render_transport(
+                        self._scene, self.camera, spp=self.spp, seed=self.seed * 1_000_003 + i
+                    )
+                )
             for s in self.family.labels:
                 labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
         self.next_frame += n_needed
@@ -475,8 +516,12 @@ class EventWriter:
     def _write_event(self, body: bytes, *, step: int) -> None:
         event = b"\x09" + struct.pack("<d", time.time()) + b"\x10" + _varint(int(step)) + body
         header = struct.pack("<Q", len(event))
-        self._f.write(header + struct.pack("<I", _masked_crc(header)) + event
-                      + struct.pack("<I", _masked_crc(event)))
+        self._f.write(
+            header
+            + struct.pack("<I", _masked_crc(header))
+            + event
+            + struct.pack("<I", _masked_crc(event))
+        )
         self._f.flush()
 
     def scalar(self, tag: str, value: float, step: int) -> None:
@@ -509,12 +554,12 @@ def _proto_fields(buf: bytes) -> list[tuple[int, Any]]:
         if wire == 0:
             val, i = _read_varint(buf, i)
         elif wire == 1:
-            val, i = buf[i: i + 8], i + 8
+            val, i = buf[i : i + 8], i + 8
         elif wire == 5:
-            val, i = buf[i: i + 4], i + 4
+            val, i = buf[i : i + 4], i + 4
         elif wire == 2:
             n, i = _read_varint(buf, i)
-            val, i = buf[i: i + n], i + n
+            val, i = buf[i : i + n], i + n
         else:
             raise ValueError(f"unsupported protobuf wire type {wire}")
         out.append((num, val))
@@ -528,9 +573,9 @@ def read_events(path: str | os.PathLike) -> list[tuple[int, str, float]]:
     pos = 0
     while pos < len(data):
         (n,) = struct.unpack_from("<Q", data, pos)
-        if struct.unpack_from("<I", data, pos + 8)[0] != _masked_crc(data[pos:pos + 8]):
+        if struct.unpack_from("<I", data, pos + 8)[0] != _masked_crc(data[pos : pos + 8]):
             raise ValueError(f"{path}: corrupt record length at byte {pos}")
-        ev = data[pos + 12: pos + 12 + n]
+        ev = data[pos + 12 : pos + 12 + n]
         if struct.unpack_from("<I", data, pos + 12 + n)[0] != _masked_crc(ev):
             raise ValueError(f"{path}: corrupt record at byte {pos}")
         pos += 16 + n
@@ -566,8 +611,9 @@ def median_filter(x: np.ndarray, window: int) -> np.ndarray:
     return np.median(win, axis=-1).astype(x.dtype)
 
 
-def postprocess(pred: Mapping[str, np.ndarray], specs: Sequence[LabelSpec], fps: float
-                ) -> dict[str, np.ndarray]:
+def postprocess(
+    pred: Mapping[str, np.ndarray], specs: Sequence[LabelSpec], fps: float
+) -> dict[str, np.ndarray]:
     """The paper's test-time post-processing of predictions ``{name: [time, size]}``.
 
     COUNT: round to the nearest integer >= 0, then median filter; REGRESSION:
@@ -591,9 +637,15 @@ def _even_indices(n: int, limit: int | None) -> np.ndarray:
 
 
 @torch.no_grad()
-def predict(model: Model, data: TrainingData, *, batch_size: int = 256, noise: bool = True,
-            seed: int = 1234, limit: int | None = None
-            ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], float]:
+def predict(
+    model: Model,
+    data: TrainingData,
+    *,
+    batch_size: int = 256,
+    noise: bool = True,
+    seed: int = 1234,
+    limit: int | None = None,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], float]:
     """Predictions, labels (``{name: [n, size]}``) and mean loss over a split, in time order."""
     was_training = model.training
     model.eval()
@@ -603,7 +655,7 @@ def predict(model: Model, data: TrainingData, *, batch_size: int = 256, noise: b
     labs: dict[str, list] = {s.name: [] for s in data.label_specs}
     loss_sum = 0.0
     for a in range(0, len(idx), batch_size):
-        t, y = data.batch(idx[a: a + batch_size])
+        t, y = data.batch(idx[a : a + batch_size])
         out = model(t, noise=noise, generator=g)
         loss, _ = task_loss(model.head, out, y)
         loss_sum += float(loss) * len(t)
@@ -615,8 +667,9 @@ def predict(model: Model, data: TrainingData, *, batch_size: int = 256, noise: b
     return cat, {k: np.concatenate(v) for k, v in labs.items()}, loss_sum / max(1, len(idx))
 
 
-def evaluate(model: Model, data: TrainingData, *, noise: bool = True, seed: int = 1234
-             ) -> dict[str, Any]:
+def evaluate(
+    model: Model, data: TrainingData, *, noise: bool = True, seed: int = 1234
+) -> dict[str, Any]:
     """Test metrics after post-processing (every sample of ``data``, in time order).
 
     Returns ``{"loss": ..., "labels": {name: {...}}, "error": primary error}`` where
@@ -631,8 +684,11 @@ def evaluate(model: Model, data: TrainingData, *, noise: bool = True, seed: int 
         y = lab[s.name].astype(np.float64)
         if s.kind is LabelKind.BINARY:
             acc = (post[s.name] == y).mean(axis=0)
-            res["labels"][s.name] = {"accuracy": float(acc.mean()),
-                                     "accuracy_per_element": acc.tolist(), "unit": ""}
+            res["labels"][s.name] = {
+                "accuracy": float(acc.mean()),
+                "accuracy_per_element": acc.tolist(),
+                "unit": "",
+            }
         else:
             raw = pred[s.name].astype(np.float64)
             res["labels"][s.name] = {
@@ -675,11 +731,23 @@ def _optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
 
 
 def _atomic_save(obj: Any, path: Path) -> None:
+    from .dataset import atomic_write_bytes
+
     buf = io.BytesIO()
     torch.save(obj, buf)
-    tmp = path.with_name(path.name + ".partial")
-    tmp.write_bytes(buf.getvalue())
-    os.replace(tmp, path)
+    # temporary file, fsync, rename: a kill or a full disk leaves the old checkpoint
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _load_checkpoint(path: Path) -> dict[str, Any]:
+    """``torch.load`` of a checkpoint; a damaged file is a one-line ValueError naming it."""
+    try:
+        return torch.load(path, weights_only=False)
+    except (RuntimeError, EOFError, OSError, ValueError, pickle.UnpicklingError) as err:
+        raise ValueError(
+            f"{path}: checkpoint unreadable ({str(err).splitlines()[0][:120]}); delete it or "
+            "train with --no-resume"
+        ) from None
 
 
 def _snapshot(model: Model) -> np.ndarray | None:
@@ -736,7 +804,7 @@ def train_model(
     elapsed = 0.0
     stopped_early = False
     if ckpt_path is not None and resume and ckpt_path.is_file():
-        ck = torch.load(ckpt_path, weights_only=False)
+        ck = _load_checkpoint(ckpt_path)
         if ck["model_description"] != describe_model(model):
             raise ValueError(
                 f"{ckpt_path} was written for {ck['model_description']}, not "
@@ -759,18 +827,38 @@ def train_model(
     def save_checkpoint() -> None:
         if ckpt_path is None:
             return
-        _atomic_save({
-            "model_description": describe_model(model), "config": asdict(config),
-            "model": model.state_dict(), "optimizer": opt.state_dict(),
-            "generator": gen.get_state(), "source": source.state(), "step": step,
-            "best_step": best_step, "bad": bad, "best_loss": best_loss,
-            "best_state": best_state, "history": history, "snapshots": snaps,
-            "elapsed": elapsed, "stopped_early": stopped_early,
-        }, ckpt_path)
+        _atomic_save(
+            {
+                "model_description": describe_model(model),
+                "config": asdict(config),
+                "model": model.state_dict(),
+                "optimizer": opt.state_dict(),
+                "generator": gen.get_state(),
+                "source": source.state(),
+                "step": step,
+                "best_step": best_step,
+                "bad": bad,
+                "best_loss": best_loss,
+                "best_state": best_state,
+                "history": history,
+                "snapshots": snaps,
+                "elapsed": elapsed,
+                "stopped_early": stopped_early,
+            },
+            ckpt_path,
+        )
 
+    if isinstance(model, MincamCamera):
+        model.project_logits_()  # e.g. a start with masks pinned at their limits
     done = stopped_early or step >= config.max_steps
-    bar = tqdm(total=config.max_steps, initial=step, desc=desc, disable=not progress,
-               leave=False, dynamic_ncols=True)
+    bar = tqdm(
+        total=config.max_steps,
+        initial=step,
+        desc=desc,
+        disable=not progress,
+        leave=False,
+        dynamic_ncols=True,
+    )
     model.train()
     t_start = time.perf_counter() - elapsed
     g0, g1 = config.gain_range
@@ -786,6 +874,8 @@ def train_model(
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
+            if isinstance(model, MincamCamera):
+                model.project_logits_()  # a saturated mask must be able to move back
             step += 1
             bar.update(1)
             if writer is not None:
@@ -793,8 +883,12 @@ def train_model(
             if step % config.eval_every == 0 or step >= config.max_steps:
                 _, _, val_loss = predict(model, val, limit=config.max_eval_samples)
                 elapsed = time.perf_counter() - t_start
-                rec = {"step": step, "train_loss": loss.item(), "val_loss": val_loss,
-                       "wall_time_s": elapsed}
+                rec = {
+                    "step": step,
+                    "train_loss": loss.item(),
+                    "val_loss": val_loss,
+                    "wall_time_s": elapsed,
+                }
                 history.append(rec)
                 snap = _snapshot(model)
                 if snap is not None:
@@ -827,13 +921,20 @@ def train_model(
         model.load_state_dict(best_state)
         if out is not None and snaps:
             plot_mask_evolution(snaps, out / "mask_evolution.png")
-    return TrainResult(steps=step, best_step=best_step, best_val_loss=best_loss,
-                       stopped_early=stopped_early, wall_time_s=elapsed, history=history,
-                       snapshots=snaps)
+    return TrainResult(
+        steps=step,
+        best_step=best_step,
+        best_val_loss=best_loss,
+        stopped_early=stopped_early,
+        wall_time_s=elapsed,
+        history=history,
+        snapshots=snaps,
+    )
 
 
-def plot_mask_evolution(snapshots: Sequence[tuple[int, np.ndarray]], path: str | os.PathLike,
-                        max_rows: int = 6) -> Path:
+def plot_mask_evolution(
+    snapshots: Sequence[tuple[int, np.ndarray]], path: str | os.PathLike, max_rows: int = 6
+) -> Path:
     """Grid of mask transmittance (rows: training steps, columns: pixels), saved as PNG."""
     import matplotlib
 
@@ -844,8 +945,9 @@ def plot_mask_evolution(snapshots: Sequence[tuple[int, np.ndarray]], path: str |
     rows = [snapshots[i] for i in pick]
     k = rows[0][1].shape[0]
     cols = min(k, 16)
-    fig, axes = plt.subplots(len(rows), cols, figsize=(1.3 * cols + 0.8, 1.3 * len(rows) + 0.4),
-                             squeeze=False)
+    fig, axes = plt.subplots(
+        len(rows), cols, figsize=(1.3 * cols + 0.8, 1.3 * len(rows) + 0.4), squeeze=False
+    )
     for r, (step, m) in enumerate(rows):
         for c in range(cols):
             ax = axes[r, c]
@@ -879,7 +981,7 @@ def _val_loss_without(model: MincamCamera, data: TrainingData, pixel: int, limit
     cols = torch.arange(pixel, model.head.in_features, k)
     total = 0.0
     for a in range(0, len(idx), 256):
-        t, y = data.batch(idx[a: a + 256])
+        t, y = data.batch(idx[a : a + 256])
         from .models import temporal_features
 
         x = temporal_features(model.measure(t, noise=True, generator=g))
@@ -915,33 +1017,55 @@ def greedy_prune(
     current = model
     keep = list(range(model.num_pixels))  # indices into the original model's pixels
     removed: list[int] = []
-    records = [{"pixels": len(keep), "kept": list(keep), "removed": [],
-                "val_loss": predict(current, val, limit=config.max_eval_samples)[2],
-                "test": evaluate(current, test) if test is not None else None}]
+    records = [
+        {
+            "pixels": len(keep),
+            "kept": list(keep),
+            "removed": [],
+            "val_loss": predict(current, val, limit=config.max_eval_samples)[2],
+            "test": evaluate(current, test) if test is not None else None,
+        }
+    ]
     while len(keep) > min_pixels:
-        scores = [_val_loss_without(current, val, j, config.max_eval_samples)
-                  for j in range(current.num_pixels)]
+        scores = [
+            _val_loss_without(current, val, j, config.max_eval_samples)
+            for j in range(current.num_pixels)
+        ]
         j = int(np.argmin(scores))
         removed.append(keep.pop(j))
         dets = [int(d) for d in model.detectors[keep]]
         ctx = _seeded(config.seed + len(keep))
         try:
-            head = Head(len(keep) * max(train.history - 1, 1), train.label_specs,
-                        target_mean=train.target_stats()[0], target_std=train.target_stats()[1])
+            head = Head(
+                len(keep) * max(train.history - 1, 1),
+                train.label_specs,
+                target_mean=train.target_stats()[0],
+                target_std=train.target_stats()[1],
+            )
         finally:
             ctx.__exit__(None, None, None)
-        nxt = MincamCamera(model.camera, head, detectors=dets, sensor_model=model.sensor_model,
-                           history=model.history)
+        nxt = MincamCamera(
+            model.camera,
+            head,
+            detectors=dets,
+            sensor_model=model.sensor_model,
+            history=model.history,
+        )
         with torch.no_grad():
             nxt.logits.copy_(model.logits[keep])
         nxt.logits.requires_grad_(False)
-        res = train_model(nxt, train, val, config, progress=progress,
-                          desc=f"prune {len(keep)} px")
+        res = train_model(nxt, train, val, config, progress=progress, desc=f"prune {len(keep)} px")
         current = nxt
-        records.append({"pixels": len(keep), "kept": list(keep), "removed": list(removed),
-                        "score_val_loss_without": float(scores[j]),
-                        "val_loss": res.best_val_loss,
-                        "test": evaluate(current, test) if test is not None else None})
+        records.append(
+            {
+                "pixels": len(keep),
+                "kept": list(keep),
+                "removed": list(removed),
+                "score_val_loss_without": float(scores[j]),
+                "val_loss": res.best_val_loss,
+                "test": evaluate(current, test) if test is not None else None,
+            }
+        )
     return records
 
 
@@ -979,23 +1103,46 @@ def sweep(
         jobs.append((f"mincam_{k}px", lambda k=k: build_mincam(train, k, seed=config.seed)))
     for g in baseline_grids:
         grid = _parse_grid(g)
-        jobs.append((f"baseline_{grid[0]}x{grid[1]}",
-                     lambda grid=grid: build_baseline(train, grid, seed=config.seed)))
+        jobs.append(
+            (
+                f"baseline_{grid[0]}x{grid[1]}",
+                lambda grid=grid: build_baseline(train, grid, seed=config.seed),
+            )
+        )
     for name, make in jobs:
         model = make()
-        res = train_model(model, train, val, config,
-                          out_dir=(out / name) if out is not None else None,
-                          progress=progress, desc=name)
+        res = train_model(
+            model,
+            train,
+            val,
+            config,
+            out_dir=(out / name) if out is not None else None,
+            progress=progress,
+            desc=name,
+        )
         metrics = evaluate(model, test)
-        row = {"name": name, **describe_model(model), "error": metrics["error"],
-               "error_name": metrics["error_name"], "metrics": metrics,
-               "steps": res.steps, "best_step": res.best_step,
-               "train_wall_time_s": res.wall_time_s, "train_samples": len(train)}
+        row = {
+            "name": name,
+            **describe_model(model),
+            "error": metrics["error"],
+            "error_name": metrics["error_name"],
+            "metrics": metrics,
+            "steps": res.steps,
+            "best_step": res.best_step,
+            "train_wall_time_s": res.wall_time_s,
+            "train_samples": len(train),
+        }
         rows.append(row)
         if on_result is not None:
             on_result(row)
-        log.info("%s: %s = %.4g after %d steps (%.1f s)", name, metrics["error_name"],
-                 metrics["error"], res.steps, res.wall_time_s)
+        log.info(
+            "%s: %s = %.4g after %d steps (%.1f s)",
+            name,
+            metrics["error_name"],
+            metrics["error"],
+            res.steps,
+            res.wall_time_s,
+        )
     if out is not None:
         write_sweep(rows, out, title=str(train.source.get("family", "")))
     return rows
@@ -1003,16 +1150,21 @@ def sweep(
 
 def sweep_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """A Markdown table of sweep rows."""
-    lines = ["| camera | pixels | test error | steps | train time (s) |",
-             "|---|---:|---:|---:|---:|"]
+    lines = [
+        "| camera | pixels | test error | steps | train time (s) |",
+        "|---|---:|---:|---:|---:|",
+    ]
     for r in rows:
-        lines.append(f"| {r['name']} | {r['pixels']} | {r['error']:.4f} | {r['steps']} | "
-                     f"{r['train_wall_time_s']:.1f} |")
+        lines.append(
+            f"| {r['name']} | {r['pixels']} | {r['error']:.4f} | {r['steps']} | "
+            f"{r['train_wall_time_s']:.1f} |"
+        )
     return "\n".join(lines)
 
 
-def write_sweep(rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike,
-                title: str = "") -> dict[str, Path]:
+def write_sweep(
+    rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike, title: str = ""
+) -> dict[str, Path]:
     """Write ``sweep.json``, ``sweep.md`` and ``sweep.png`` (error vs pixel count, log x)."""
     import matplotlib
 
@@ -1024,8 +1176,10 @@ def write_sweep(rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike,
     (out / "sweep.json").write_text(json.dumps(list(rows), indent=2, default=str))
     (out / "sweep.md").write_text(sweep_table(rows) + "\n")
     fig, ax = plt.subplots(figsize=(5, 3.5))
-    for kind, style, label in (("mincam", "o-", "minimalist camera"),
-                               ("baseline", "s--", "baseline camera")):
+    for kind, style, label in (
+        ("mincam", "o-", "minimalist camera"),
+        ("baseline", "s--", "baseline camera"),
+    ):
         pts = sorted((r["pixels"], r["error"]) for r in rows if r["kind"] == kind)
         if pts:
             ax.plot(*zip(*pts, strict=True), style, label=label)
@@ -1066,28 +1220,59 @@ def run_pipeline(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     task = task or str(train.source.get("family", "task"))
-    runs = {"mincam": train_run(train, val, test, out / "mincam", pixels=pixels, config=config,
-                                progress=progress),
-            "baseline": train_run(train, val, test, out / "baseline", baseline_grid=baseline_grid,
-                                  config=config, progress=progress)}
+    runs = {
+        "mincam": train_run(
+            train, val, test, out / "mincam", pixels=pixels, config=config, progress=progress
+        ),
+        "baseline": train_run(
+            train,
+            val,
+            test,
+            out / "baseline",
+            baseline_grid=baseline_grid,
+            config=config,
+            progress=progress,
+        ),
+    }
     rows = []
     for name, m in runs.items():
-        rows.append({"name": name, **m["model"], "error": m["test"]["error"],
-                     "error_name": m["test"]["error_name"], "steps": m["steps"],
-                     "train_wall_time_s": m["train_wall_time_s"]})
+        rows.append(
+            {
+                "name": name,
+                **m["model"],
+                "error": m["test"]["error"],
+                "error_name": m["test"]["error_name"],
+                "steps": m["steps"],
+                "train_wall_time_s": m["train_wall_time_s"],
+            }
+        )
     write_sweep(rows, out, title=task)
     os.replace(out / "sweep.png", out / "comparison.png")
     exported = None
     if masks_dir is not None:
         m, camera, run = run_masks(out / "mincam")
-        exported = export_masks(m, camera, Path(masks_dir) / task, task=task,
-                                provenance={"run": str(out / "mincam"), "data": run["data"],
-                                            "test_metrics": runs["mincam"]["test"],
-                                            "detectors": run["model"]["detectors"]})
-    result = {"task": task, "train_samples": len(train), "val_samples": len(val),
-              "test_samples": len(test), "config": asdict(config), "runs": runs,
-              "figure": str(out / "comparison.png"),
-              "masks": {k: str(v) for k, v in (exported or {}).items()}}
+        exported = export_masks(
+            m,
+            camera,
+            Path(masks_dir) / task,
+            task=task,
+            provenance={
+                "run": str(out / "mincam"),
+                "data": run["data"],
+                "test_metrics": runs["mincam"]["test"],
+                "detectors": run["model"]["detectors"],
+            },
+        )
+    result = {
+        "task": task,
+        "train_samples": len(train),
+        "val_samples": len(val),
+        "test_samples": len(test),
+        "config": asdict(config),
+        "runs": runs,
+        "figure": str(out / "comparison.png"),
+        "masks": {k: str(v) for k, v in (exported or {}).items()},
+    }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str))
     return result
 
@@ -1118,23 +1303,59 @@ def train_run(
         model: Model = build_baseline(train, baseline_grid, seed=config.seed)
     else:
         model = build_mincam(train, pixels, sensor_model=sensor_model, seed=config.seed)
-    run = {"model": describe_model(model), "camera": _camera_dict(train.camera),
-           "data": {"train": train.source, "val": val.source,
-                    "test": test.source if test is not None else None,
-                    "train_samples": len(train), "on_the_fly": on_the_fly is not None},
-           "config": asdict(config), "fps": train.fps, "history": train.history,
-           "label_specs": [{"name": s.name, "kind": s.kind.value, "size": s.size, "unit": s.unit,
-                            "median_filter_s": s.median_filter_s} for s in train.label_specs]}
-    (out / "run.json").write_text(json.dumps(run, indent=2, default=str))
-    res = train_model(model, on_the_fly if on_the_fly is not None else train, val, config,
-                      out_dir=out, resume=resume, progress=progress,
-                      desc=f"{run['model']['kind']} {model.num_pixels} px")
-    metrics = {"model": run["model"], "steps": res.steps, "best_step": res.best_step,
-               "best_val_loss": res.best_val_loss, "stopped_early": res.stopped_early,
-               "train_wall_time_s": res.wall_time_s, "train_samples": len(train),
-               "test": evaluate(model, test) if test is not None else None}
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=str))
+    run = {
+        "model": describe_model(model),
+        "camera": _camera_dict(train.camera),
+        "data": {
+            "train": train.source,
+            "val": val.source,
+            "test": test.source if test is not None else None,
+            "train_samples": len(train),
+            "on_the_fly": on_the_fly is not None,
+        },
+        "config": asdict(config),
+        "fps": train.fps,
+        "history": train.history,
+        "label_specs": [
+            {
+                "name": s.name,
+                "kind": s.kind.value,
+                "size": s.size,
+                "unit": s.unit,
+                "median_filter_s": s.median_filter_s,
+            }
+            for s in train.label_specs
+        ],
+    }
+    _write_json_atomic(out / "run.json", run)
+    res = train_model(
+        model,
+        on_the_fly if on_the_fly is not None else train,
+        val,
+        config,
+        out_dir=out,
+        resume=resume,
+        progress=progress,
+        desc=f"{run['model']['kind']} {model.num_pixels} px",
+    )
+    metrics = {
+        "model": run["model"],
+        "steps": res.steps,
+        "best_step": res.best_step,
+        "best_val_loss": res.best_val_loss,
+        "stopped_early": res.stopped_early,
+        "train_wall_time_s": res.wall_time_s,
+        "train_samples": len(train),
+        "test": evaluate(model, test) if test is not None else None,
+    }
+    _write_json_atomic(out / "metrics.json", metrics)
     return metrics
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    from .dataset import atomic_write_bytes
+
+    atomic_write_bytes(path, (json.dumps(obj, indent=2, default=str) + "\n").encode())
 
 
 def _camera_dict(camera: FreeformCamera) -> dict[str, Any]:
@@ -1147,8 +1368,11 @@ def load_run(run_dir: str | os.PathLike) -> tuple[dict[str, Any], dict[str, torc
     run_path, ckpt_path = run_dir / "run.json", run_dir / "checkpoint.pt"
     if not run_path.is_file() or not ckpt_path.is_file():
         raise ValueError(f"{run_dir}: not a training run (needs run.json and checkpoint.pt)")
-    run = json.loads(run_path.read_text())
-    ck = torch.load(ckpt_path, weights_only=False)
+    try:
+        run = json.loads(run_path.read_text())
+    except ValueError:
+        raise ValueError(f"{run_path}: not valid JSON (truncated?)") from None
+    ck = _load_checkpoint(ckpt_path)
     return run, ck["best_state"]
 
 

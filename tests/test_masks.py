@@ -16,15 +16,17 @@ from mincam_render.masks import SHEET_MARGIN_MM, export_masks, sheet_layout
 
 @pytest.fixture
 def camera() -> FreeformCamera:
-    return FreeformCamera(mask_resolution=(8, 12),
-                          layout=DetectorLayout.grid(rows=2, cols=3, pitch_m=20 * MM))
+    return FreeformCamera(
+        mask_resolution=(8, 12), layout=DetectorLayout.grid(rows=2, cols=3, pitch_m=20 * MM)
+    )
 
 
 @pytest.fixture
 def exported(tmp_path, camera, rng):
     m = rng.uniform(-0.1, 1.1, (6, 8, 12))  # partly outside the printable range
-    return m, export_masks(m, camera, tmp_path / "task", task="demo",
-                           provenance={"run": "runs/x", "dataset": "data/y"})
+    return m, export_masks(
+        m, camera, tmp_path / "task", task="demo", provenance={"run": "runs/x", "dataset": "data/y"}
+    )
 
 
 def test_sheet_size_in_mm(camera):
@@ -40,15 +42,19 @@ def test_svg_true_size_and_masks(exported, camera):
     _, paths = exported
     svg = paths["svg"].read_text()
     w, h, _ = sheet_layout(camera)
-    head = re.search(r'<svg [^>]*width="([\d.]+)mm" height="([\d.]+)mm" viewBox="0 0 ([\d.]+) '
-                     r'([\d.]+)"', svg)
+    head = re.search(
+        r'<svg [^>]*width="([\d.]+)mm" height="([\d.]+)mm" viewBox="0 0 ([\d.]+) '
+        r'([\d.]+)"',
+        svg,
+    )
     assert head is not None
     assert float(head.group(1)) == pytest.approx(w) and float(head.group(2)) == pytest.approx(h)
     assert float(head.group(3)) == pytest.approx(w)  # 1 user unit = 1 mm
     sizes = re.findall(r'<image [^>]*width="([\d.]+)" height="([\d.]+)"', svg)
     assert len(sizes) == 6
-    assert all(float(a) == pytest.approx(16.0) and float(b) == pytest.approx(16.0)
-               for a, b in sizes)
+    assert all(
+        float(a) == pytest.approx(16.0) and float(b) == pytest.approx(16.0) for a, b in sizes
+    )
     assert svg.count("<path") >= 6 * 4  # cut marks at every corner
     assert "pixel 5" in svg and "0.01-0.67" in svg
 
@@ -75,8 +81,9 @@ def test_sidecar(exported, camera):
     side = json.loads(paths["json"].read_text())
     assert side["camera"]["mask_size_m"] == pytest.approx(16 * MM)
     assert side["printable_transmittance_range"] == [0.01, 0.67]
-    assert side["texels_clipped_to_printable_range"] == int(np.count_nonzero((m < 0.01)
-                                                                             | (m > 0.67)))
+    assert side["texels_clipped_to_printable_range"] == int(
+        np.count_nonzero((m < 0.01) | (m > 0.67))
+    )
     assert side["provenance"]["dataset"] == "data/y"
     assert side["units"]["lengths"] == "m"
 

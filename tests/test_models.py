@@ -27,14 +27,17 @@ SPECS = (
 
 
 def _camera(k: int = 3, res: int = 8) -> FreeformCamera:
-    return FreeformCamera(mask_resolution=(res, res),
-                          layout=DetectorLayout.row(count=k, pitch_m=20 * MM))
+    return FreeformCamera(
+        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
+    )
 
 
 def _labels(b: int, rng) -> dict[str, torch.Tensor]:
-    return {"count": torch.tensor(rng.integers(0, 5, (b, 1)), dtype=torch.float32),
-            "zones": torch.tensor(rng.integers(0, 2, (b, 3)), dtype=torch.float32),
-            "speed": torch.tensor(rng.uniform(0, 30, (b, 2)), dtype=torch.float32)}
+    return {
+        "count": torch.tensor(rng.integers(0, 5, (b, 1)), dtype=torch.float32),
+        "zones": torch.tensor(rng.integers(0, 2, (b, 3)), dtype=torch.float32),
+        "speed": torch.tensor(rng.uniform(0, 30, (b, 2)), dtype=torch.float32),
+    }
 
 
 @pytest.mark.parametrize("history", [1, 4])
@@ -48,7 +51,10 @@ def test_mincam_shapes_and_init(variant, rng, history):
     t = torch.from_numpy(rng.uniform(0, 1e-9, (5, history, 3, 8, 8)).astype(np.float32))
     out = model(t, noise=True, generator=torch.Generator().manual_seed(0))
     assert {k: tuple(v.shape) for k, v in out.items()} == {
-        "count": (5, 1), "zones": (5, 3), "speed": (5, 2)}
+        "count": (5, 1),
+        "zones": (5, 3),
+        "speed": (5, 2),
+    }
 
 
 def test_head_input_count_is_checked():
@@ -65,12 +71,22 @@ def test_temporal_features_are_forward_differences():
 
 
 def test_loss_per_kind_closed_form():
-    head = Head(2, SPECS, target_mean={"count": np.array([2.0]), "speed": np.array([10.0, 20.0])},
-                target_std={"count": np.array([2.0]), "speed": np.array([5.0, 5.0])})
-    out = {"count": torch.tensor([[0.5]]), "zones": torch.tensor([[0.0, 2.0, -1.0]]),
-           "speed": torch.tensor([[1.0, -1.0]])}
-    lab = {"count": torch.tensor([[4.0]]), "zones": torch.tensor([[1.0, 0.0, 0.0]]),
-           "speed": torch.tensor([[10.0, 20.0]])}
+    head = Head(
+        2,
+        SPECS,
+        target_mean={"count": np.array([2.0]), "speed": np.array([10.0, 20.0])},
+        target_std={"count": np.array([2.0]), "speed": np.array([5.0, 5.0])},
+    )
+    out = {
+        "count": torch.tensor([[0.5]]),
+        "zones": torch.tensor([[0.0, 2.0, -1.0]]),
+        "speed": torch.tensor([[1.0, -1.0]]),
+    }
+    lab = {
+        "count": torch.tensor([[4.0]]),
+        "zones": torch.tensor([[1.0, 0.0, 0.0]]),
+        "speed": torch.tensor([[10.0, 20.0]]),
+    }
     total, parts = task_loss(head, out, lab)
     # count: standardised target (4-2)/2 = 1 -> (0.5-1)^2
     assert parts["count"].item() == pytest.approx(0.25, rel=1e-6)

@@ -18,17 +18,24 @@ COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
 def linear_task(n: int = 200, k: int = 2, res: int = 8, seed: int = 0, dead: int | None = None):
     """Frames whose count is a linear function of the top half of detector 0's image."""
     rng = np.random.default_rng(seed)
-    cam = FreeformCamera(mask_resolution=(res, res),
-                         layout=DetectorLayout.row(count=k, pitch_m=20 * MM))
+    cam = FreeformCamera(
+        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
+    )
     base = rng.uniform(0.0, 1.0, (n, 1, res, res)).astype(np.float32)
     t = np.repeat(base, k, axis=1) * np.float32(2e-8)
     t += rng.uniform(0, 2e-9, t.shape).astype(np.float32)
     if dead is not None:
         t[:, dead] = 0.0
-    signal = base[:, 0, : res // 2].mean(axis=(1, 2)) - base[:, 0, res // 2:].mean(axis=(1, 2))
+    signal = base[:, 0, : res // 2].mean(axis=(1, 2)) - base[:, 0, res // 2 :].mean(axis=(1, 2))
     count = np.clip(np.rint(5 + 40 * signal), 0, None).astype(np.float32)[:, None]
-    return tr.TrainingData(transport=t, labels={"count": count}, label_specs=(COUNT,),
-                           camera=cam, fps=30.0, source={"family": "synthetic"})
+    return tr.TrainingData(
+        transport=t,
+        labels={"count": count},
+        label_specs=(COUNT,),
+        camera=cam,
+        fps=30.0,
+        source={"family": "synthetic"},
+    )
 
 
 CFG = tr.TrainConfig(max_steps=150, batch_size=32, eval_every=25, patience=100, mask_lr=0.05)
@@ -69,8 +76,9 @@ def test_resume_equals_continuing(variant, tmp_path):
         torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7, msg=k)
     ck_a = torch.load(tmp_path / "full" / "checkpoint.pt", weights_only=False)
     ck_b = torch.load(tmp_path / "killed" / "checkpoint.pt", weights_only=False)
-    torch.testing.assert_close(ck_a["model"]["logits"], ck_b["model"]["logits"], rtol=1e-5,
-                               atol=1e-7)
+    torch.testing.assert_close(
+        ck_a["model"]["logits"], ck_b["model"]["logits"], rtol=1e-5, atol=1e-7
+    )
     assert [h["step"] for h in ck_b["history"]] == [5, 10, 15, 20]
 
 
@@ -98,9 +106,10 @@ def replace_cfg(**kw) -> tr.TrainConfig:
     return replace(CFG, **kw)
 
 
-@pytest.mark.parametrize(("seconds", "fps", "window"), [(2.0, 30.0, 61), (0.5, 30.0, 15),
-                                                         (0.0, 30.0, 1), (0.5, 4.0, 3),
-                                                         (2.0, 1.0, 3)])
+@pytest.mark.parametrize(
+    ("seconds", "fps", "window"),
+    [(2.0, 30.0, 61), (0.5, 30.0, 15), (0.0, 30.0, 1), (0.5, 4.0, 3), (2.0, 1.0, 3)],
+)
 def test_median_filter_window(seconds, fps, window):
     assert tr.median_filter_window(seconds, fps) == window
 
@@ -113,12 +122,16 @@ def test_median_filter_known_sequence():
 
 
 def test_postprocess_rounds_thresholds_and_filters():
-    specs = (LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=3 / 30),
-             LabelSpec(name="door", kind=LabelKind.BINARY, median_filter_s=3 / 30),
-             LabelSpec(name="speed", kind=LabelKind.REGRESSION, median_filter_s=0.0))
-    pred = {"count": np.array([[1.4], [1.6], [-0.7], [2.2], [2.4]]),
-            "door": np.array([[0.2], [0.7], [0.1], [0.9], [0.8]]),
-            "speed": np.array([[3.3], [2.1], [7.5], [1.0], [0.0]])}
+    specs = (
+        LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=3 / 30),
+        LabelSpec(name="door", kind=LabelKind.BINARY, median_filter_s=3 / 30),
+        LabelSpec(name="speed", kind=LabelKind.REGRESSION, median_filter_s=0.0),
+    )
+    pred = {
+        "count": np.array([[1.4], [1.6], [-0.7], [2.2], [2.4]]),
+        "door": np.array([[0.2], [0.7], [0.1], [0.9], [0.8]]),
+        "speed": np.array([[3.3], [2.1], [7.5], [1.0], [0.0]]),
+    }
     post = tr.postprocess(pred, specs, fps=30.0)
     # rounded 1, 2, 0, 2, 2 -> median over 3 (edges replicated)
     np.testing.assert_array_equal(post["count"][:, 0], [1, 1, 2, 2, 2])
@@ -129,8 +142,14 @@ def test_postprocess_rounds_thresholds_and_filters():
 
 def test_history_windows_and_forward_differences(variant):
     d = linear_task(40)
-    d = tr.TrainingData(transport=d.transport, labels=d.labels, label_specs=d.label_specs,
-                        camera=d.camera, fps=30.0, history=4)
+    d = tr.TrainingData(
+        transport=d.transport,
+        labels=d.labels,
+        label_specs=d.label_specs,
+        camera=d.camera,
+        fps=30.0,
+        history=4,
+    )
     assert len(d) == 37
     t, y = d.batch(np.array([0, 36]))
     assert t.shape == (2, 4, 2, 8, 8)
@@ -155,8 +174,13 @@ def test_train_run_writes_logs_and_metrics(variant, tmp_path):
     cfg = tr.TrainConfig(max_steps=10, batch_size=16, eval_every=5)
     metrics = tr.train_run(train, val, test, tmp_path, pixels=2, config=cfg)
     assert metrics["test"]["labels"]["count"]["rmse"] >= 0
-    for name in ("run.json", "metrics.json", "checkpoint.pt", "history.jsonl",
-                 "mask_evolution.png"):
+    for name in (
+        "run.json",
+        "metrics.json",
+        "checkpoint.pt",
+        "history.jsonl",
+        "mask_evolution.png",
+    ):
         assert (tmp_path / name).is_file(), name
     assert json.loads((tmp_path / "run.json").read_text())["model"]["pixels"] == 2
     m, camera, _ = tr.run_masks(tmp_path)
@@ -168,14 +192,19 @@ def test_train_run_writes_logs_and_metrics(variant, tmp_path):
 def test_rendered_patches_and_on_the_fly(variant):
     from mincam_render.generators import load_family
 
-    fam = load_family("patches", seed=0, num_frames=40,
-                      overrides={"camera": {"detectors": 2, "mask_resolution": 8}})
+    fam = load_family(
+        "patches",
+        seed=0,
+        num_frames=40,
+        overrides={"camera": {"detectors": 2, "mask_resolution": 8}},
+    )
     data = tr.TrainingData.render(fam, range(12), spp=1)
     assert data.transport.shape == (12, 2, 8, 8) and data.transport.dtype == np.float32
     assert float(data.transport.min()) >= 0 and float(data.transport.max()) > 0
     train, val = data.split((0.75, 0.25))
     stream = tr.RenderedBatches(fam, 4, spp=1, start_frame=12)
     model = tr.build_mincam(train, 2)
-    res = tr.train_model(model, stream, val, tr.TrainConfig(max_steps=2, batch_size=4,
-                                                            eval_every=1))
+    res = tr.train_model(
+        model, stream, val, tr.TrainConfig(max_steps=2, batch_size=4, eval_every=1)
+    )
     assert res.steps == 2 and stream.next_frame == 20
