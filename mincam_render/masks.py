@@ -60,6 +60,10 @@ def _png8(m: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+#: Narrowest sheet (mm): room for the title line above a small camera's masks.
+MIN_SHEET_WIDTH_MM = 150.0
+
+
 def sheet_layout(camera: FreeformCamera) -> tuple[float, float, np.ndarray]:
     """Sheet ``(width_mm, height_mm, corners_mm[K, 2])`` (top-left of each mask, y down)."""
     side = camera.mask_size_m / MM
@@ -67,7 +71,8 @@ def sheet_layout(camera: FreeformCamera) -> tuple[float, float, np.ndarray]:
     left = xy[:, 0] - side / 2
     top = -xy[:, 1] - side / 2
     x0, y0 = left.min(), top.min()
-    width = (left.max() - x0) + side + 2 * SHEET_MARGIN_MM
+    # wide enough for the title line (about 1.9 mm per character at LABEL_FONT_MM)
+    width = max((left.max() - x0) + side + 2 * SHEET_MARGIN_MM, MIN_SHEET_WIDTH_MM)
     height = (top.max() - y0) + side + 2 * SHEET_MARGIN_MM
     corners = np.stack([left - x0 + SHEET_MARGIN_MM, top - y0 + SHEET_MARGIN_MM], axis=1)
     return float(width), float(height), corners

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from mincam_render.camera import MM, DetectorLayout, FreeformCamera
-from mincam_render.masks import SHEET_MARGIN_MM, export_masks, sheet_layout
+from mincam_render.masks import MIN_SHEET_WIDTH_MM, SHEET_MARGIN_MM, export_masks, sheet_layout
 
 
 @pytest.fixture
@@ -31,7 +31,8 @@ def exported(tmp_path, camera, rng):
 
 def test_sheet_size_in_mm(camera):
     w, h, corners = sheet_layout(camera)
-    assert w == pytest.approx(2 * 20 + 16 + 2 * SHEET_MARGIN_MM)
+    # the masks span 2 * 20 + 16 mm; the sheet is at least wide enough for its title
+    assert w == pytest.approx(max(2 * 20 + 16 + 2 * SHEET_MARGIN_MM, MIN_SHEET_WIDTH_MM))
     assert h == pytest.approx(20 + 16 + 2 * SHEET_MARGIN_MM)
     # detector 0 is top-left on the board (seen from the detector side)
     np.testing.assert_allclose(corners[0], [SHEET_MARGIN_MM, SHEET_MARGIN_MM])
