@@ -11,10 +11,11 @@ sequence, at fixed seeds) and decides:
   the parallax changes measurements by less than ``SHARED_ERROR_SHARE`` of the
   target error (measured with common random numbers: the same samples with every
   detector moved to the board centre, so noise cancels);
-- **direct light only** (``max_depth = 2``) when indirect light changes
-  measurements by less than ``indirect_fraction`` (probe renders at depth 2 and
-  at the scene's depth with common random numbers, so the difference is the
-  indirect light, not noise);
+- **bounce depth**: the shallowest of ``CANDIDATE_DEPTHS`` (2 = direct light
+  only) whose measurements differ from a depth-``DEEP_REFERENCE_DEPTH`` render
+  by less than ``indirect_fraction``; probes use common random numbers, so the
+  difference is the light of the bounces left out, not noise. The scene's own
+  integrator depth is measured and recorded too, not trusted;
 - **samples per texel** from the target measurement error: the Monte Carlo
   error of measurements, estimated from two renders with different seeds at a
   pilot sample count, falls as ``1/sqrt(spp)``; the choice is then checked
@@ -59,6 +60,8 @@ MAX_AUTO_SPP = 1024
 REFERENCE_SPP_FACTOR = 8
 #: Cap on the reference's spp (keeps planning a noisy scene to minutes).
 MAX_REFERENCE_SPP = 4096
+#: Path depths tried, shallowest first, against the deep reference.
+CANDIDATE_DEPTHS = (2, 3, 4, 6, 8, 12)
 #: Path depth of the reference when the scene's integrator is unbounded (-1).
 DEEP_REFERENCE_DEPTH = 16
 #: A shared render is chosen when parallax changes measurements by less than this
@@ -214,18 +217,38 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         reason = f"the scene's integrator is already direct-only (max_depth = {scene_depth})"
         measured["indirect_change"] = {"rms": 0.0, "max": 0.0}
     else:
-        ref_depth = scene_depth if scene_depth and scene_depth > 2 else DEEP_REFERENCE_DEPTH
-        # same seeds: direct light uses the same samples, the difference is indirect light
-        direct = render(render_cam, spp=PILOT_SPP, max_depth=2, shared=shared)
-        deep = render(render_cam, spp=PILOT_SPP, max_depth=ref_depth, shared=shared)
-        change = measurement_relative_error(direct, deep, lo_hi)
-        measured.update({"indirect_change": change, "reference_depth": ref_depth})
-        max_depth = 2 if change["rms"] < request.indirect_fraction else 0
-        source = "auto"
-        reason = (
-            f"indirect light changes measurements by {change['rms']:.3g} (rms) "
-            f"{'<' if max_depth == 2 else '>='} bound {request.indirect_fraction:g}"
+        # same seeds (common random numbers): paths agree up to the truncation, so
+        # each difference is the light of the bounces left out, not noise. The
+        # scene's own depth is an author's default, not the truth: it is measured
+        # like any other candidate.
+        deep = render(render_cam, spp=PILOT_SPP, max_depth=DEEP_REFERENCE_DEPTH, shared=shared)
+        changes = {}
+        max_depth = DEEP_REFERENCE_DEPTH
+        for depth in CANDIDATE_DEPTHS:
+            trial = render(render_cam, spp=PILOT_SPP, max_depth=depth, shared=shared)
+            changes[depth] = measurement_relative_error(trial, deep, lo_hi)
+            if changes[depth]["rms"] < request.indirect_fraction:
+                max_depth = depth
+                break
+        if scene_depth is not None and scene_depth > 0 and scene_depth not in changes:
+            trial = render(render_cam, spp=PILOT_SPP, max_depth=scene_depth, shared=shared)
+            changes[scene_depth] = measurement_relative_error(trial, deep, lo_hi)
+        measured.update(
+            {
+                "change_vs_reference": {str(d): c for d, c in sorted(changes.items())},
+                "indirect_change": changes[2],
+                "reference_depth": DEEP_REFERENCE_DEPTH,
+            }
         )
+        source = "auto"
+        kept = changes.get(max_depth, {"rms": 0.0})["rms"]
+        reason = (
+            f"depth {max_depth} changes measurements by {kept:.3g} (rms) vs depth "
+            f"{DEEP_REFERENCE_DEPTH}, < bound {request.indirect_fraction:g}; direct light "
+            f"only (depth 2) would change them by {changes[2]['rms']:.3g}"
+        )
+        if scene_depth is not None and scene_depth in changes:
+            reason += f", the scene's own depth {scene_depth} by {changes[scene_depth]['rms']:.3g}"
     decisions["max_depth"] = {"value": max_depth, "source": source, "reason": reason, **measured}
 
     # ---- samples per texel -------------------------------------------------------------

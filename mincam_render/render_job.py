@@ -29,6 +29,7 @@ import enum
 import hashlib
 import json
 import logging
+import math
 import os
 import queue as queue_mod
 import threading
@@ -380,6 +381,10 @@ def plan_render(request: RenderRequest) -> dict:
             base_camera, mask_resolution=(request.mask_res, request.mask_res)
         )
     settings, decisions = decide_fidelity(family, base_camera, request)
+    # measured figures are reported to 6 significant digits: last-bit differences
+    # of floating-point sums between two planning runs must not change the bytes
+    # of otherwise identical manifests
+    decisions = _rounded(decisions)
     camera = base_camera
     num_shards = -(-request.num_frames // request.shard_frames)
     job = {
@@ -447,6 +452,17 @@ def _identity_diff(old: dict, new: dict, prefix: str = "") -> list[str]:
         elif a != b:
             diffs.append(f"{prefix}{key}: {a!r} (on disk) != {b!r} (now)")
     return diffs
+
+
+def _rounded(obj: Any, digits: int = 6) -> Any:
+    """``obj`` with every float rounded to ``digits`` significant digits (recursively)."""
+    if isinstance(obj, float):
+        return float(f"{obj:.{digits}g}") if math.isfinite(obj) else obj
+    if isinstance(obj, dict):
+        return {k: _rounded(v, digits) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return type(obj)(_rounded(v, digits) for v in obj)
+    return obj
 
 
 def _open_or_plan(request: RenderRequest, out: Path) -> dict:

@@ -3,13 +3,14 @@
 # CPU backend, a virtual environment in .venv, and the package with pinned deps.
 #
 # Usage: scripts/setup.sh [--dev]
-#   --dev   also install the test and lint tools (pytest, hypothesis, ruff)
+#   --dev   also install the test and lint tools (pytest, hypothesis, ruff) and the
+#           traffic extra (Eclipse SUMO), so the traffic tests run
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 extras=""
-if [[ "${1:-}" == "--dev" ]]; then extras="[dev]"; fi
+if [[ "${1:-}" == "--dev" ]]; then extras="[dev,traffic]"; fi
 
 log() { echo "[setup] $*" >&2; }
 die() { echo "[setup] ERROR: $*" >&2; exit 1; }
