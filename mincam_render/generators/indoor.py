@@ -1474,3 +1474,41 @@ def track_state(track: PeopleTrack, index: int) -> tuple[tuple[Appearance, Pose]
             )
         )
     return tuple(out)
+
+
+def rig_for(config, *, lamps: tuple = ()) -> IndoorRig:
+    """The :class:`IndoorRig` of an indoor family's description (workspace, lighting)."""
+    return IndoorRig(
+        room=config.room,
+        window=config.window,
+        door=config.door,
+        furniture=config.furniture,
+        banks=config.ceiling_lights,
+        lamps=lamps,
+        daylight=config.daylight,
+        daylight_update_s=config.daylight_update_s,
+        slots=config.max_people,
+        max_depth=config.max_depth,
+    )
+
+
+def occupants_for(config, rig: IndoorRig, rng: np.random.Generator, num_frames: int):
+    """People trajectories of an indoor family: paths around furniture, chairs as seats."""
+    nav = NavGrid(config.room, [f for f in config.furniture if f.kind is not FurnitureKind.CHAIR])
+    seats = [
+        (*f.position_m, math.radians(f.rotation_deg))
+        for f in config.furniture
+        if f.kind is FurnitureKind.CHAIR
+    ]
+    return simulate_people(
+        rng=rng,
+        num_frames=num_frames,
+        fps=config.fps,
+        slots=config.max_people,
+        people=config.people,
+        nav=nav,
+        seats=seats,
+        door=rig.door,
+        arrivals_per_s=config.arrivals_per_min / 60.0,
+        burn_in_s=config.burn_in_s,
+    )

@@ -34,10 +34,8 @@ from .indoor import (
     FloorLampConfig,
     FurnitureConfig,
     FurnitureKind,
-    IndoorRig,
     IndoorState,
     LightBankConfig,
-    NavGrid,
     PeopleConfig,
     RoomConfig,
     Wall,
@@ -49,8 +47,9 @@ from .indoor import (
     check_light_banks,
     check_wall_opening,
     lamp_surface_points,
+    occupants_for,
     points_in_view,
-    simulate_people,
+    rig_for,
     switching_process,
     track_state,
 )
@@ -178,37 +177,9 @@ class LightingFamily(SceneFamily):
     def __init__(self, config: LightingConfig, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)
         c = config
-        self.rig = IndoorRig(
-            room=c.room,
-            window=c.window,
-            door=c.door,
-            furniture=c.furniture,
-            banks=c.ceiling_lights,
-            lamps=c.floor_lamps,
-            daylight=c.daylight,
-            daylight_update_s=c.daylight_update_s,
-            slots=c.max_people,
-            max_depth=c.max_depth,
-        )
+        self.rig = rig_for(c, lamps=c.floor_lamps)
         rng = np.random.default_rng(seed)
-        nav = NavGrid(c.room, [f for f in c.furniture if f.kind is not FurnitureKind.CHAIR])
-        seats = [
-            (*f.position_m, math.radians(f.rotation_deg))
-            for f in c.furniture
-            if f.kind is FurnitureKind.CHAIR
-        ]
-        self.track = simulate_people(
-            rng=rng,
-            num_frames=num_frames,
-            fps=c.fps,
-            slots=c.max_people,
-            people=c.people,
-            nav=nav,
-            seats=seats,
-            door=self.rig.door,
-            arrivals_per_s=c.arrivals_per_min / 60.0,
-            burn_in_s=c.burn_in_s,
-        )
+        self.track = occupants_for(c, self.rig, rng, num_frames)
         banks = [(b.mean_on_s, b.mean_off_s) for b in c.ceiling_lights]
         lamps = [(lp.mean_on_s, lp.mean_off_s) for lp in c.floor_lamps]
         self.lights_on = np.stack(

@@ -33,10 +33,8 @@ from .indoor import (
     DoorConfig,
     FurnitureConfig,
     FurnitureKind,
-    IndoorRig,
     IndoorState,
     LightBankConfig,
-    NavGrid,
     PeopleConfig,
     RoomConfig,
     Wall,
@@ -49,7 +47,8 @@ from .indoor import (
     check_wall_opening,
     check_zones,
     inside_room,
-    simulate_people,
+    occupants_for,
+    rig_for,
     switching_process,
     track_state,
     zone_overlaps,
@@ -172,37 +171,9 @@ class WorkspaceFamily(SceneFamily):
     def __init__(self, config: WorkspaceConfig, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)
         c = config
-        self.rig = IndoorRig(
-            room=c.room,
-            window=c.window,
-            door=c.door,
-            furniture=c.furniture,
-            banks=c.ceiling_lights,
-            lamps=(),
-            daylight=c.daylight,
-            daylight_update_s=c.daylight_update_s,
-            slots=c.max_people,
-            max_depth=c.max_depth,
-        )
+        self.rig = rig_for(c)
         rng = np.random.default_rng(seed)
-        nav = NavGrid(c.room, [f for f in c.furniture if f.kind is not FurnitureKind.CHAIR])
-        seats = [
-            (*f.position_m, math.radians(f.rotation_deg))
-            for f in c.furniture
-            if f.kind is FurnitureKind.CHAIR
-        ]
-        self.track = simulate_people(
-            rng=rng,
-            num_frames=num_frames,
-            fps=c.fps,
-            slots=c.max_people,
-            people=c.people,
-            nav=nav,
-            seats=seats,
-            door=self.rig.door,
-            arrivals_per_s=c.arrivals_per_min / 60.0,
-            burn_in_s=c.burn_in_s,
-        )
+        self.track = occupants_for(c, self.rig, rng, num_frames)
         self.lights_on = (
             np.stack(
                 [
