@@ -192,7 +192,36 @@ def task_loss(
     return torch.stack(list(parts.values())).sum(), parts
 
 
-class MincamCamera(nn.Module):
+class CameraModel(nn.Module):
+    """A camera feeding a :class:`Head`: subclasses define ``measure`` (pixel outputs)."""
+
+    head: Head
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel outputs ``[batch, time, pixel]`` of ``T[batch, (time,) detector, row, col]``."""
+        raise NotImplementedError
+
+    def forward(
+        self,
+        transport: torch.Tensor,
+        *,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> dict[str, torch.Tensor]:
+        """Raw head outputs ``{name: [batch, size]}``."""
+        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
+        return self.head(temporal_features(v))
+
+
+class MincamCamera(CameraModel):
     """A minimalist camera: trainable masks, the detector model, and a head.
 
     Args:
@@ -277,18 +306,6 @@ class MincamCamera(nn.Module):
             return power * (e.responsivity_a_per_w * e.gain_v_per_a)
         return detector_voltage(power, e, noise=noise, generator=generator)
 
-    def forward(
-        self,
-        transport: torch.Tensor,
-        *,
-        gain: torch.Tensor | None = None,
-        noise: bool = True,
-        generator: torch.Generator | None = None,
-    ) -> dict[str, torch.Tensor]:
-        """Raw head outputs ``{name: [batch, size]}``."""
-        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
-        return self.head(temporal_features(v))
-
 
 def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     """Box-sum ``image[..., row, col]`` into ``grid = (R, C)`` pixels (sums power; torch).
@@ -307,7 +324,7 @@ def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     return pooled.reshape(*lead, r, c)
 
 
-class BaselineCamera(nn.Module):
+class BaselineCamera(CameraModel):
     """A traditional ``R x C`` camera (box pixels, 8-bit read-out) feeding a :class:`Head`.
 
     Args:
@@ -374,15 +391,3 @@ class BaselineCamera(nn.Module):
             dn = dn + self.read_noise_dn * torch.randn(dn.shape, **kw)
             dn = dn + (torch.rand(dn.shape, **kw) - 0.5)
         return torch.clamp(dn, 0.0, float(full)) / full
-
-    def forward(
-        self,
-        transport: torch.Tensor,
-        *,
-        gain: torch.Tensor | None = None,
-        noise: bool = True,
-        generator: torch.Generator | None = None,
-    ) -> dict[str, torch.Tensor]:
-        """Raw head outputs ``{name: [batch, size]}``."""
-        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
-        return self.head(temporal_features(v))

@@ -36,6 +36,7 @@ import trimesh
 from .. import mitsuba_scene as ms
 from ..config import spec
 from ..photometry import lambertian_radiance, lumens_to_watts
+from .base import SceneFamily
 
 #: Floor area one person needs (m^2): a room "holds" floor_area / this many people.
 AREA_PER_PERSON_M2 = 2.0
@@ -1476,39 +1477,116 @@ def track_state(track: PeopleTrack, index: int) -> tuple[tuple[Appearance, Pose]
     return tuple(out)
 
 
-def rig_for(config, *, lamps: tuple = ()) -> IndoorRig:
-    """The :class:`IndoorRig` of an indoor family's description (workspace, lighting)."""
-    return IndoorRig(
-        room=config.room,
-        window=config.window,
-        door=config.door,
-        furniture=config.furniture,
-        banks=config.ceiling_lights,
-        lamps=lamps,
-        daylight=config.daylight,
-        daylight_update_s=config.daylight_update_s,
-        slots=config.max_people,
-        max_depth=config.max_depth,
-    )
+def check_room_layout(config) -> None:
+    """Checks shared by the indoor descriptions: openings, furniture, lights, capacity, camera.
+
+    Raises:
+        ValueError: naming the offending field.
+    """
+    r = config.room
+    if config.window is not None:
+        w = config.window
+        check_wall_opening("window", r, w.wall, w.center_m, w.width_m, w.sill_height_m, w.height_m)
+    d = config.door
+    check_wall_opening("door", r, d.wall, d.center_m, d.width_m, 0.0, d.height_m)
+    check_furniture(r, config.furniture)
+    check_light_banks(r, config.ceiling_lights)
+    check_capacity(r, config.max_people)
+    check_camera(r, config.camera)
 
 
-def occupants_for(config, rig: IndoorRig, rng: np.random.Generator, num_frames: int):
-    """People trajectories of an indoor family: paths around furniture, chairs as seats."""
-    nav = NavGrid(config.room, [f for f in config.furniture if f.kind is not FurnitureKind.CHAIR])
-    seats = [
-        (*f.position_m, math.radians(f.rotation_deg))
-        for f in config.furniture
-        if f.kind is FurnitureKind.CHAIR
-    ]
-    return simulate_people(
-        rng=rng,
-        num_frames=num_frames,
-        fps=config.fps,
-        slots=config.max_people,
-        people=config.people,
-        nav=nav,
-        seats=seats,
-        door=rig.door,
-        arrivals_per_s=config.arrivals_per_min / 60.0,
-        burn_in_s=config.burn_in_s,
-    )
+class IndoorFamily(SceneFamily):
+    """What the indoor families share: one :class:`IndoorRig`, people and switched lights.
+
+    Subclasses set ``name``, ``config_type`` and :attr:`floor_lamps`, and define
+    ``labels``, ``labels_for(state)`` and ``frame_state``.
+    """
+
+    def __init__(self, config, *, seed: int, num_frames: int) -> None:
+        super().__init__(config, seed=seed, num_frames=num_frames)
+        c = config
+        lamps = self.floor_lamps
+        self.rig = IndoorRig(
+            room=c.room,
+            window=c.window,
+            door=c.door,
+            furniture=c.furniture,
+            banks=c.ceiling_lights,
+            lamps=lamps,
+            daylight=c.daylight,
+            daylight_update_s=c.daylight_update_s,
+            slots=c.max_people,
+            max_depth=c.max_depth,
+        )
+        rng = np.random.default_rng(seed)
+        nav = NavGrid(c.room, [f for f in c.furniture if f.kind is not FurnitureKind.CHAIR])
+        seats = [
+            (*f.position_m, math.radians(f.rotation_deg))
+            for f in c.furniture
+            if f.kind is FurnitureKind.CHAIR
+        ]
+        self.track = simulate_people(
+            rng=rng,
+            num_frames=num_frames,
+            fps=c.fps,
+            slots=c.max_people,
+            people=c.people,
+            nav=nav,
+            seats=seats,
+            door=self.rig.door,
+            arrivals_per_s=c.arrivals_per_min / 60.0,
+            burn_in_s=c.burn_in_s,
+        )
+        # in the rig's light order: ceiling banks, then floor lamps
+        switched = [*c.ceiling_lights, *lamps]
+        self.lights_on = (
+            np.stack(
+                [
+                    switching_process(rng, num_frames, c.fps, li.mean_on_s, li.mean_off_s)
+                    for li in switched
+                ],
+                axis=1,
+            )
+            if switched
+            else np.zeros((num_frames, 0), dtype=bool)
+        )
+
+    @property
+    def floor_lamps(self) -> tuple:
+        """The description's floor lamps (none unless the family has them)."""
+        return ()
+
+    @property
+    def fps(self) -> float:
+        return self.config.fps
+
+    def camera(self):
+        return self.config.camera.camera()
+
+    def build_scene(self):
+        return self.rig.build_scene()
+
+    def state(self, index: int) -> IndoorState:
+        """The scene state of frame ``index`` (people, door, lights, daylight time)."""
+        self.check_index(index)
+        return IndoorState(
+            people=track_state(self.track, index),
+            door_angle_rad=float(self.track.door_angle_rad[index]),
+            lights_on=tuple(bool(v) for v in self.lights_on[index]),
+            daylight_time_s=self.time_s(index),
+        )
+
+    def labels_for(self, state: IndoorState) -> dict[str, np.ndarray]:
+        """Labels of any state (e.g. one placed by hand in a test)."""
+        raise NotImplementedError
+
+    def apply_state(self, scene, state: IndoorState) -> dict[str, np.ndarray]:
+        """Set ``scene`` to ``state`` in place and return its labels."""
+        self.rig.apply(scene, state)
+        return self.labels_for(state)
+
+    def set_frame(self, scene, index: int) -> dict[str, np.ndarray]:
+        return self.apply_state(scene, self.state(index))
+
+    def birdseye_view(self):
+        return self.rig.birdseye_view()

@@ -24,34 +24,26 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import mitsuba as mi
 import numpy as np
 
 from ..config import spec
-from .base import CameraMount, LabelKind, LabelSpec, SceneFamily, View
+from .base import CameraMount, LabelKind, LabelSpec
 from .indoor import (
     DoorConfig,
     FloorLampConfig,
     FurnitureConfig,
     FurnitureKind,
+    IndoorFamily,
     IndoorState,
     LightBankConfig,
     PeopleConfig,
     RoomConfig,
     Wall,
     WindowConfig,
-    check_camera,
-    check_capacity,
-    check_furniture,
     check_inside,
-    check_light_banks,
-    check_wall_opening,
+    check_room_layout,
     lamp_surface_points,
-    occupants_for,
     points_in_view,
-    rig_for,
-    switching_process,
-    track_state,
 )
 from .sky import DaylightConfig
 
@@ -122,18 +114,8 @@ class LightingConfig:
     )
 
     def __post_init__(self) -> None:
+        check_room_layout(self)
         r = self.room
-        if self.window is not None:
-            w = self.window
-            check_wall_opening(
-                "window", r, w.wall, w.center_m, w.width_m, w.sill_height_m, w.height_m
-            )
-        d = self.door
-        check_wall_opening("door", r, d.wall, d.center_m, d.width_m, 0.0, d.height_m)
-        check_furniture(r, self.furniture)
-        check_light_banks(r, self.ceiling_lights)
-        check_capacity(r, self.max_people)
-        check_camera(r, self.camera)
         names = [b.name for b in self.ceiling_lights] + [lp.name for lp in self.floor_lamps]
         if len(set(names)) != len(names):
             raise ValueError(f"light names must be unique, got {names}")
@@ -168,28 +150,15 @@ def panel_points(room: RoomConfig, bank: LightBankConfig, n: int = 5) -> np.ndar
     return np.concatenate(pts)
 
 
-class LightingFamily(SceneFamily):
+class LightingFamily(IndoorFamily):
     """Estimating which of five lights are on from shading (paper Sec. 7.2)."""
 
     name = "lighting"
     config_type = LightingConfig
 
-    def __init__(self, config: LightingConfig, *, seed: int, num_frames: int) -> None:
-        super().__init__(config, seed=seed, num_frames=num_frames)
-        c = config
-        self.rig = rig_for(c, lamps=c.floor_lamps)
-        rng = np.random.default_rng(seed)
-        self.track = occupants_for(c, self.rig, rng, num_frames)
-        banks = [(b.mean_on_s, b.mean_off_s) for b in c.ceiling_lights]
-        lamps = [(lp.mean_on_s, lp.mean_off_s) for lp in c.floor_lamps]
-        self.lights_on = np.stack(
-            [switching_process(rng, num_frames, c.fps, on, off) for on, off in banks + lamps],
-            axis=1,
-        )
-
     @property
-    def fps(self) -> float:
-        return self.config.fps
+    def floor_lamps(self) -> tuple:
+        return self.config.floor_lamps
 
     @property
     def light_names(self) -> tuple[str, ...]:
@@ -207,33 +176,9 @@ class LightingFamily(SceneFamily):
             ),
         )
 
-    def camera(self):
-        return self.config.camera.camera()
-
-    def build_scene(self) -> mi.Scene:
-        return self.rig.build_scene()
-
-    def state(self, index: int) -> IndoorState:
-        """The scene state of frame ``index``."""
-        self.check_index(index)
-        return IndoorState(
-            people=track_state(self.track, index),
-            door_angle_rad=float(self.track.door_angle_rad[index]),
-            lights_on=tuple(bool(v) for v in self.lights_on[index]),
-            daylight_time_s=self.time_s(index),
-        )
-
     def labels_for(self, state: IndoorState) -> dict[str, np.ndarray]:
         """Labels of any state (e.g. one set by hand in a test)."""
         return {"lights": np.array(state.lights_on, dtype=np.float32)}
-
-    def apply_state(self, scene: mi.Scene, state: IndoorState) -> dict[str, np.ndarray]:
-        """Set ``scene`` to ``state`` in place and return its labels."""
-        self.rig.apply(scene, state)
-        return self.labels_for(state)
-
-    def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
-        return self.apply_state(scene, self.state(index))
 
     def frame_state(self, index: int) -> dict[str, Any]:
         st = self.state(index)
@@ -252,6 +197,3 @@ class LightingFamily(SceneFamily):
             "door_angle_deg": math.degrees(st.door_angle_rad),
             "lights_on": dict(zip(self.light_names, st.lights_on, strict=True)),
         }
-
-    def birdseye_view(self) -> View:
-        return self.rig.birdseye_view()

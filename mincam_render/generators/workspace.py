@@ -24,15 +24,15 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import mitsuba as mi
 import numpy as np
 
 from ..config import spec
-from .base import CameraMount, LabelKind, LabelSpec, SceneFamily, View
+from .base import CameraMount, LabelKind, LabelSpec
 from .indoor import (
     DoorConfig,
     FurnitureConfig,
     FurnitureKind,
+    IndoorFamily,
     IndoorState,
     LightBankConfig,
     PeopleConfig,
@@ -40,17 +40,9 @@ from .indoor import (
     Wall,
     WindowConfig,
     ZoneConfig,
-    check_camera,
-    check_capacity,
-    check_furniture,
-    check_light_banks,
-    check_wall_opening,
+    check_room_layout,
     check_zones,
     inside_room,
-    occupants_for,
-    rig_for,
-    switching_process,
-    track_state,
     zone_overlaps,
 )
 from .sky import DaylightConfig
@@ -138,23 +130,13 @@ class WorkspaceConfig:
     )
 
     def __post_init__(self) -> None:
-        r = self.room
-        if self.window is not None:
-            w = self.window
-            check_wall_opening(
-                "window", r, w.wall, w.center_m, w.width_m, w.sill_height_m, w.height_m
-            )
-        d = self.door
-        check_wall_opening("door", r, d.wall, d.center_m, d.width_m, 0.0, d.height_m)
+        check_room_layout(self)
+        r, d = self.room, self.door
         if self.window is not None and self.window.wall is d.wall:
             w = self.window
             if abs(w.center_m - d.center_m) < (w.width_m + d.width_m) / 2:
                 raise ValueError("window: overlaps the door on the same wall")
-        check_furniture(r, self.furniture)
         check_zones(r, self.zones)
-        check_light_banks(r, self.ceiling_lights)
-        check_capacity(r, self.max_people)
-        check_camera(r, self.camera)
         if d.open_threshold_deg >= d.max_angle_deg:
             raise ValueError(
                 f"door.open_threshold_deg = {d.open_threshold_deg}: must be below "
@@ -162,33 +144,11 @@ class WorkspaceConfig:
             )
 
 
-class WorkspaceFamily(SceneFamily):
+class WorkspaceFamily(IndoorFamily):
     """Monitoring an office: people count, zone occupancy and door state (paper Sec. 7.1)."""
 
     name = "workspace"
     config_type = WorkspaceConfig
-
-    def __init__(self, config: WorkspaceConfig, *, seed: int, num_frames: int) -> None:
-        super().__init__(config, seed=seed, num_frames=num_frames)
-        c = config
-        self.rig = rig_for(c)
-        rng = np.random.default_rng(seed)
-        self.track = occupants_for(c, self.rig, rng, num_frames)
-        self.lights_on = (
-            np.stack(
-                [
-                    switching_process(rng, num_frames, c.fps, b.mean_on_s, b.mean_off_s)
-                    for b in c.ceiling_lights
-                ],
-                axis=1,
-            )
-            if c.ceiling_lights
-            else np.zeros((num_frames, 0), dtype=bool)
-        )
-
-    @property
-    def fps(self) -> float:
-        return self.config.fps
 
     @property
     def labels(self) -> tuple[LabelSpec, ...]:
@@ -204,22 +164,6 @@ class WorkspaceFamily(SceneFamily):
             LabelSpec(name="door_open", kind=LabelKind.BINARY, median_filter_s=0.5),
         )
 
-    def camera(self):
-        return self.config.camera.camera()
-
-    def build_scene(self) -> mi.Scene:
-        return self.rig.build_scene()
-
-    def state(self, index: int) -> IndoorState:
-        """The scene state of frame ``index`` (people, door, lights, daylight time)."""
-        self.check_index(index)
-        return IndoorState(
-            people=track_state(self.track, index),
-            door_angle_rad=float(self.track.door_angle_rad[index]),
-            lights_on=tuple(bool(v) for v in self.lights_on[index]),
-            daylight_time_s=self.time_s(index),
-        )
-
     def labels_for(self, state: IndoorState) -> dict[str, np.ndarray]:
         """Labels of any state (e.g. one placed by hand in a test)."""
         c = self.config
@@ -232,14 +176,6 @@ class WorkspaceFamily(SceneFamily):
                 [math.degrees(state.door_angle_rad) > c.door.open_threshold_deg], dtype=np.float32
             ),
         }
-
-    def apply_state(self, scene: mi.Scene, state: IndoorState) -> dict[str, np.ndarray]:
-        """Set ``scene`` to ``state`` in place and return its labels."""
-        self.rig.apply(scene, state)
-        return self.labels_for(state)
-
-    def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
-        return self.apply_state(scene, self.state(index))
 
     def frame_state(self, index: int) -> dict[str, Any]:
         st = self.state(index)
@@ -267,6 +203,3 @@ class WorkspaceFamily(SceneFamily):
             ),
             "global_horizontal_w_m2": day.global_horizontal_w_m2,
         }
-
-    def birdseye_view(self) -> View:
-        return self.rig.birdseye_view()
