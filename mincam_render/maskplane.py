@@ -105,4 +105,6 @@ def mask_power(
     lo, hi = (float(v) for v in transmittance_range)
     if not 0.0 <= lo < hi <= 1.0:
         raise ValueError(f"transmittance_range = {transmittance_range}: need 0 <= lo < hi <= 1")
-    return _power_drjit(transport.contiguous(), logits.contiguous(), lo, hi)
+    # dr.wrap converts plain tensors only: pass views, never an nn.Parameter itself
+    transport = transport.contiguous().view(transport.shape)
+    return _power_drjit(transport, logits.contiguous().view(logits.shape), lo, hi)

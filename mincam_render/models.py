@@ -295,9 +295,7 @@ class MincamCamera(CameraModel):
         t = _as_5d(transport)
         b, h = t.shape[:2]
         t = t.index_select(2, self.detectors).reshape(b * h, self.num_pixels, *t.shape[3:])
-        # dr.wrap converts plain tensors only: pass a view, not the nn.Parameter itself
-        logits = self.logits.view(self.logits.shape)
-        power = mask_power(t.contiguous(), logits, self.camera.transmittance_range)
+        power = mask_power(t, self.logits, self.camera.transmittance_range)
         power = power.reshape(b, h, self.num_pixels)
         if gain is not None:
             power = power * gain.reshape(b, 1, 1)

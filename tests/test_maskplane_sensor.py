@@ -218,3 +218,11 @@ def test_chain_finite_with_gradients_from_moonless_to_sunlit(radiance):
     assert (logits.grad.abs() > 0).all()
     if radiance == 1e6:
         assert (v > DetectorElectronics().full_scale_v).all()  # saturated, yet leaky gradients
+
+
+def test_mask_power_accepts_an_nn_parameter():
+    logits = torch.nn.Parameter(torch.zeros(1, 2, 2))
+    p = mask_power(torch.ones(3, 1, 2, 2), logits, RANGE)
+    p.sum().backward()
+    np.testing.assert_allclose(p.detach().numpy(), 4 * (0.01 + 0.66 * 0.5), rtol=1e-6)
+    np.testing.assert_allclose(logits.grad.numpy(), 3 * 0.66 * 0.25, rtol=1e-6)
