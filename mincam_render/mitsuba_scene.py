@@ -296,34 +296,6 @@ def directional_light(direction, irradiance_w_m2: float) -> dict[str, Any]:
     }
 
 
-def spot_light(position_m, target_m, intensity_w_sr: float, cutoff_deg: float = 60.0) -> dict:
-    """A spot light of radiant intensity ``intensity_w_sr`` (W/sr) on its axis."""
-    return {
-        "type": "spot",
-        "to_world": _to_world(position_m, target_m, _any_up(position_m, target_m)),
-        "intensity": {"type": "rgb", "value": float(intensity_w_sr)},
-        "cutoff_angle": float(cutoff_deg),
-        "beam_width": float(cutoff_deg) * 0.75,
-    }
-
-
-def point_light(position_m, intensity_w_sr: float) -> dict[str, Any]:
-    """An isotropic point light of radiant intensity ``intensity_w_sr`` (W/sr)."""
-    return {
-        "type": "point",
-        "position": list(map(float, position_m)),
-        "intensity": {"type": "rgb", "value": float(intensity_w_sr)},
-    }
-
-
-def _any_up(position, target):
-    import numpy as np
-
-    d = np.subtract(target, position)
-    d = d / np.linalg.norm(d)
-    return (0.0, 0.0, 1.0) if abs(d[1]) > 0.9 else (0.0, 1.0, 0.0)
-
-
 def textured_emitter_rectangle(center_m, facing_m, size_m, radiance_w_m2_sr, up=(0.0, 1.0, 0.0)):
     """A rectangle emitting a radiance image ``L[row, col]`` (W m^-2 sr^-1), nearest filtered.
 

@@ -43,8 +43,3 @@ def lambertian_radiance(power_w: float, area_m2: float) -> float:
     if area_m2 <= 0:
         raise ValueError(f"area_m2 = {area_m2!r} must be > 0")
     return power_w / (math.pi * area_m2)
-
-
-def isotropic_intensity(power_w: float) -> float:
-    """Radiant intensity (W/sr) of an isotropic point source of ``power_w``: Phi / (4 pi)."""
-    return power_w / (4.0 * math.pi)

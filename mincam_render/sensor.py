@@ -73,8 +73,3 @@ def detector_voltage(
         quant = torch.rand(shape, generator=generator, **kw)
         voltage_v = voltage_v + shot_sigma_v * eps + e.read_noise_v * read + e.lsb_v * quant
     return leaky_saturation(voltage_v, e.full_scale_v, e.saturation_slope)
-
-
-def voltage_to_counts(voltage_v: torch.Tensor, electronics: DetectorElectronics) -> torch.Tensor:
-    """ADC counts (float, not rounded) of a voltage; full scale maps to 2^bits - 1."""
-    return voltage_v / electronics.lsb_v

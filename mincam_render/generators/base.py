@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import abc
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import mitsuba as mi
@@ -154,13 +154,3 @@ class SceneFamily(abc.ABC):
         """Raise ``IndexError`` unless 0 <= index < num_frames."""
         if not 0 <= index < self.num_frames:
             raise IndexError(f"frame {index} outside [0, {self.num_frames})")
-
-
-@dataclass
-class FrameRecord:
-    """Labels and state of one frame (numpy), as produced by a family."""
-
-    index: int
-    time_s: float
-    labels: dict[str, np.ndarray]
-    state: dict[str, Any] = field(default_factory=dict)
