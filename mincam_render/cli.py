@@ -946,6 +946,7 @@ def export_exr_cmd(dataset, frame_list, out):
     "--baseline-grid",
     default="8x8",
     show_default=True,
+    callback=_grid,
     help="Baseline camera resolution ROWSxCOLS.",
 )
 @click.option(
@@ -1009,12 +1010,7 @@ def pipeline_cmd(
     from .render_job import RenderError, RenderRequest, render_dataset
     from .train import TrainConfig, TrainingData, run_pipeline
 
-    try:
-        rows, cols = (int(v) for v in baseline_grid.lower().split("x"))
-    except ValueError:
-        raise click.BadParameter(
-            f"{baseline_grid!r} is not ROWSxCOLS, e.g. 8x8", param_hint="--baseline-grid"
-        ) from None
+    rows, cols = baseline_grid
     try:
         fixed = {} if auto_fidelity else {"spp": spp, "max_depth": 0, "shared_render": False}
         request = RenderRequest(

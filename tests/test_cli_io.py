@@ -97,3 +97,44 @@ def test_cli_preview_unknown_family(variant, tmp_path):
     res = CliRunner().invoke(main, ["preview", "nosuch", "--out", str(tmp_path / "p")])
     assert res.exit_code != 0 and "not found" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "p").exists()
+
+
+def test_cli_pipeline_renders_trains_exports_and_reports(variant, tmp_path):
+    out = tmp_path / "main"
+    args = [
+        "pipeline",
+        "--family",
+        "patches",
+        "--frames",
+        "80",
+        "--steps",
+        "30",
+        "--workers",
+        "0",
+        "--spp",
+        "2",
+        "--pixels",
+        "2",
+        "--baseline-grid",
+        "2x2",
+        "--out",
+        str(out),
+    ]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics["runs"]) == {"mincam", "baseline"}
+    assert metrics["runs"]["mincam"]["model"]["pixels"] == 2
+    assert metrics["runs"]["baseline"]["model"]["grid"] == [2, 2]
+    assert metrics["train_samples"] + metrics["val_samples"] + metrics["test_samples"] == 80
+    for run in metrics["runs"].values():
+        assert np.isfinite(run["test"]["error"])
+    assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    sidecar = json.loads((out / "masks" / "patches" / "masks.json").read_text())
+    assert sidecar["masks"] == 2 and len(sidecar["files"]["png"]) == 2
+    for name in sidecar["files"]["png"]:
+        assert (out / "masks" / "patches" / name).is_file()
+    # the dataset it trained on is a complete, checksummed render of the request
+    from mincam_render.dataset import open_dataset
+
+    assert open_dataset(out / "dataset").verify() == []
