@@ -951,11 +951,11 @@ class PeopleTrack:
 @dataclass
 class _Agent:
     appearance: int
-    pos: np.ndarray
-    heading: float
+    pos: np.ndarray  # (x, y) on the floor (m)
+    heading_rad: float
     tasks: list = field(default_factory=list)
     stops_left: int = 0
-    phase: float = 0.0
+    phase_rad: float = 0.0
     gait: float = 0.0
     sit: float = 0.0
     seat: int | None = None
@@ -1008,7 +1008,7 @@ def simulate_people(
         return _Agent(
             appearance=len(appearances) - 1,
             pos=np.asarray(pos, float),
-            heading=float(rng.uniform(-math.pi, math.pi)),
+            heading_rad=float(rng.uniform(-math.pi, math.pi)),
             stops_left=stops,
         )
 
@@ -1061,7 +1061,7 @@ def simulate_people(
                 k = free_slots[0]
                 corridor, doorway, inside = entrance
                 ag = new_agent(corridor, int(rng.integers(people.stops[0], people.stops[1] + 1)))
-                ag.heading = math.atan2(*(doorway - corridor)[::-1])
+                ag.heading_rad = math.atan2(*(doorway - corridor)[::-1])
                 ag.tasks = [("walk", [doorway, inside])]
                 ag.passing = True
                 agents[k] = ag
@@ -1080,11 +1080,13 @@ def simulate_people(
                     d = arg[0] - ag.pos
                     dist = float(np.linalg.norm(d))
                     if dist > 1e-9:
-                        ag.heading = _turn(ag.heading, math.atan2(d[1], d[0]), TURN_RATE_RAD_S * dt)
+                        ag.heading_rad = _turn(
+                            ag.heading_rad, math.atan2(d[1], d[0]), TURN_RATE_RAD_S * dt
+                        )
                     if dist <= step_len:
                         ag.pos = np.array(arg.pop(0), float)
                         step_len -= dist
-                        ag.phase += (
+                        ag.phase_rad += (
                             2
                             * math.pi
                             * dist
@@ -1092,7 +1094,7 @@ def simulate_people(
                         )
                     else:
                         ag.pos = ag.pos + d / dist * step_len
-                        ag.phase += (
+                        ag.phase_rad += (
                             2
                             * math.pi
                             * step_len
@@ -1104,8 +1106,8 @@ def simulate_people(
                     ag.tasks.pop(0)
             elif kind == "sit":
                 target = seats[arg][2]
-                ag.heading = _turn(ag.heading, target, TURN_RATE_RAD_S * dt)
-                if abs((target - ag.heading + math.pi) % (2 * math.pi) - math.pi) < 1e-6:
+                ag.heading_rad = _turn(ag.heading_rad, target, TURN_RATE_RAD_S * dt)
+                if abs((target - ag.heading_rad + math.pi) % (2 * math.pi) - math.pi) < 1e-6:
                     ag.sit = min(1.0, ag.sit + SIT_RATE_PER_S * dt)
                     if ag.sit >= 1.0:
                         ag.tasks.pop(0)
@@ -1157,7 +1159,7 @@ def simulate_people(
                 continue
             active[f, k] = True
             visit[f, k] = ag.appearance
-            pose[f, k] = (ag.pos[0], ag.pos[1], ag.heading, ag.phase, ag.gait, ag.sit)
+            pose[f, k] = (ag.pos[0], ag.pos[1], ag.heading_rad, ag.phase_rad, ag.gait, ag.sit)
     return PeopleTrack(active, pose, visit, appearances, door_angle)
 
 
