@@ -287,6 +287,40 @@ def environment_map(radiance_w_m2_sr, to_world=None) -> dict[str, Any]:
     return d
 
 
+def portal_sky(radiance_w_m2_sr, corner_m, edge_u_m, edge_v_m) -> dict[str, Any]:
+    """Sky and ground seen through one window, sampled through it (a light portal).
+
+    ``radiance_w_m2_sr`` is a lat-long map ``L[row, col]`` in the layout of
+    :func:`mincam_render.generators.sky.envmap_directions` (W m^-2 sr^-1); the
+    window is the rectangle ``corner_m + a edge_u_m + b edge_v_m``, ``a, b`` in
+    [0, 1] (m, world), with ``edge_u_m x edge_v_m`` pointing out of the room.
+    See :mod:`mincam_render.portal_sky`; update the map per frame via
+    ``"<key>.data"`` with :func:`portal_sky_data`.
+    """
+    import numpy as np
+
+    from . import portal_sky as ps
+
+    use_variant()
+    ps.register()
+    data = np.ascontiguousarray(np.asarray(radiance_w_m2_sr, dtype=np.float32))
+    return {
+        "type": ps.PLUGIN_NAME,
+        "corner": mi.ScalarPoint3f(*map(float, corner_m)),
+        "edge_u": mi.ScalarVector3f(*map(float, edge_u_m)),
+        "edge_v": mi.ScalarVector3f(*map(float, edge_v_m)),
+        "data": mi.TensorXf(data),
+    }
+
+
+def portal_sky_data(radiance_w_m2_sr) -> mi.Float:
+    """Flat value of a :func:`portal_sky`'s ``"<key>.data"`` from ``L[row, col]``."""
+    import numpy as np
+
+    use_variant()
+    return mi.Float(np.ascontiguousarray(np.asarray(radiance_w_m2_sr, dtype=np.float32)).ravel())
+
+
 def directional_light(direction, irradiance_w_m2: float) -> dict[str, Any]:
     """A distant light (e.g. the sun) travelling along ``direction``, irradiance in W/m^2."""
     return {

@@ -146,6 +146,23 @@ class SceneFamily(abc.ABC):
     def birdseye_view(self) -> View:
         """A view from above covering the scene, for previews."""
 
+    #: True when the family separates a static background from moving objects
+    #: (:meth:`background_key`, :meth:`set_background`), for differential rendering.
+    has_background: ClassVar[bool] = False
+
+    def background_key(self, index: int, interval_s: float) -> str:
+        """Identity of frame ``index``'s static background (its scene without movers).
+
+        Frames with equal keys share one background: the lights of the frame and
+        the slowly changing light (daylight) of the start of its ``interval_s``
+        window. See :mod:`mincam_render.differential`.
+        """
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
+    def set_background(self, scene: mi.Scene, index: int, interval_s: float) -> None:
+        """Set ``scene`` to the static background of frame ``index`` (movers removed)."""
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
     def time_s(self, index: int) -> float:
         """Time of frame ``index`` since the start of the sequence (s)."""
         return index / self.fps

@@ -1270,6 +1270,13 @@ class Light:
         return f"{self.key}.emitter.sampling_weight"
 
 
+class SkySampling(enum.Enum):
+    """How light samples find the sky seen through the window."""
+
+    PORTAL = "portal"  # through the window opening (mincam_render.portal_sky)
+    ENVMAP = "envmap"  # Mitsuba's envmap: over the whole sphere (for validation)
+
+
 @dataclass(frozen=True)
 class IndoorState:
     """Everything that changes between frames of an indoor scene.
@@ -1330,12 +1337,14 @@ class IndoorRig:
         daylight_update_s: float,
         slots: int,
         max_depth: int,
+        sky_sampling: SkySampling = SkySampling.PORTAL,
     ) -> None:
         self.room, self.window, self.furniture = room, window, furniture
         self.door = Door(room, door) if door is not None else None
         self.banks, self.lamps = banks, lamps
         self.daylight_config, self.daylight_update_s = daylight, daylight_update_s
         self.slots, self.max_depth = slots, max_depth
+        self.sky_sampling = sky_sampling
         self.body = BodyModel()
         self.lights = tuple(
             [Light(b.name, f"bank_{i}", bank_radiance_w_m2_sr(b)) for i, b in enumerate(banks)]
@@ -1386,13 +1395,26 @@ class IndoorRig:
         if self.window is not None:
             day = self.sky(0.0)
             shapes[SUN_KEY] = ms.directional_light(-day.sun_direction, day.sun_irradiance_w_m2)
-            shapes[SKY_KEY] = ms.environment_map(day.sky_radiance_w_m2_sr, envmap_to_world())
+            if self.sky_sampling is SkySampling.PORTAL:
+                shapes[SKY_KEY] = ms.portal_sky(day.sky_radiance_w_m2_sr, *self.window_rectangle())
+            else:
+                shapes[SKY_KEY] = ms.environment_map(day.sky_radiance_w_m2_sr, envmap_to_world())
         scene = ms.load_scene(ms.scene_dict(shapes, max_depth=self.max_depth))
         params = mi.traverse(scene)
         missing = [k for k in self.param_keys() if k not in params]
         if missing:
             raise RuntimeError(f"scene has no parameter(s) {missing[:4]}")
         return scene
+
+    def window_rectangle(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The window opening ``(corner, edge_u, edge_v)`` (m, world), edge_u x edge_v outward."""
+        w = self.window
+        origin, t, inward = wall_frame(self.room, w.wall)
+        corner = origin + (w.center_m - w.width_m / 2) * t + w.sill_height_m * np.array([0, 0, 1.0])
+        edge_u, edge_v = w.width_m * t, w.height_m * np.array([0, 0, 1.0])
+        if np.cross(edge_u, edge_v) @ inward > 0:
+            corner, edge_u = corner + edge_u, -edge_u
+        return corner, edge_u, edge_v
 
     def sky(self, time_s: float):
         """Daylight at ``time_s`` rounded down to the update interval (cached)."""
@@ -1451,8 +1473,11 @@ class IndoorRig:
             day = self.sky(state.daylight_time_s)
             params[SUN_IRRADIANCE_PARAM] = dr.opaque(mi.Float, float(day.sun_irradiance_w_m2))
             params[SUN_TO_WORLD_PARAM] = ms.directional_light_to_world(-day.sun_direction)
-            params[SKY_DATA_PARAM] = ms.environment_map_data(
-                np.maximum(day.sky_radiance_w_m2_sr, 1e-6)
+            sky = np.maximum(day.sky_radiance_w_m2_sr, 1e-6)
+            params[SKY_DATA_PARAM] = (
+                ms.portal_sky_data(sky)
+                if self.sky_sampling is SkySampling.PORTAL
+                else ms.environment_map_data(sky)
             )
         params.update()
 
@@ -1589,6 +1614,25 @@ class IndoorFamily(SceneFamily):
 
     def set_frame(self, scene, index: int) -> dict[str, np.ndarray]:
         return self.apply_state(scene, self.state(index))
+
+    has_background = True
+
+    def _background_state(self, index: int, interval_s: float) -> IndoorState:
+        # nobody in the room, the door closed, the frame's lights, and the daylight
+        # of the start of the frame's interval
+        if not interval_s > 0:
+            raise ValueError(f"interval_s = {interval_s!r}: allowed a number > 0 (s)")
+        state = self.state(index)
+        window_start_s = math.floor(state.daylight_time_s / interval_s + 1e-9) * interval_s
+        return IndoorState(lights_on=state.lights_on, daylight_time_s=window_start_s)
+
+    def background_key(self, index: int, interval_s: float) -> str:
+        b = self._background_state(index, interval_s)
+        lights = "".join("1" if on else "0" for on in b.lights_on)
+        return f"lights={lights};daylight_s={b.daylight_time_s:.6g}"
+
+    def set_background(self, scene, index: int, interval_s: float) -> None:
+        self.rig.apply(scene, self._background_state(index, interval_s))
 
     def birdseye_view(self):
         return self.rig.birdseye_view()
