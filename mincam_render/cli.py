@@ -773,6 +773,26 @@ def _render_settings(ctx, param, values):
     help="One render for all detectors, or one per detector (default: by parallax).",
 )
 @click.option(
+    "--differential/--no-differential",
+    default=None,
+    help="Render frames as a converged static background plus what the movers change "
+    "(default: when cheaper at the target error; indoor families only).",
+)
+@click.option(
+    "--background-interval",
+    "background_interval_s",
+    type=click.FloatRange(1e-3, 1e6),
+    default=60.0,
+    show_default=True,
+    help="Scene seconds one static background's daylight stands for (--differential).",
+)
+@click.option(
+    "--background-spp",
+    type=click.IntRange(1, 1 << 20),
+    default=None,
+    help="Samples per texel of the static backgrounds (default: from --target-error).",
+)
+@click.option(
     "--mask-res",
     type=click.IntRange(1, 4096),
     default=None,
@@ -826,6 +846,9 @@ def render_cmd(
     spp,
     max_depth,
     shared_render,
+    differential,
+    background_interval_s,
+    background_spp,
     mask_res,
     dtype,
     target_error,
@@ -864,6 +887,9 @@ def render_cmd(
             spp=spp,
             max_depth=max_depth,
             shared_render=shared_render,
+            differential=differential,
+            background_interval_s=background_interval_s,
+            background_spp=background_spp,
             mask_res=mask_res,
             dtype=dtype,
             target_error=target_error,
@@ -1012,7 +1038,11 @@ def pipeline_cmd(
 
     rows, cols = baseline_grid
     try:
-        fixed = {} if auto_fidelity else {"spp": spp, "max_depth": 0, "shared_render": False}
+        fixed = (
+            {}
+            if auto_fidelity
+            else {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
+        )
         request = RenderRequest(
             family=family, num_frames=frames, seed=seed, overrides={"fps": fps}, **fixed
         )

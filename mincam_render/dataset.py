@@ -45,6 +45,8 @@ FORMAT_NAME = "mincam_render.transport_dataset"
 FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 SHARD_DIR = "shards"
+#: Static backgrounds of differentially rendered datasets (mincam_render.differential).
+BACKGROUND_DIR = "backgrounds"
 LOG_NAME = "render_log.jsonl"
 SPLIT_NAMES = ("train", "val", "test")
 #: Storage types of transport images.

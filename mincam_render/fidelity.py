@@ -71,6 +71,16 @@ SHARED_ERROR_SHARE = 0.5
 FULL_SPP = 64
 #: Rays per side of the grid cast to estimate scene depth.
 DEPTH_GRID = 16
+#: Differential rendering: share of the target error given to the converged
+#: background ``B`` and to the per-frame difference ``X - C`` (in quadrature ~1).
+BACKGROUND_ERROR_SHARE = 0.5
+DIFFERENCE_ERROR_SHARE = 0.85
+#: Cap on the background's spp.
+MAX_BACKGROUND_SPP = 16384
+#: spp of the renders that measure how deep ``X - C`` must go: the change the
+#: movers make to deep bounces is small, so its estimate needs more samples than
+#: the pilot's for its own noise to stay below the bound.
+DIFFERENCE_DEPTH_SPP = 32
 
 
 def _scene_max_depth(scene) -> int | None:
@@ -251,39 +261,92 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
             reason += f", the scene's own depth {scene_depth} by {changes[scene_depth]['rms']:.3g}"
     decisions["max_depth"] = {"value": max_depth, "source": source, "reason": reason, **measured}
 
-    # ---- samples per texel -------------------------------------------------------------
+    # ---- samples per texel (plain estimator) ------------------------------------------
     measured = {"target_error": request.target_error}
+    e_pilot = None
     if request.spp is not None:
         spp, source, reason = request.spp, "flag", "set by --spp"
     elif not auto:
         spp, source, reason = FULL_SPP, "full", f"full fidelity default {FULL_SPP} spp"
     else:
+        source = "auto"
+    if auto:
         a = render(render_cam, spp=PILOT_SPP, max_depth=max_depth, shared=shared)
         b = render(render_cam, spp=PILOT_SPP, seed_offset=1, max_depth=max_depth, shared=shared)
         # the difference of two independent renders has twice the variance of one
         e_pilot = measurement_relative_error(a, b, lo_hi)["rms"] / math.sqrt(2.0)
-        need = PILOT_SPP * (e_pilot / request.target_error) ** 2
-        spp = int(min(MAX_AUTO_SPP, 2 ** max(0, math.ceil(math.log2(max(need, 1.0))))))
-        source = "auto"
         measured.update(
             {
                 "pilot_spp": PILOT_SPP,
                 "pilot_error_rms": e_pilot,
-                "predicted_error_rms": e_pilot * math.sqrt(PILOT_SPP / spp),
             }
         )
+    if source == "auto":
+        spp = _spp_for(e_pilot, request.target_error, MAX_AUTO_SPP)
+        measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
         reason = (
             f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); "
             f"{spp} spp meets target {request.target_error:g}"
-            + (" (capped)" if spp == MAX_AUTO_SPP and need > MAX_AUTO_SPP else "")
+            + (" (capped)" if spp == MAX_AUTO_SPP and e_pilot > request.target_error else "")
         )
-    chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)
-    if source == "auto":
-        ref_spp = min(spp * REFERENCE_SPP_FACTOR, MAX_REFERENCE_SPP)
-        ref = render(render_cam, spp=ref_spp, seed_offset=3, max_depth=max_depth, shared=shared)
-        measured["error_vs_reference"] = measurement_relative_error(chosen, ref, lo_hi)
-        measured["reference_spp"] = ref_spp
     decisions["spp"] = {"value": spp, "source": source, "reason": reason, **measured}
+
+    # ---- differential rendering ----------------------------------------------------------
+    background = None
+    diff = _decide_differential(
+        family,
+        scene,
+        request,
+        render_cam,
+        probes,
+        lo_hi,
+        max_depth,
+        spp,
+        e_pilot,
+        decisions["spp"],
+    )
+    decisions["differential"] = diff
+    if diff["value"]:
+        background = {
+            "interval_s": request.background_interval_s,
+            "spp": diff["background_spp"],
+            "max_depth": max_depth,
+        }
+        for name, value in (("spp", diff["frame_spp"]), ("max_depth", diff["frame_max_depth"])):
+            decisions[name]["plain_value"] = decisions[name]["value"]
+            decisions[name]["value"] = value
+            decisions[name]["reason"] += (
+                f"; differential rendering renders frames with {name} {value} and backgrounds "
+                f"with {decisions[name]['plain_value']} (see 'differential')"
+            )
+        spp, max_depth = diff["frame_spp"], diff["frame_max_depth"]
+
+    # ---- check against a reference -------------------------------------------------------
+    if background is not None:
+        chosen = np.stack(
+            [
+                _differential_probe(
+                    family, scene, render_cam, i, request, background, spp, max_depth, shared, k
+                )
+                for i in probes
+            ]
+        )
+        ref_spp = min(MAX_REFERENCE_SPP, 2 * background["spp"])
+        ref_depth = background["max_depth"]
+    else:
+        chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)
+        ref_spp = min(spp * REFERENCE_SPP_FACTOR, MAX_REFERENCE_SPP)
+        ref_depth = max_depth
+    if auto:
+        ref = render(render_cam, spp=ref_spp, seed_offset=3, max_depth=ref_depth, shared=shared)
+        check = {
+            "error_vs_reference": measurement_relative_error(chosen, ref, lo_hi),
+            "reference_spp": ref_spp,
+        }
+        if e_pilot is not None:
+            # the reference's own Monte Carlo error, part of the figure above
+            check["reference_noise_rms"] = e_pilot * math.sqrt(PILOT_SPP / ref_spp)
+        (diff if background is not None else decisions["spp"]).update(check)
 
     # ---- storage type ------------------------------------------------------------------
     stored, scales = encode_transport(chosen, "float16")
@@ -328,6 +391,180 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         "shared_render": shared,
         "mask_resolution": rows,
         "dtype": dtype,
+        "background": background,
     }
     log.info("fidelity: %s", {k_: v["value"] for k_, v in decisions.items() if isinstance(v, dict)})
     return settings, decisions
+
+
+def _path_segments(depth: int | None) -> int:
+    """Path segments per sample at ``depth`` (None, the scene's: as the deep reference)."""
+    return DEEP_REFERENCE_DEPTH if depth is None else depth
+
+
+def _spp_for(error_at_pilot: float, target: float, cap: int) -> int:
+    """Smallest power of two of spp whose predicted error (1/sqrt(spp)) meets ``target``."""
+    need = PILOT_SPP * (error_at_pilot / target) ** 2
+    return int(min(cap, 2 ** max(0, math.ceil(math.log2(max(need, 1.0))))))
+
+
+def _differential_probe(
+    family, scene, camera, index, request, background, spp, max_depth, shared, k
+):
+    """``B + X - C`` of probe frame ``index`` (as a dataset would store it)."""
+    from .differential import BackgroundSettings, render_background, render_frame
+
+    settings = BackgroundSettings(
+        interval_s=background["interval_s"],
+        spp=background["spp"],
+        max_depth=background["max_depth"] or None,
+    )
+    bg = render_background(
+        family,
+        scene,
+        camera,
+        index,
+        settings,
+        dataset_seed=request.seed,
+        spp=spp,
+        max_depth=max_depth or None,
+    )
+    t, _ = render_frame(family, scene, camera, index, bg, spp=spp, max_depth=max_depth or None)
+    return np.repeat(t, k, axis=0) if shared else t
+
+
+def _decide_differential(
+    family,
+    scene,
+    request,
+    render_cam,
+    probes,
+    lo_hi,
+    max_depth,
+    plain_spp,
+    e_plain,
+    spp_decision,
+) -> dict[str, Any]:
+    """Differential rendering or not, with its frame depth, spp and background spp.
+
+    Measured on the probe frames with common random numbers (``X`` and ``C`` with
+    one seed): the bias of truncating ``X - C`` at each candidate depth against
+    the plain depth, the noise of ``X - C`` from two seeds, and the cost per
+    frame of both estimators from the pilot renders' times (backgrounds
+    amortized over the frames sharing them).
+    """
+    from .render_job import Fidelity, frame_seed
+    from .transport import render_transport
+
+    available = bool(getattr(family, "has_background", False))
+    interval = request.background_interval_s
+    record: dict[str, Any] = {"background_interval_s": interval}
+    if request.differential is not None:
+        if request.differential and not available:
+            raise ValueError(
+                f"family {family.name!r} has no static background: differential rendering "
+                "is unavailable (drop --differential)"
+            )
+        if not request.differential:
+            return {
+                "value": False,
+                "source": "flag",
+                "reason": "set by --no-differential",
+                **record,
+            }
+    elif request.fidelity is not Fidelity.AUTO:
+        return {
+            "value": False,
+            "source": "full",
+            "reason": "full fidelity renders frames whole",
+            **record,
+        }
+    elif not available:
+        return {
+            "value": False,
+            "source": "auto",
+            "reason": f"family {family.name!r} has no static background",
+            **record,
+        }
+
+    keys = {family.background_key(i, interval) for i in range(family.num_frames)}
+    record["backgrounds"] = len(keys)
+    deep = max_depth or None
+
+    def pair(depth, seed_offset, spp=PILOT_SPP):
+        """(X, C) per probe with one seed each (common random numbers)."""
+        xs, cs = [], []
+        for i in probes:
+            seed = (frame_seed(request.seed, i) + 7919 * (seed_offset + 11)) % 2**63
+            family.set_frame(scene, i)
+            xs.append(render_transport(scene, render_cam, spp=spp, seed=seed, max_depth=depth))
+            family.set_background(scene, i, interval)
+            cs.append(render_transport(scene, render_cam, spp=spp, seed=seed, max_depth=depth))
+        return np.stack(xs), np.stack(cs)
+
+    x_ref, c_ref = pair(deep, 0, DIFFERENCE_DEPTH_SPP)
+    d_ref = x_ref - c_ref
+    changes = {}
+    frame_depth = deep
+    candidates = [d for d in CANDIDATE_DEPTHS if deep is None or d < deep]
+    if request.max_depth is None:
+        for depth in candidates:
+            x, c = pair(depth, 0, DIFFERENCE_DEPTH_SPP)
+            changes[depth] = measurement_relative_error(x_ref + (x - c) - d_ref, x_ref, lo_hi)
+            if changes[depth]["rms"] < request.indirect_fraction:
+                frame_depth = depth
+                break
+    x1, c1 = pair(frame_depth, 1)
+    x2, c2 = pair(frame_depth, 2)
+    e_diff = measurement_relative_error(x_ref + x1 - c1, x_ref + x2 - c2, lo_hi)["rms"] / math.sqrt(
+        2.0
+    )
+    frame_spp = (
+        request.spp
+        if request.spp is not None
+        else _spp_for(e_diff, DIFFERENCE_ERROR_SHARE * request.target_error, MAX_AUTO_SPP)
+    )
+    e_bg = e_plain if e_plain is not None else e_diff
+    background_spp = (
+        request.background_spp
+        if request.background_spp is not None
+        else _spp_for(e_bg, BACKGROUND_ERROR_SHARE * request.target_error, MAX_BACKGROUND_SPP)
+    )
+    # cost in traced path segments per texel (samples x path depth): a deterministic
+    # stand-in for time (wall-clock figures would make two plans of one request
+    # differ), slightly unfair to shallow depths, whose paths are never cut short
+    # by Russian roulette
+    depth_frame = _path_segments(frame_depth)
+    depth_deep = _path_segments(deep)
+    per_frame_bg = len(keys) / family.num_frames
+    cost_diff = frame_spp * depth_frame + per_frame_bg * (
+        background_spp * depth_deep + frame_spp * depth_frame
+    )
+    cost_plain = plain_spp * depth_deep
+    record.update(
+        {
+            "frame_max_depth": 0 if frame_depth is None else frame_depth,
+            "frame_spp": frame_spp,
+            "background_spp": background_spp,
+            "difference_change_vs_depth": {str(d): c for d, c in changes.items()},
+            "difference_pilot_error_rms": e_diff,
+            "predicted_error_rms": math.hypot(
+                e_diff * math.sqrt(PILOT_SPP / frame_spp),
+                e_bg * math.sqrt(PILOT_SPP / background_spp),
+            ),
+            "cost_per_texel": cost_diff,
+            "plain_cost_per_texel": cost_plain,
+            "cost_unit": "samples x path depth per texel (backgrounds amortized over frames)",
+        }
+    )
+    if request.differential:
+        value, source, reason = True, "flag", "set by --differential"
+    else:
+        value, source = cost_diff < cost_plain, "auto"
+        reason = (
+            f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp (difference "
+            f"noise {e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) at "
+            f"{background_spp} spp: cost {cost_diff:.4g} vs plain {plain_spp} spp "
+            f"{cost_plain:.4g} (samples x depth per texel)"
+        )
+    return {"value": value, "source": source, "reason": reason, **record}

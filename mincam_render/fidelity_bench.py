@@ -408,7 +408,11 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
         from .fidelity import decide_fidelity
         from .render_job import RenderRequest
 
-        request = RenderRequest(family=family_name, num_frames=family.num_frames, seed=cfg.seed)
+        # the knobs here are those of plain renders; differential rendering
+        # (backgrounds + frames) is measured by benchmarks/bench_render.py
+        request = RenderRequest(
+            family=family_name, num_frames=family.num_frames, seed=cfg.seed, differential=False
+        )
         settings, decisions = decide_fidelity(family, camera, request)
         auto = {"settings": settings, "decisions": decisions}
         # 0 = the scene's integrator

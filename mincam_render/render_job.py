@@ -87,6 +87,11 @@ class RenderRequest:
         dtype_error_bound: largest relative measurement error float16 may add.
         indirect_fraction: drop indirect light when it changes measurements less.
         parallax_fraction: share one render when parallax is below this many texels.
+        differential: render frames as a converged static background plus the
+            change the movers make (:mod:`mincam_render.differential`), or None
+            to decide (families with a static background only).
+        background_interval_s: scene time (s) one background's daylight stands for.
+        background_spp: samples per texel of the backgrounds, or None to decide.
     """
 
     family: str
@@ -105,6 +110,9 @@ class RenderRequest:
     dtype_error_bound: float = 1e-3
     indirect_fraction: float = 0.005
     parallax_fraction: float = 0.25
+    differential: bool | None = None
+    background_interval_s: float = 60.0
+    background_spp: int | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -134,6 +142,12 @@ class RenderRequest:
             not is_int(self.mask_res) or not 1 <= self.mask_res <= 4096
         ):
             raise bad("mask_res", "None or an integer in [1, 4096]")
+        if self.background_spp is not None and (
+            not is_int(self.background_spp) or not 1 <= self.background_spp <= 1 << 20
+        ):
+            raise bad("background_spp", "None or an integer in [1, 2^20]")
+        if self.differential is not None and not isinstance(self.differential, bool):
+            raise bad("differential", "None, True or False")
         if self.dtype is not None and self.dtype not in ds.DTYPES:
             raise bad("dtype", f"None or one of {', '.join(ds.DTYPES)}")
         for name, lo, hi in (
@@ -141,6 +155,7 @@ class RenderRequest:
             ("dtype_error_bound", 1e-9, 1.0),
             ("indirect_fraction", 0.0, 1.0),
             ("parallax_fraction", 0.0, 100.0),
+            ("background_interval_s", 1e-3, 1e6),
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
@@ -260,17 +275,25 @@ def _worker_init(threads: int, progress_queue, parent_pid: int | None) -> None:
     _WORKER["parent"] = parent_pid
 
 
-def render_shard(job: dict, shard: int) -> tuple[int, np.ndarray, dict, float]:
+def render_shard(
+    job: dict, shard: int, backgrounds: dict | None = None
+) -> tuple[int, np.ndarray, dict, float]:
     """Render one shard of a job (in whatever process calls it).
 
     Args:
         job: the ``job`` section of a manifest (family, camera, render settings).
         shard: shard number.
+        backgrounds: for differentially rendered jobs, ``{key: Background}``
+            covering the shard's frames (see :func:`load_backgrounds`).
 
     Returns:
         ``(shard, stored T[frame, detector, row, col], shard metadata, seconds)``.
+
+    Raises:
+        ValueError: a differential job without the shard's backgrounds.
     """
     from .backend import use_variant
+    from .differential import render_frame
     from .transport import render_transport
 
     use_variant()
@@ -294,17 +317,29 @@ def render_shard(job: dict, shard: int) -> tuple[int, np.ndarray, dict, float]:
     for i in range(start, stop):
         if _WORKER["parent"] is not None and os.getppid() != _WORKER["parent"]:
             os._exit(1)  # the render was killed: do not linger as an orphan
-        lab = family.set_frame(scene, i)
-        seed = frame_seed(job["seed"], i)
-        t = render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)
+        background = None
+        if r.get("background") is not None:
+            key = family.background_key(i, r["background"]["interval_s"])
+            background = (backgrounds or {}).get(key)
+            if background is None:
+                raise ValueError(f"frame {i}: background {key!r} was not given to render_shard")
+            t, lab = render_frame(
+                family, scene, render_cam, i, background, spp=r["spp"], max_depth=max_depth
+            )
+            seed = background.seed
+        else:
+            lab = family.set_frame(scene, i)
+            seed = frame_seed(job["seed"], i)
+            t = render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)
         if r["shared_render"]:
             t = np.repeat(t, k, axis=0)
         images.append(t)
         for name in labels:
             labels[name].append(np.asarray(lab[name], dtype=np.float32).reshape(-1).tolist())
-        frames.append(
-            {"index": i, "time_s": family.time_s(i), "seed": seed, "state": family.frame_state(i)}
-        )
+        record = {"index": i, "time_s": family.time_s(i), "seed": seed}
+        if background is not None:
+            record["background"] = background.key
+        frames.append(dict(record, state=family.frame_state(i)))
         if _WORKER["progress"] is not None:
             _WORKER["progress"].put(1)
         if delay:
@@ -329,14 +364,120 @@ def render_shard(job: dict, shard: int) -> tuple[int, np.ndarray, dict, float]:
     return shard, stored, meta, time.perf_counter() - t0
 
 
-def _ray_render_shard(job: dict, shard: int, threads: int):
+def _ray_render_shard(job: dict, shard: int, threads: int, backgrounds: dict | None):
     import drjit as dr
 
     from .backend import use_variant
 
     use_variant()
     dr.set_thread_count(max(1, int(threads)))
-    return render_shard(job, shard)
+    return render_shard(job, shard, backgrounds)
+
+
+# ---- backgrounds (differential rendering) ------------------------------------------------
+
+
+def background_keys(family, job: dict) -> list[str]:
+    """Background key of every frame of a differential job (frame order)."""
+    interval = job["render"]["background"]["interval_s"]
+    return [family.background_key(i, interval) for i in range(job["num_frames"])]
+
+
+def _background_path(out: Path, index: int) -> Path:
+    return out / ds.BACKGROUND_DIR / f"background_{index:05d}.npy"
+
+
+def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> list[int]:
+    """Render (in this process) every background of ``manifest`` that is missing or corrupt.
+
+    Each is written atomically as ``backgrounds/background_NNNNN.npy`` (float32
+    ``[2, detector, row, col]``: converged ``B``, same-seed ``C``) and recorded
+    with its key, seed and sha256 in ``manifest["backgrounds"]``.
+
+    Returns:
+        indices of the backgrounds rendered.
+    """
+    from .differential import BackgroundSettings, render_background
+
+    job = manifest["job"]
+    keys = job["backgrounds"]
+    records = manifest["backgrounds"]
+    todo = []
+    for b, key in enumerate(keys):
+        rec = records[b]
+        if rec is not None:
+            path = out / rec["file"]
+            if path.is_file() and ds.sha256_file(path) == rec["sha256"] and rec["key"] == key:
+                continue
+            log.warning("background %d: missing or not matching its sha256; re-rendering it", b)
+        todo.append(b)
+    if not todo:
+        return []
+    r = job["render"]
+    settings = BackgroundSettings(
+        interval_s=r["background"]["interval_s"],
+        spp=r["background"]["spp"],
+        max_depth=r["background"]["max_depth"] or None,
+    )
+    family = _load_family(job)
+    scene = family.build_scene()
+    _, render_cam = _render_camera(job)
+    first_frame: dict[str, int] = {}
+    for i, key in enumerate(background_keys(family, job)):
+        first_frame.setdefault(key, i)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(todo), unit="background", desc="backgrounds", dynamic_ncols=True)
+    try:
+        for b in todo:
+            bg = render_background(
+                family,
+                scene,
+                render_cam,
+                first_frame[keys[b]],
+                settings,
+                dataset_seed=job["seed"],
+                spp=r["spp"],
+                max_depth=r["max_depth"] or None,
+            )
+            data = ds.npy_bytes(np.stack([bg.converged_w, bg.same_seed_w]).astype("<f4"))
+            path = _background_path(out, b)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            ds.atomic_write_bytes(path, data)
+            records[b] = {
+                "index": b,
+                "key": bg.key,
+                "seed": bg.seed,
+                "file": f"{ds.BACKGROUND_DIR}/{path.name}",
+                "sha256": hashlib.sha256(data).hexdigest(),
+            }
+            ds.write_manifest(out, manifest)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    return todo
+
+
+def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
+    """``{key: Background}`` for ``keys`` from a dataset's background files."""
+    from .differential import Background
+
+    index = {rec["key"]: rec for rec in manifest["backgrounds"] if rec is not None}
+    interval = manifest["job"]["render"]["background"]["interval_s"]
+    out_map = {}
+    for key in set(keys):
+        rec = index.get(key)
+        if rec is None:
+            raise ds.DatasetError(f"{out}: background {key!r} has not been rendered")
+        b, c = np.load(out / rec["file"])
+        out_map[key] = Background(
+            key=key, interval_s=interval, seed=int(rec["seed"]), converged_w=b, same_seed_w=c
+        )
+    return out_map
 
 
 # ---- planning ----------------------------------------------------------------------------
@@ -406,8 +547,14 @@ def plan_render(request: RenderRequest) -> dict:
             "shared_render": settings["shared_render"],
             "mask_resolution": settings["mask_resolution"],
             "dtype": settings["dtype"],
+            "background": settings["background"],
         },
     }
+    backgrounds = None
+    if settings["background"] is not None:
+        keys = background_keys(family, job)
+        job["backgrounds"] = list(dict.fromkeys(keys))
+        backgrounds = [None] * len(job["backgrounds"])
     info = backend.describe()
     return {
         "format": ds.FORMAT_NAME,
@@ -439,6 +586,7 @@ def plan_render(request: RenderRequest) -> dict:
         "variant": info["variant"],
         "versions": package_versions(),
         "shards": [None] * num_shards,
+        "backgrounds": backgrounds,
         "complete": False,
     }
 
@@ -582,6 +730,7 @@ def render_dataset(
         i: min(job["num_frames"], (i + 1) * job["shard_frames"]) - i * job["shard_frames"]
         for i in range(num_shards)
     }
+    backgrounds_of = _shard_backgrounds(out, manifest, progress) if todo else (lambda i: None)
     done_frames = sum(frames_of[i] for i in kept)
     _append_log(
         out,
@@ -636,12 +785,12 @@ def render_dataset(
         if not todo:
             pass
         elif ray_address is not None:
-            _run_ray(ray_address, job, todo, finish, shards_per_worker)
+            _run_ray(ray_address, job, todo, finish, shards_per_worker, backgrounds_of)
         elif workers == 0:
             for i in todo:
-                finish(render_shard(job, i), False)
+                finish(render_shard(job, i, backgrounds_of(i)), False)
         else:
-            _run_processes(job, todo, finish, workers, shards_per_worker, bar)
+            _run_processes(job, todo, finish, workers, shards_per_worker, bar, backgrounds_of)
     finally:
         if bar is not None:
             bar.close()
@@ -669,6 +818,22 @@ def render_dataset(
     )
 
 
+def _shard_backgrounds(out: Path, manifest: dict, progress: bool) -> Callable[[int], dict | None]:
+    """``shard -> {key: Background}`` of its frames (rendering missing backgrounds first)."""
+    job = manifest["job"]
+    if job["render"].get("background") is None:
+        return lambda shard: None
+    ensure_backgrounds(out, manifest, progress=progress)
+    keys = background_keys(_load_family(job), job)
+    loaded = load_backgrounds(out, manifest, keys)
+    size = job["shard_frames"]
+
+    def of(shard: int) -> dict:
+        return {k: loaded[k] for k in set(keys[shard * size : (shard + 1) * size])}
+
+    return of
+
+
 def _run_processes(
     job: dict,
     todo: list[int],
@@ -676,6 +841,7 @@ def _run_processes(
     workers: int,
     shards_per_worker: int,
     bar,
+    backgrounds_of: Callable[[int], dict | None],
 ) -> None:
     import multiprocessing as mp
     from concurrent.futures.process import BrokenProcessPool
@@ -707,7 +873,7 @@ def _run_processes(
         max_tasks_per_child=shards_per_worker,
     )
     try:
-        pending = {executor.submit(render_shard, job, i): i for i in todo}
+        pending = {executor.submit(render_shard, job, i, backgrounds_of(i)): i for i in todo}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
@@ -733,6 +899,7 @@ def _run_ray(
     todo: list[int],
     finish: Callable[[tuple, bool], None],
     shards_per_worker: int,
+    backgrounds_of: Callable[[int], dict | None],
 ) -> None:
     try:
         import ray
@@ -760,7 +927,7 @@ def _run_ray(
         # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
         task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
         job_ref = ray.put(job)
-        pending = [task.remote(job_ref, i, 1) for i in todo]
+        pending = [task.remote(job_ref, i, 1, backgrounds_of(i)) for i in todo]
         log.info("Ray: %d shard tasks on %d CPUs", len(pending), cpus)
         while pending:
             done, pending = ray.wait(pending, num_returns=1)

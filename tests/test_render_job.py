@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import json
 import os
 import signal
@@ -105,7 +106,19 @@ def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
     p = _cli([*CLI_TINY, "--out", str(killed), "--workers", "1"])
     out, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
-    assert _files(killed) == _files(ref)
+    got, want = _files(killed), _files(ref)
+    assert sorted(got) == sorted(want)
+    for name in want:
+        assert got[name] == want[name], f"{name} differs:\n" + "\n".join(
+            difflib.unified_diff(
+                want[name].decode(errors="replace").splitlines(),
+                got[name].decode(errors="replace").splitlines(),
+                "uninterrupted",
+                "resumed",
+                lineterm="",
+                n=2,
+            )
+        )
     after = {
         n: (
             (killed / ds.SHARD_DIR / n).stat().st_ino,

@@ -1,0 +1,155 @@
+r"""Differential rendering: a converged static background plus what the movers change.
+
+Most of an indoor scene does not move: people and a door change a few per cent
+of the light a detector receives, while walls, furniture, lamps and daylight
+stay put. A frame's transport image is estimated as
+
+.. math::
+
+    \hat T(\text{frame}) = B + X(\text{frame}; s) - C(s)
+
+- ``B``: the frame's *background* (its scene with the movers removed, the
+  frame's lights, the daylight of the start of its ``interval_s`` window),
+  rendered once per background at many samples and the full path depth;
+- ``X``: the frame itself, at few samples, path depth ``d`` and seed ``s``;
+- ``C``: the background at the same samples, depth and seed ``s`` as ``X``.
+
+``X`` and ``C`` use common random numbers (same seed, same wavefront): a path
+that never meets a mover is the same path in both, so it cancels exactly, and
+the noise of ``X - C`` comes only from paths that meet a person or the door.
+``E[X - C]`` is the light the movers change, so the estimate is unbiased up to
+the movers' effect on bounces deeper than ``d`` (measured by
+:mod:`mincam_render.fidelity`). This is Debevec's differential rendering (1998)
+with common random numbers instead of a photographed background.
+
+All frames of one background share the seed ``s`` (so ``C`` is rendered once),
+which makes the residual noise of ``X - C`` correlated across those frames;
+each frame is still an unbiased estimate. ``\hat T`` can be slightly negative in
+texels where noise exceeds the light (it is stored as is: clamping would bias).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import FreeformCamera
+
+
+@dataclass(frozen=True)
+class BackgroundSettings:
+    """How backgrounds are rendered (recorded in a dataset's manifest).
+
+    Args:
+        interval_s: scene time (s) a background's daylight stands for.
+        spp: samples per texel of the converged background ``B``.
+        max_depth: path depth of ``B`` (None: the scene's integrator).
+    """
+
+    interval_s: float
+    spp: int
+    max_depth: int | None
+
+    def __post_init__(self) -> None:
+        if not self.interval_s > 0:
+            raise ValueError(f"interval_s = {self.interval_s!r}: allowed a number > 0 (s)")
+        if not 1 <= self.spp <= 1 << 20:
+            raise ValueError(f"spp = {self.spp!r}: allowed an integer in [1, 2^20]")
+
+
+@dataclass(frozen=True)
+class Background:
+    """A rendered background (numpy arrays ``[detector, row, col]``, W).
+
+    Args:
+        key: the family's background key.
+        interval_s: the window the key was made with (s).
+        seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
+        converged_w: ``B``, many samples, full depth.
+        same_seed_w: ``C``, the frames' samples, depth and seed.
+    """
+
+    key: str
+    interval_s: float
+    seed: int
+    converged_w: np.ndarray
+    same_seed_w: np.ndarray
+
+
+def background_seed(dataset_seed: int, key: str) -> int:
+    """Seed ``s`` of a background: a hash of the dataset seed and the key, in [0, 2^63)."""
+    digest = hashlib.sha256(f"{int(dataset_seed)}|{key}".encode()).digest()
+    return int.from_bytes(digest[:8], "little") & (2**63 - 1)
+
+
+def render_background(
+    family,
+    scene,
+    camera: FreeformCamera,
+    index: int,
+    settings: BackgroundSettings,
+    *,
+    dataset_seed: int,
+    spp: int,
+    max_depth: int | None,
+) -> Background:
+    """Render the background of frame ``index`` (``B`` and ``C``); leaves ``scene`` at it.
+
+    Args:
+        family: a family with ``has_background``.
+        scene: the family's scene (Mitsuba), updated in place.
+        camera: the camera rendered.
+        index: any frame of the background.
+        settings: how ``B`` is rendered.
+        dataset_seed: the dataset's seed (``s`` derives from it and the key).
+        spp: the frames' samples per texel (for ``C``).
+        max_depth: the frames' path depth (for ``C``; None: the scene's integrator).
+    """
+    from .transport import render_transport
+
+    key = family.background_key(index, settings.interval_s)
+    seed = background_seed(dataset_seed, key)
+    family.set_background(scene, index, settings.interval_s)
+    converged = render_transport(
+        scene,
+        camera,
+        spp=settings.spp,
+        seed=background_seed(seed, "converged"),
+        max_depth=settings.max_depth,
+    )
+    same_seed = render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
+    return Background(
+        key=key,
+        interval_s=settings.interval_s,
+        seed=seed,
+        converged_w=converged,
+        same_seed_w=same_seed,
+    )
+
+
+def render_frame(
+    family,
+    scene,
+    camera: FreeformCamera,
+    index: int,
+    background: Background,
+    *,
+    spp: int,
+    max_depth: int | None,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """``(B + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
+
+    Raises:
+        ValueError: ``background`` is not frame ``index``'s.
+    """
+    from .transport import render_transport
+
+    key = family.background_key(index, background.interval_s)
+    if key != background.key:
+        raise ValueError(f"frame {index} has background {key!r}, not {background.key!r}")
+    labels = family.set_frame(scene, index)
+    x = render_transport(scene, camera, spp=spp, seed=background.seed, max_depth=max_depth)
+    estimate = background.converged_w.astype(np.float64) + x - background.same_seed_w
+    return estimate.astype(np.float32), labels

@@ -1,0 +1,193 @@
+"""Differential rendering: background keys, exact cancellation, unbiasedness, datasets."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mincam_render import dataset as ds
+from mincam_render.differential import (
+    BackgroundSettings,
+    background_seed,
+    render_background,
+    render_frame,
+)
+from mincam_render.generators import load_family
+from mincam_render.transport import render_transport
+
+#: nobody ever comes and the door stays shut: every frame equals its background
+EMPTY_ROOM = {"arrivals_per_min": 0.0, "burn_in_s": 0.0, "door": {"mean_propped_s": 0.0}}
+
+
+def _small(camera):
+    return dataclasses.replace(camera, mask_resolution=(8, 8))
+
+
+def test_background_keys_follow_daylight_windows_and_lights(variant):
+    """Two frames share a background iff same lights and same daylight window."""
+    fam = load_family("workspace", seed=0, num_frames=600, overrides={"fps": 2.0})
+    interval = 30.0
+    keys = [fam.background_key(i, interval) for i in range(fam.num_frames)]
+    window = np.floor(np.arange(fam.num_frames) / fam.fps / interval)
+    lights = [tuple(row) for row in fam.lights_on]
+    rng = np.random.default_rng(0)
+    pairs = rng.integers(0, fam.num_frames, size=(2000, 2))
+    pairs = np.concatenate([pairs, np.stack([np.arange(599), np.arange(1, 600)], axis=1)])
+    same_key = np.array([keys[i] == keys[j] for i, j in pairs])
+    same_state = np.array([window[i] == window[j] and lights[i] == lights[j] for i, j in pairs])
+    np.testing.assert_array_equal(same_key, same_state)
+    assert same_key.any() and not same_key.all()
+    assert len({lt for lt in lights}) > 1  # the lights do switch in this sequence
+
+
+def test_families_without_background_say_so(variant):
+    fam = load_family("patches", seed=0, num_frames=4)
+    assert not fam.has_background
+    with pytest.raises(NotImplementedError, match="no static background"):
+        fam.background_key(0, 60.0)
+
+
+def test_background_seed_is_a_pure_function_of_seed_and_key():
+    assert background_seed(3, "a") == background_seed(3, "a")
+    assert len({background_seed(3, "a"), background_seed(4, "a"), background_seed(3, "b")}) == 3
+    assert 0 <= background_seed(2**62, "x") < 2**63
+
+
+def test_frames_without_movers_cancel_exactly(variant):
+    """Common random numbers: X and C are the same paths, so B + X - C == B bit for bit."""
+    fam = load_family("workspace", seed=0, num_frames=4, overrides=EMPTY_ROOM)
+    assert fam.track.active[0].sum() == 0 and fam.track.door_angle_rad[0] == 0.0
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    settings = BackgroundSettings(interval_s=60.0, spp=16, max_depth=6)
+    bg = render_background(fam, scene, cam, 0, settings, dataset_seed=1, spp=4, max_depth=3)
+    t, _ = render_frame(fam, scene, cam, 0, bg, spp=4, max_depth=3)
+    np.testing.assert_array_equal(t, bg.converged_w)
+
+
+def test_render_frame_refuses_another_frames_background(variant):
+    fam = load_family("workspace", seed=0, num_frames=200, overrides={"fps": 2.0})
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    settings = BackgroundSettings(interval_s=30.0, spp=1, max_depth=2)
+    bg = render_background(fam, scene, cam, 0, settings, dataset_seed=0, spp=1, max_depth=2)
+    with pytest.raises(ValueError, match="has background"):
+        render_frame(fam, scene, cam, 100, bg, spp=1, max_depth=2)
+
+
+def test_estimate_is_unbiased_and_less_noisy_than_plain(variant):
+    """Mean of B + X - C over seeds matches a plain reference; its noise is lower at equal spp."""
+    fam = load_family("workspace", seed=0, num_frames=600)
+    index = int(np.flatnonzero(fam.track.active.sum(axis=1) >= 2)[0])
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    lo_hi = cam.transmittance_range
+    depth, spp, big = 8, 16, 4096
+    settings = BackgroundSettings(interval_s=60.0, spp=big, max_depth=depth)
+    bg0 = render_background(
+        fam, scene, cam, index, settings, dataset_seed=0, spp=spp, max_depth=depth
+    )
+    diffs, plains = [], []
+    for s in range(6):
+        # a fresh seed s for X and C, the same converged B
+        seed = background_seed(s, bg0.key)
+        fam.set_background(scene, index, settings.interval_s)
+        same = render_transport(scene, cam, spp=spp, seed=seed, max_depth=depth)
+        bg = dataclasses.replace(bg0, seed=seed, same_seed_w=same)
+        diffs.append(render_frame(fam, scene, cam, index, bg, spp=spp, max_depth=depth)[0])
+        fam.set_frame(scene, index)
+        plains.append(render_transport(scene, cam, spp=spp, seed=100 + s, max_depth=depth))
+    ref = render_transport(scene, cam, spp=big, seed=999, max_depth=depth)
+    diffs, plains = np.stack(diffs), np.stack(plains)
+    # one estimate's relative noise (the difference of two has sqrt(2) times more)
+    noise_diff = ds.measurement_relative_error(diffs[:3], diffs[3:], lo_hi)["rms"] / np.sqrt(2)
+    noise_plain = ds.measurement_relative_error(plains[:3], plains[3:], lo_hi)["rms"] / np.sqrt(2)
+    assert noise_diff < 0.6 * noise_plain
+    # the mean of 6 estimates shares one B; B and the reference each carry the
+    # plain noise at 4096 spp: 3 sigma of that combination
+    err = ds.measurement_relative_error(diffs.mean(0)[None], ref[None], lo_hi)["rms"]
+    sigma = np.sqrt(noise_diff**2 / 6 + 2 * noise_plain**2 * spp / big)
+    assert err < 3 * sigma
+
+
+@pytest.fixture(scope="module")
+def differential_dataset(tmp_path_factory, variant):
+    from mincam_render.render_job import RenderRequest, render_dataset
+
+    out = tmp_path_factory.mktemp("diff") / "ds"
+    request = RenderRequest(
+        family="workspace",
+        num_frames=24,
+        shard_frames=8,
+        overrides={"fps": 1.0, "camera": {"mask_resolution": 8, "detectors": 2}},
+        spp=2,
+        max_depth=3,
+        shared_render=False,
+        dtype="float32",
+        differential=True,
+        background_interval_s=10.0,
+        background_spp=8,
+    )
+    render_dataset(request, out, workers=0)
+    return request, out
+
+
+def test_differential_dataset_records_backgrounds(differential_dataset):
+    import json
+
+    request, out = differential_dataset
+    manifest = ds.read_manifest(out)
+    job = manifest["job"]
+    assert job["render"]["background"] == {"interval_s": 10.0, "spp": 8, "max_depth": 3}
+    fam = load_family("workspace", seed=0, num_frames=24, overrides=request.overrides)
+    keys = [fam.background_key(i, 10.0) for i in range(24)]
+    assert job["backgrounds"] == list(dict.fromkeys(keys))  # first-seen order
+    assert len(job["backgrounds"]) >= 3  # 24 s at 1 fps in 10 s windows, plus light switches
+    seeds = {}
+    for rec in manifest["backgrounds"]:
+        assert ds.sha256_file(out / rec["file"]) == rec["sha256"]
+        assert np.load(out / rec["file"]).shape == (2, 2, 8, 8)
+        seeds[rec["key"]] = rec["seed"]
+    for shard in manifest["shards"]:
+        for frame in json.loads((out / shard["metadata"]).read_text())["frames"]:
+            assert frame["background"] == keys[frame["index"]]
+            assert frame["seed"] == seeds[frame["background"]]
+    assert manifest["fidelity"]["differential"]["value"] is True
+
+
+def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_dataset, tmp_path):
+    import shutil
+
+    from mincam_render.render_job import render_dataset
+
+    request, out = differential_dataset
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    manifest = ds.read_manifest(copy)
+    bg_file = copy / manifest["backgrounds"][1]["file"]
+    bg_file.write_bytes(bg_file.read_bytes()[:-16])  # truncated
+    for rec in manifest["shards"][1:]:
+        (copy / rec["transport"]).unlink()
+        (copy / rec["metadata"]).unlink()
+    summary = render_dataset(request, copy, workers=1)
+    assert summary.shards_rendered == [1, 2]
+    for name in ("transport", "metadata"):
+        for rec in ds.read_manifest(out)["shards"]:
+            assert (copy / rec[name]).read_bytes() == (out / rec[name]).read_bytes()
+    assert bg_file.read_bytes() == (out / bg_file.relative_to(copy)).read_bytes()
+
+
+def test_differential_is_refused_for_families_without_background(tmp_path, variant):
+    from mincam_render.render_job import RenderRequest, render_dataset
+
+    request = RenderRequest(
+        family="patches",
+        num_frames=4,
+        spp=1,
+        max_depth=2,
+        shared_render=False,
+        dtype="float32",
+        differential=True,
+        overrides={"camera": {"mask_resolution": 4}},
+    )
+    with pytest.raises(ValueError, match="no static background"):
+        render_dataset(request, tmp_path / "ds", workers=0)
