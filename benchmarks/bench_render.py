@@ -72,10 +72,7 @@ def render_backgrounds(job: dict, render_cam, frames: int) -> tuple[dict | None,
     """Backgrounds of the first ``frames`` frames of a differential job, and seconds per background."""
     if job["render"].get("background") is None:
         return None, 0.0
-    b = job["render"]["background"]
-    settings = BackgroundSettings(
-        interval_s=b["interval_s"], spp=b["spp"], max_depth=b["max_depth"] or None
-    )
+    settings = BackgroundSettings.from_dict(job["render"]["background"])
     family = _load_family(job)
     scene = family.build_scene()
     keys = background_keys(family, job)

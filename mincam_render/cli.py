@@ -787,6 +787,12 @@ def _render_settings(ctx, param, values):
     help="Scene seconds one static background's daylight stands for (--differential).",
 )
 @click.option(
+    "--shared-difference/--per-detector-difference",
+    default=None,
+    help="With --differential: render the movers' change once from the board centre "
+    "for all detectors (default: when its parallax error is below a share of the target).",
+)
+@click.option(
     "--background-spp",
     type=click.IntRange(1, 1 << 20),
     default=None,
@@ -849,6 +855,7 @@ def render_cmd(
     differential,
     background_interval_s,
     background_spp,
+    shared_difference,
     mask_res,
     dtype,
     target_error,
@@ -890,6 +897,7 @@ def render_cmd(
             differential=differential,
             background_interval_s=background_interval_s,
             background_spp=background_spp,
+            shared_difference=shared_difference,
             mask_res=mask_res,
             dtype=dtype,
             target_error=target_error,

@@ -22,6 +22,11 @@ the movers' effect on bounces deeper than ``d`` (measured by
 :mod:`mincam_render.fidelity`). This is Debevec's differential rendering (1998)
 with common random numbers instead of a photographed background.
 
+With several detectors, ``X - C`` can be rendered once from the board centre
+and added to every detector's own ``B`` (``shared_difference``): parallax then
+acts on the movers' change only, a few per cent of the light, while ``B`` keeps
+each detector's exact view; the fidelity module measures the error this adds.
+
 All frames of one background share the seed ``s`` (so ``C`` is rendered once),
 which makes the residual noise of ``X - C`` correlated across those frames;
 each frame is still an unbiased estimate. ``\hat T`` can be slightly negative in
@@ -46,11 +51,24 @@ class BackgroundSettings:
         interval_s: scene time (s) a background's daylight stands for.
         spp: samples per texel of the converged background ``B``.
         max_depth: path depth of ``B`` (None: the scene's integrator).
+        shared_difference: render ``X`` and ``C`` once, from the board centre,
+            for all detectors (``B`` stays per detector).
     """
 
     interval_s: float
     spp: int
     max_depth: int | None
+    shared_difference: bool = False
+
+    @classmethod
+    def from_dict(cls, d: dict) -> BackgroundSettings:
+        """From a manifest's ``job.render.background`` (``max_depth`` 0: the scene's)."""
+        return cls(
+            interval_s=float(d["interval_s"]),
+            spp=int(d["spp"]),
+            max_depth=int(d["max_depth"]) or None,
+            shared_difference=bool(d.get("shared_difference", False)),
+        )
 
     def __post_init__(self) -> None:
         if not self.interval_s > 0:
@@ -67,8 +85,10 @@ class Background:
         key: the family's background key.
         interval_s: the window the key was made with (s).
         seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
-        converged_w: ``B``, many samples, full depth.
-        same_seed_w: ``C``, the frames' samples, depth and seed.
+        converged_w: ``B``, many samples, full depth, ``[detector, row, col]``.
+        same_seed_w: ``C``, the frames' samples, depth and seed; ``[1, row, col]``
+            (board centre) when ``shared_difference``.
+        shared_difference: whether frames render ``X`` from the board centre.
     """
 
     key: str
@@ -76,6 +96,18 @@ class Background:
     seed: int
     converged_w: np.ndarray
     same_seed_w: np.ndarray
+    shared_difference: bool = False
+
+
+def difference_camera(camera: FreeformCamera, shared: bool) -> FreeformCamera:
+    """The camera ``X`` and ``C`` are rendered with: one detector at the board centre if shared."""
+    from dataclasses import replace
+
+    from .camera import DetectorLayout
+
+    if not shared:
+        return camera
+    return replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
 
 
 def background_seed(dataset_seed: int, key: str) -> int:
@@ -100,7 +132,7 @@ def render_background(
     Args:
         family: a family with ``has_background``.
         scene: the family's scene (Mitsuba), updated in place.
-        camera: the camera rendered.
+        camera: the dataset's camera (``B`` is rendered per detector).
         index: any frame of the background.
         settings: how ``B`` is rendered.
         dataset_seed: the dataset's seed (``s`` derives from it and the key).
@@ -119,13 +151,20 @@ def render_background(
         seed=background_seed(seed, "converged"),
         max_depth=settings.max_depth,
     )
-    same_seed = render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
+    same_seed = render_transport(
+        scene,
+        difference_camera(camera, settings.shared_difference),
+        spp=spp,
+        seed=seed,
+        max_depth=max_depth,
+    )
     return Background(
         key=key,
         interval_s=settings.interval_s,
         seed=seed,
         converged_w=converged,
         same_seed_w=same_seed,
+        shared_difference=settings.shared_difference,
     )
 
 
@@ -150,6 +189,13 @@ def render_frame(
     if key != background.key:
         raise ValueError(f"frame {index} has background {key!r}, not {background.key!r}")
     labels = family.set_frame(scene, index)
-    x = render_transport(scene, camera, spp=spp, seed=background.seed, max_depth=max_depth)
+    x = render_transport(
+        scene,
+        difference_camera(camera, background.shared_difference),
+        spp=spp,
+        seed=background.seed,
+        max_depth=max_depth,
+    )
+    # [1, R, C] differences broadcast over the detectors' own backgrounds
     estimate = background.converged_w.astype(np.float64) + x - background.same_seed_w
     return estimate.astype(np.float32), labels

@@ -81,6 +81,9 @@ MAX_BACKGROUND_SPP = 16384
 #: movers make to deep bounces is small, so its estimate needs more samples than
 #: the pilot's for its own noise to stay below the bound.
 DIFFERENCE_DEPTH_SPP = 32
+#: spp of the renders that measure the parallax error of one ``X - C`` for all
+#: detectors (a difference of noise levels: it needs noise well below the bound).
+SHARED_DIFFERENCE_SPP = 128
 
 
 def _scene_max_depth(scene) -> int | None:
@@ -303,7 +306,6 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         max_depth,
         spp,
         e_pilot,
-        decisions["spp"],
     )
     decisions["differential"] = diff
     if diff["value"]:
@@ -311,6 +313,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
             "interval_s": request.background_interval_s,
             "spp": diff["background_spp"],
             "max_depth": max_depth,
+            "shared_difference": diff.get("shared_difference", {}).get("value", False),
         }
         for name, value in (("spp", diff["frame_spp"]), ("max_depth", diff["frame_max_depth"])):
             decisions[name]["plain_value"] = decisions[name]["value"]
@@ -414,11 +417,7 @@ def _differential_probe(
     """``B + X - C`` of probe frame ``index`` (as a dataset would store it)."""
     from .differential import BackgroundSettings, render_background, render_frame
 
-    settings = BackgroundSettings(
-        interval_s=background["interval_s"],
-        spp=background["spp"],
-        max_depth=background["max_depth"] or None,
-    )
+    settings = BackgroundSettings.from_dict(background)
     bg = render_background(
         family,
         scene,
@@ -443,7 +442,6 @@ def _decide_differential(
     max_depth,
     plain_spp,
     e_plain,
-    spp_decision,
 ) -> dict[str, Any]:
     """Differential rendering or not, with its frame depth, spp and background spp.
 
@@ -453,6 +451,7 @@ def _decide_differential(
     frame of both estimators from the pilot renders' times (backgrounds
     amortized over the frames sharing them).
     """
+    from .differential import difference_camera
     from .render_job import Fidelity, frame_seed
     from .transport import render_transport
 
@@ -491,15 +490,15 @@ def _decide_differential(
     record["backgrounds"] = len(keys)
     deep = max_depth or None
 
-    def pair(depth, seed_offset, spp=PILOT_SPP):
+    def pair(depth, seed_offset, spp, camera=render_cam):
         """(X, C) per probe with one seed each (common random numbers)."""
         xs, cs = [], []
         for i in probes:
             seed = (frame_seed(request.seed, i) + 7919 * (seed_offset + 11)) % 2**63
             family.set_frame(scene, i)
-            xs.append(render_transport(scene, render_cam, spp=spp, seed=seed, max_depth=depth))
+            xs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
             family.set_background(scene, i, interval)
-            cs.append(render_transport(scene, render_cam, spp=spp, seed=seed, max_depth=depth))
+            cs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
         return np.stack(xs), np.stack(cs)
 
     x_ref, c_ref = pair(deep, 0, DIFFERENCE_DEPTH_SPP)
@@ -514,8 +513,37 @@ def _decide_differential(
             if changes[depth]["rms"] < request.indirect_fraction:
                 frame_depth = depth
                 break
-    x1, c1 = pair(frame_depth, 1)
-    x2, c2 = pair(frame_depth, 2)
+    # one render of X - C from the board centre for all detectors? Its parallax
+    # error p is measured against the noise of independent seeds:
+    # e_shared^2 ~ noise^2 + p^2 and e_noise^2 ~ noise^2 (same spp, independent seeds)
+    k = render_cam.num_detectors
+    centre_cam = difference_camera(render_cam, True)
+    shared_difference = False
+    if k > 1 and request.shared_difference is not None:
+        shared_difference = request.shared_difference
+        record["shared_difference"] = {"value": shared_difference, "source": "flag"}
+    elif k > 1:
+        xa, ca = pair(frame_depth, 3, SHARED_DIFFERENCE_SPP)
+        xb, cb = pair(frame_depth, 4, SHARED_DIFFERENCE_SPP)
+        xc, cc = pair(frame_depth, 5, SHARED_DIFFERENCE_SPP, centre_cam)
+        e_shared = measurement_relative_error(xa + (xc - cc) - (xa - ca), xa, lo_hi)["rms"]
+        e_noise = measurement_relative_error(xa + (xb - cb) - (xa - ca), xa, lo_hi)["rms"]
+        parallax_error = math.sqrt(max(e_shared**2 - e_noise**2, 0.0))
+        bound = SHARED_ERROR_SHARE * request.target_error
+        shared_difference = parallax_error < bound
+        record["shared_difference"] = {
+            "value": shared_difference,
+            "source": "auto",
+            "parallax_error_rms": parallax_error,
+            "shared_vs_per_detector_rms": e_shared,
+            "two_seeds_rms": e_noise,
+            "probe_spp": SHARED_DIFFERENCE_SPP,
+            "bound": bound,
+        }
+    diff_cam = centre_cam if shared_difference else render_cam
+    x1, c1 = pair(frame_depth, 1, PILOT_SPP, diff_cam)
+    x2, c2 = pair(frame_depth, 2, PILOT_SPP, diff_cam)
+    # [N, 1, R, C] differences broadcast over the detectors when shared
     e_diff = measurement_relative_error(x_ref + x1 - c1, x_ref + x2 - c2, lo_hi)["rms"] / math.sqrt(
         2.0
     )
@@ -530,17 +558,14 @@ def _decide_differential(
         if request.background_spp is not None
         else _spp_for(e_bg, BACKGROUND_ERROR_SHARE * request.target_error, MAX_BACKGROUND_SPP)
     )
-    # cost in traced path segments per texel (samples x path depth): a deterministic
-    # stand-in for time (wall-clock figures would make two plans of one request
-    # differ), slightly unfair to shallow depths, whose paths are never cut short
-    # by Russian roulette
-    depth_frame = _path_segments(frame_depth)
-    depth_deep = _path_segments(deep)
-    per_frame_bg = len(keys) / family.num_frames
-    cost_diff = frame_spp * depth_frame + per_frame_bg * (
-        background_spp * depth_deep + frame_spp * depth_frame
-    )
-    cost_plain = plain_spp * depth_deep
+    # cost in traced path segments per frame (samples x path depth x detectors
+    # rendered): a deterministic stand-in for time (wall-clock figures would make
+    # two plans of one request differ), slightly unfair to shallow depths, whose
+    # paths are never cut short by Russian roulette
+    frame_cost = frame_spp * _path_segments(frame_depth) * diff_cam.num_detectors
+    background_cost = background_spp * _path_segments(deep) * k + frame_cost
+    cost_diff = frame_cost + len(keys) / family.num_frames * background_cost
+    cost_plain = plain_spp * _path_segments(deep) * k
     record.update(
         {
             "frame_max_depth": 0 if frame_depth is None else frame_depth,
@@ -552,9 +577,9 @@ def _decide_differential(
                 e_diff * math.sqrt(PILOT_SPP / frame_spp),
                 e_bg * math.sqrt(PILOT_SPP / background_spp),
             ),
-            "cost_per_texel": cost_diff,
-            "plain_cost_per_texel": cost_plain,
-            "cost_unit": "samples x path depth per texel (backgrounds amortized over frames)",
+            "cost_per_frame": cost_diff,
+            "plain_cost_per_frame": cost_plain,
+            "cost_unit": "samples x path depth x detectors per texel, backgrounds amortized",
         }
     )
     if request.differential:
@@ -562,9 +587,10 @@ def _decide_differential(
     else:
         value, source = cost_diff < cost_plain, "auto"
         reason = (
-            f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp (difference "
-            f"noise {e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) at "
+            f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp"
+            f"{' from the board centre' if shared_difference else ''} (difference noise "
+            f"{e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) at "
             f"{background_spp} spp: cost {cost_diff:.4g} vs plain {plain_spp} spp "
-            f"{cost_plain:.4g} (samples x depth per texel)"
+            f"{cost_plain:.4g} (samples x depth x detectors per texel)"
         )
     return {"value": value, "source": source, "reason": reason, **record}

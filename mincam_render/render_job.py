@@ -92,6 +92,8 @@ class RenderRequest:
             to decide (families with a static background only).
         background_interval_s: scene time (s) one background's daylight stands for.
         background_spp: samples per texel of the backgrounds, or None to decide.
+        shared_difference: render the movers' change once from the board centre
+            for all detectors, or None to decide (differential rendering).
     """
 
     family: str
@@ -113,6 +115,7 @@ class RenderRequest:
     differential: bool | None = None
     background_interval_s: float = 60.0
     background_spp: int | None = None
+    shared_difference: bool | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -146,8 +149,9 @@ class RenderRequest:
             not is_int(self.background_spp) or not 1 <= self.background_spp <= 1 << 20
         ):
             raise bad("background_spp", "None or an integer in [1, 2^20]")
-        if self.differential is not None and not isinstance(self.differential, bool):
-            raise bad("differential", "None, True or False")
+        for name in ("differential", "shared_difference"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
+                raise bad(name, "None, True or False")
         if self.dtype is not None and self.dtype not in ds.DTYPES:
             raise bad("dtype", f"None or one of {', '.join(ds.DTYPES)}")
         for name, lo, hi in (
@@ -383,16 +387,21 @@ def background_keys(family, job: dict) -> list[str]:
     return [family.background_key(i, interval) for i in range(job["num_frames"])]
 
 
-def _background_path(out: Path, index: int) -> Path:
-    return out / ds.BACKGROUND_DIR / f"background_{index:05d}.npy"
+#: The two arrays of a background file pair: B and C (see mincam_render.differential).
+_BACKGROUND_PARTS = ("converged", "same_seed")
+
+
+def _background_path(out: Path, index: int, part: str) -> Path:
+    return out / ds.BACKGROUND_DIR / f"background-{index:05d}-{part}.npy"
 
 
 def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> list[int]:
     """Render (in this process) every background of ``manifest`` that is missing or corrupt.
 
-    Each is written atomically as ``backgrounds/background_NNNNN.npy`` (float32
-    ``[2, detector, row, col]``: converged ``B``, same-seed ``C``) and recorded
-    with its key, seed and sha256 in ``manifest["backgrounds"]``.
+    Each is written atomically as ``backgrounds/background-NNNNN-converged.npy``
+    (``B``) and ``...-same_seed.npy`` (``C``), float32 ``[detector, row, col]``,
+    and recorded with its key, seed and the files' sha256 in
+    ``manifest["backgrounds"]``.
 
     Returns:
         indices of the backgrounds rendered.
@@ -406,19 +415,19 @@ def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> 
     for b, key in enumerate(keys):
         rec = records[b]
         if rec is not None:
-            path = out / rec["file"]
-            if path.is_file() and ds.sha256_file(path) == rec["sha256"] and rec["key"] == key:
+            intact = rec["key"] == key and all(
+                (out / rec[part]).is_file()
+                and ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
+                for part in _BACKGROUND_PARTS
+            )
+            if intact:
                 continue
             log.warning("background %d: missing or not matching its sha256; re-rendering it", b)
         todo.append(b)
     if not todo:
         return []
     r = job["render"]
-    settings = BackgroundSettings(
-        interval_s=r["background"]["interval_s"],
-        spp=r["background"]["spp"],
-        max_depth=r["background"]["max_depth"] or None,
-    )
+    settings = BackgroundSettings.from_dict(r["background"])
     family = _load_family(job)
     scene = family.build_scene()
     _, render_cam = _render_camera(job)
@@ -442,17 +451,17 @@ def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> 
                 spp=r["spp"],
                 max_depth=r["max_depth"] or None,
             )
-            data = ds.npy_bytes(np.stack([bg.converged_w, bg.same_seed_w]).astype("<f4"))
-            path = _background_path(out, b)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            ds.atomic_write_bytes(path, data)
-            records[b] = {
-                "index": b,
-                "key": bg.key,
-                "seed": bg.seed,
-                "file": f"{ds.BACKGROUND_DIR}/{path.name}",
-                "sha256": hashlib.sha256(data).hexdigest(),
-            }
+            record = {"index": b, "key": bg.key, "seed": bg.seed}
+            for part, array in zip(
+                _BACKGROUND_PARTS, (bg.converged_w, bg.same_seed_w), strict=True
+            ):
+                data = ds.npy_bytes(np.asarray(array, dtype="<f4"))
+                path = _background_path(out, b, part)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                ds.atomic_write_bytes(path, data)
+                record[part] = f"{ds.BACKGROUND_DIR}/{path.name}"
+                record[f"{part}_sha256"] = hashlib.sha256(data).hexdigest()
+            records[b] = record
             ds.write_manifest(out, manifest)
             if bar is not None:
                 bar.update(1)
@@ -464,18 +473,23 @@ def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> 
 
 def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
     """``{key: Background}`` for ``keys`` from a dataset's background files."""
-    from .differential import Background
+    from .differential import Background, BackgroundSettings
 
     index = {rec["key"]: rec for rec in manifest["backgrounds"] if rec is not None}
-    interval = manifest["job"]["render"]["background"]["interval_s"]
+    settings = BackgroundSettings.from_dict(manifest["job"]["render"]["background"])
     out_map = {}
     for key in set(keys):
         rec = index.get(key)
         if rec is None:
             raise ds.DatasetError(f"{out}: background {key!r} has not been rendered")
-        b, c = np.load(out / rec["file"])
+        b, c = (np.load(out / rec[part]) for part in _BACKGROUND_PARTS)
         out_map[key] = Background(
-            key=key, interval_s=interval, seed=int(rec["seed"]), converged_w=b, same_seed_w=c
+            key=key,
+            interval_s=settings.interval_s,
+            seed=int(rec["seed"]),
+            converged_w=b,
+            same_seed_w=c,
+            shared_difference=settings.shared_difference,
         )
     return out_map
 

@@ -66,6 +66,28 @@ def test_frames_without_movers_cancel_exactly(variant):
     np.testing.assert_array_equal(t, bg.converged_w)
 
 
+@pytest.mark.parametrize("shared", [False, True])
+def test_frame_is_background_plus_difference_per_detector_or_shared(variant, shared):
+    """T_k = B_k + X - C, with X and C from the board centre for every k when shared."""
+    from mincam_render.differential import difference_camera
+
+    fam = load_family("workspace", seed=0, num_frames=600)
+    index = int(np.flatnonzero(fam.track.active.sum(axis=1) >= 2)[0])
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    settings = BackgroundSettings(interval_s=60.0, spp=8, max_depth=3, shared_difference=shared)
+    bg = render_background(fam, scene, cam, index, settings, dataset_seed=0, spp=2, max_depth=3)
+    t, _ = render_frame(fam, scene, cam, index, bg, spp=2, max_depth=3)
+    diff_cam = difference_camera(cam, shared)
+    assert bg.converged_w.shape == (cam.num_detectors, 8, 8)
+    assert bg.same_seed_w.shape == (diff_cam.num_detectors, 8, 8)
+    fam.set_frame(scene, index)
+    x = render_transport(scene, diff_cam, spp=2, seed=bg.seed, max_depth=3)
+    expected = bg.converged_w.astype(np.float64) + x - bg.same_seed_w
+    np.testing.assert_allclose(t, expected.astype(np.float32), rtol=1e-6, atol=0)
+    assert t.shape == (cam.num_detectors, 8, 8)
+    assert np.any(x != bg.same_seed_w)  # the people do change the light
+
+
 def test_render_frame_refuses_another_frames_background(variant):
     fam = load_family("workspace", seed=0, num_frames=200, overrides={"fps": 2.0})
     scene, cam = fam.build_scene(), _small(fam.camera())
@@ -126,6 +148,7 @@ def differential_dataset(tmp_path_factory, variant):
         differential=True,
         background_interval_s=10.0,
         background_spp=8,
+        shared_difference=True,
     )
     render_dataset(request, out, workers=0)
     return request, out
@@ -137,15 +160,23 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
     request, out = differential_dataset
     manifest = ds.read_manifest(out)
     job = manifest["job"]
-    assert job["render"]["background"] == {"interval_s": 10.0, "spp": 8, "max_depth": 3}
+    assert job["render"]["background"] == {
+        "interval_s": 10.0,
+        "spp": 8,
+        "max_depth": 3,
+        "shared_difference": True,
+    }
     fam = load_family("workspace", seed=0, num_frames=24, overrides=request.overrides)
     keys = [fam.background_key(i, 10.0) for i in range(24)]
     assert job["backgrounds"] == list(dict.fromkeys(keys))  # first-seen order
     assert len(job["backgrounds"]) >= 3  # 24 s at 1 fps in 10 s windows, plus light switches
     seeds = {}
     for rec in manifest["backgrounds"]:
-        assert ds.sha256_file(out / rec["file"]) == rec["sha256"]
-        assert np.load(out / rec["file"]).shape == (2, 2, 8, 8)
+        for part in ("converged", "same_seed"):
+            assert ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
+        # B per detector; C (and every X) once from the board centre
+        assert np.load(out / rec["converged"]).shape == (2, 8, 8)
+        assert np.load(out / rec["same_seed"]).shape == (1, 8, 8)
         seeds[rec["key"]] = rec["seed"]
     for shard in manifest["shards"]:
         for frame in json.loads((out / shard["metadata"]).read_text())["frames"]:
@@ -163,7 +194,7 @@ def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     manifest = ds.read_manifest(copy)
-    bg_file = copy / manifest["backgrounds"][1]["file"]
+    bg_file = copy / manifest["backgrounds"][1]["converged"]
     bg_file.write_bytes(bg_file.read_bytes()[:-16])  # truncated
     for rec in manifest["shards"][1:]:
         (copy / rec["transport"]).unlink()
@@ -191,3 +222,27 @@ def test_differential_is_refused_for_families_without_background(tmp_path, varia
     )
     with pytest.raises(ValueError, match="no static background"):
         render_dataset(request, tmp_path / "ds", workers=0)
+
+
+def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
+    from mincam_render.fidelity import decide_fidelity
+    from mincam_render.render_job import RenderRequest
+
+    overrides = {"fps": 2.0, "camera": {"mask_resolution": 8, "detectors": 2}}
+    request = RenderRequest(family="workspace", num_frames=600, overrides=overrides)
+    fam = load_family("workspace", seed=0, num_frames=600, overrides=overrides)
+    settings, decisions = decide_fidelity(fam, fam.camera(), request)
+    d = decisions["differential"]
+    assert d["source"] == "auto"
+    assert d["backgrounds"] == len({fam.background_key(i, 60.0) for i in range(600)})
+    assert d["value"] == (d["cost_per_frame"] < d["plain_cost_per_frame"])
+    if not settings["shared_render"]:
+        sd = d["shared_difference"]
+        assert sd["value"] == (sd["parallax_error_rms"] < sd["bound"])
+    if d["value"]:
+        assert settings["background"]["spp"] == d["background_spp"]
+        assert settings["spp"] == d["frame_spp"] == decisions["spp"]["value"]
+        assert settings["max_depth"] == d["frame_max_depth"]
+        assert "error_vs_reference" in d
+    else:
+        assert settings["background"] is None
