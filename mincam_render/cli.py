@@ -592,6 +592,7 @@ def prune_cmd(
       mincam-render prune --family patches --frames 300 --steps 100 \\
           --run runs/patches4 --out runs/patches4_prune
     """
+    from .models import CountLoss
     from .train import build_mincam, greedy_prune, load_run, write_sweep
 
     try:
@@ -600,8 +601,13 @@ def prune_cmd(
         if run["model"]["kind"] != "mincam":
             raise ValueError(f"{run_dir}: only minimalist-camera runs can be pruned")
         train, val, test = _splits(dataset, family, frames, spp, seed)
+        # the run's own count loss (its description lists count_classes when classified)
+        loss = CountLoss.CROSS_ENTROPY if "count_classes" in run["model"] else CountLoss.MSE
         model = build_mincam(
-            train, detectors=run["model"]["detectors"], sensor_model=run["model"]["sensor_model"]
+            train,
+            detectors=run["model"]["detectors"],
+            sensor_model=run["model"]["sensor_model"],
+            count_loss=loss,
         )
         model.load_state_dict(state)
         records = greedy_prune(model, train, val, test, config, progress=True)

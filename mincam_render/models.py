@@ -27,11 +27,16 @@ rate suits every task; :meth:`Head.predict` returns physical values.
 
 Losses per :class:`~mincam_render.generators.base.LabelKind`: mean squared
 error for COUNT and REGRESSION (in standardised units), binary cross-entropy
-with logits per element for BINARY; the total is their sum.
+with logits per element for BINARY; the total is their sum. A COUNT label may
+instead be learned as a class ``0 .. n-1`` by cross-entropy (:class:`CountLoss`;
+the paper's toy task, Sec. 5); its prediction is then the expected count under
+the softmax (the posterior mean, which minimises the squared error the task is
+scored by).
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -60,6 +65,18 @@ BASELINE_BITS = 8
 BASELINE_READ_NOISE_DN = 1.0
 #: Percentile of training pixel power that the baseline's fixed exposure maps to full scale.
 BASELINE_EXPOSURE_PERCENTILE = 99.5
+
+
+class CountLoss(enum.Enum):
+    """How a COUNT label is learned.
+
+    * ``MSE``: regression of the standardised count (paper, supplement C: people count).
+    * ``CROSS_ENTROPY``: classification into counts ``0 .. n-1`` (paper Sec. 5: patches);
+      predicts the expected count under the softmax.
+    """
+
+    MSE = "mse"
+    CROSS_ENTROPY = "cross_entropy"
 
 
 def _as_5d(transport: torch.Tensor) -> torch.Tensor:
@@ -93,7 +110,14 @@ class Head(nn.Module):
         label_specs: the task's labels; one output group of ``spec.size`` each.
         target_mean: ``{name: [size]}`` training-set mean of COUNT/REGRESSION labels.
         target_std: ``{name: [size]}`` training-set standard deviation (> 0).
+        count_classes: ``{name: n}`` COUNT labels learned by cross-entropy over the
+            counts ``0 .. n-1`` (n >= 2; ``n`` logits per element); the other
+            COUNT labels are regressed (MSE). See :class:`CountLoss`.
         hidden: hidden width.
+
+    Raises:
+        ValueError: no labels, no inputs, or ``count_classes`` naming a label that
+            is not a COUNT label or giving fewer than 2 classes.
 
     """
 
@@ -104,6 +128,7 @@ class Head(nn.Module):
         *,
         target_mean: Mapping[str, np.ndarray] | None = None,
         target_std: Mapping[str, np.ndarray] | None = None,
+        count_classes: Mapping[str, int] | None = None,
         hidden: int = HIDDEN_UNITS,
     ) -> None:
         super().__init__()
@@ -112,6 +137,17 @@ class Head(nn.Module):
         self.label_specs = tuple(label_specs)
         if not self.label_specs:
             raise ValueError("label_specs is empty: a head needs at least one label")
+        kinds = {s.name: s.kind for s in self.label_specs}
+        self.count_classes: dict[str, int] = {}
+        for name, n in (count_classes or {}).items():
+            if kinds.get(name) is not LabelKind.COUNT:
+                raise ValueError(
+                    f"count_classes names {name!r}, which is not a COUNT label of this head "
+                    f"(COUNT labels: {sorted(k for k, v in kinds.items() if v is LabelKind.COUNT)})"
+                )
+            if isinstance(n, bool) or int(n) != n or n < 2:
+                raise ValueError(f"count_classes[{name!r}] = {n!r}: allowed an integer >= 2")
+            self.count_classes[name] = int(n)
         # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
         # brightness or the scene's light level; it rescales, so SNR is untouched.
         self.input_norm = nn.BatchNorm1d(in_features, affine=False)
@@ -121,7 +157,7 @@ class Head(nn.Module):
             nn.Linear(hidden, hidden),
             nn.LeakyReLU(LEAKY_SLOPE),
         )
-        self.out = nn.Linear(hidden, sum(s.size for s in self.label_specs))
+        self.out = nn.Linear(hidden, sum(self.output_width(s) for s in self.label_specs))
         for s in self.label_specs:
             mean = np.zeros(s.size, np.float32)
             std = np.ones(s.size, np.float32)
@@ -139,16 +175,32 @@ class Head(nn.Module):
         """Number of inputs."""
         return self.body[0].in_features
 
+    def count_loss(self, name: str) -> CountLoss:
+        """How label ``name`` is learned if it is a COUNT label."""
+        return CountLoss.CROSS_ENTROPY if name in self.count_classes else CountLoss.MSE
+
+    def output_width(self, spec: LabelSpec) -> int:
+        """Raw outputs of one label: ``size``, or ``size * classes`` for a classified count."""
+        return spec.size * self.count_classes.get(spec.name, 1)
+
     def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Raw outputs ``{name: [batch, size]}``: standardised values or logits (BINARY)."""
+        """Raw outputs ``{name: [batch, width]}``: standardised values or logits.
+
+        BINARY labels give one logit per element; a classified count gives class
+        logits ``[batch, size * classes]`` (element-major, see :meth:`class_logits`).
+        """
         y = self.out(self.body(self.input_norm(x)))
         return dict(
             zip(
                 [s.name for s in self.label_specs],
-                torch.split(y, [s.size for s in self.label_specs], dim=1),
+                torch.split(y, [self.output_width(s) for s in self.label_specs], dim=1),
                 strict=True,
             )
         )
+
+    def class_logits(self, name: str, outputs: torch.Tensor) -> torch.Tensor:
+        """Raw outputs of a classified count -> logits ``[batch, size, classes]``."""
+        return outputs.reshape(outputs.shape[0], -1, self.count_classes[name])
 
     def standardise(self, name: str, value: torch.Tensor) -> torch.Tensor:
         """Physical label -> the head's output units (identity for BINARY)."""
@@ -161,6 +213,10 @@ class Head(nn.Module):
             y = outputs[s.name]
             if s.kind is LabelKind.BINARY:
                 pred[s.name] = torch.sigmoid(y)
+            elif s.name in self.count_classes:
+                p = torch.softmax(self.class_logits(s.name, y), dim=-1)
+                counts = torch.arange(p.shape[-1], dtype=p.dtype, device=p.device)
+                pred[s.name] = p @ counts  # expected count, [batch, size]
             else:
                 pred[s.name] = y * getattr(self, f"std_{s.name}") + getattr(self, f"mean_{s.name}")
         return pred
@@ -170,6 +226,9 @@ def task_loss(
     head: Head, outputs: Mapping[str, torch.Tensor], labels: Mapping[str, torch.Tensor]
 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
     """Sum over labels of MSE (COUNT, REGRESSION; standardised) or BCE with logits (BINARY).
+
+    A COUNT label in ``head.count_classes`` uses the cross-entropy of its class
+    logits against the count (rounded, clipped to the classes), mean over elements.
 
     Args:
         head: supplies the label specs and the target standardisation.
@@ -187,6 +246,11 @@ def task_loss(
         y = labels[s.name].to(outputs[s.name].dtype)
         if s.kind is LabelKind.BINARY:
             parts[s.name] = F.binary_cross_entropy_with_logits(outputs[s.name], y)
+        elif s.name in head.count_classes:
+            logits = head.class_logits(s.name, outputs[s.name])
+            n = logits.shape[-1]
+            target = torch.clamp(torch.round(y), 0, n - 1).long()
+            parts[s.name] = F.cross_entropy(logits.reshape(-1, n), target.reshape(-1))
         else:
             parts[s.name] = F.mse_loss(outputs[s.name], head.standardise(s.name, y))
     return torch.stack(list(parts.values())).sum(), parts

@@ -10,6 +10,9 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
   Adam's per-weight steps). The mask logits use their own rate
   (``mask_lr``, logit units per step).
 * A random global gain U(0.8, 1.2) per sample multiplies the light (augmentation).
+* COUNT labels are regressed (MSE) or classified (cross-entropy over the counts
+  ``0 .. max``, predicting the expected count), :class:`~mincam_render.models.CountLoss`;
+  by default the paper's choice for the scene family (:data:`PAPER_COUNT_LOSS`).
 * Early stopping on the validation loss (evaluated every ``eval_every`` steps;
   stop after ``patience`` evaluations without improvement; the best state is kept).
 * Checkpoints after every evaluation (atomic ``checkpoint.pt``): a killed run
@@ -45,7 +48,7 @@ import torch
 
 from .camera import FreeformCamera
 from .generators.base import LabelKind, LabelSpec
-from .models import BaselineCamera, Head, MincamCamera, task_loss
+from .models import BaselineCamera, CountLoss, Head, MincamCamera, task_loss
 
 log = logging.getLogger(__name__)
 
@@ -217,6 +220,36 @@ class TrainingData:
 # ---------------------------------------------------------------------------------------
 
 
+#: The paper's loss for COUNT labels by scene family (``TrainingData.source["family"]``):
+#: cross-entropy for the toy task (Sec. 5: "trained by minimizing the cross-entropy
+#: loss"); the workspace people count was regressed (supplement C: "minimizing the mean
+#: squared error"), and so is every count of a family not listed.
+PAPER_COUNT_LOSS: dict[str, CountLoss] = {"patches": CountLoss.CROSS_ENTROPY}
+
+
+def count_loss_for(data: TrainingData, count_loss: CountLoss | None = None) -> CountLoss:
+    """``count_loss``, or when None the paper's choice for ``data``'s family."""
+    if count_loss is not None:
+        return CountLoss(count_loss)
+    return PAPER_COUNT_LOSS.get(str(data.source.get("family", "")), CountLoss.MSE)
+
+
+def count_classes_for(data: TrainingData, count_loss: CountLoss | None = None) -> dict[str, int]:
+    """``{name: classes}`` of the COUNT labels to classify (empty for MSE).
+
+    The classes are the counts ``0 .. max`` of the training labels (at least 2).
+    """
+    if count_loss_for(data, count_loss) is CountLoss.MSE:
+        return {}
+    out = {}
+    for s in data.label_specs:
+        if s.kind is LabelKind.COUNT:
+            y = np.asarray(data.labels[s.name])
+            top = int(np.rint(y.max())) if y.size else 0
+            out[s.name] = max(2, top + 1)
+    return out
+
+
 def learning_rate_for(num_inputs: int) -> float:
     """The head's Adam learning rate: ``1e-3 * min(1, sqrt(16 / num_inputs))``."""
     return 1e-3 * min(1.0, math.sqrt(16.0 / max(1, num_inputs)))
@@ -235,6 +268,9 @@ class TrainConfig:
         patience: evaluations without improvement before stopping.
         gain_range: random global gain per sample (augmentation), (lo, hi).
         max_eval_samples: validation samples used per evaluation (evenly spaced).
+        count_loss: how COUNT labels are learned; None = the paper's choice for the
+            data's scene family (:data:`PAPER_COUNT_LOSS`). Used where this module
+            builds the models (:func:`sweep`, :func:`train_run`).
         seed: seed of batches, noise and initialisation.
         torch_threads: intra-op threads while training (restored afterwards). The
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
@@ -251,6 +287,7 @@ class TrainConfig:
     patience: int = 8
     gain_range: tuple[float, float] = (0.8, 1.2)
     max_eval_samples: int = 2048
+    count_loss: CountLoss | None = None
     seed: int = 0
     torch_threads: int | None = 1
 
@@ -269,6 +306,14 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.lr = {self.lr!r}: allowed (0, 1) or None")
         if not 0 <= self.mask_lr < 10:
             raise ValueError(f"TrainConfig.mask_lr = {self.mask_lr!r}: allowed [0, 10)")
+        if self.count_loss is not None and not isinstance(self.count_loss, CountLoss):
+            allowed = [c.value for c in CountLoss]
+            try:
+                object.__setattr__(self, "count_loss", CountLoss(self.count_loss))
+            except ValueError:
+                raise ValueError(
+                    f"TrainConfig.count_loss = {self.count_loss!r}: allowed {allowed} or None"
+                ) from None
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
@@ -288,11 +333,13 @@ def build_mincam(
     *,
     detectors: Sequence[int] | None = None,
     sensor_model: bool = True,
+    count_loss: CountLoss | None = None,
     seed: int = 0,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
 
     Pixel ``j`` reads detector ``j % K`` of the data unless ``detectors`` is given.
+    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
     """
     k_data = data.transport.shape[1]
     if detectors is None:
@@ -311,6 +358,7 @@ def build_mincam(
             data.label_specs,
             target_mean=mean,
             target_std=std,
+            count_classes=count_classes_for(data, count_loss),
         )
     finally:
         ctx.__exit__(None, None, None)
@@ -324,8 +372,17 @@ def build_mincam(
     )
 
 
-def build_baseline(data: TrainingData, grid: tuple[int, int], *, seed: int = 0) -> BaselineCamera:
-    """A baseline camera of ``grid`` box pixels for ``data``'s task (exposure from ``data``)."""
+def build_baseline(
+    data: TrainingData,
+    grid: tuple[int, int],
+    *,
+    count_loss: CountLoss | None = None,
+    seed: int = 0,
+) -> BaselineCamera:
+    """A baseline camera of ``grid`` box pixels for ``data``'s task (exposure from ``data``).
+
+    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
+    """
     mean, std = data.target_stats()
     ctx = _seeded(seed)
     try:
@@ -334,6 +391,7 @@ def build_baseline(data: TrainingData, grid: tuple[int, int], *, seed: int = 0) 
             data.label_specs,
             target_mean=mean,
             target_std=std,
+            count_classes=count_classes_for(data, count_loss),
         )
     finally:
         ctx.__exit__(None, None, None)
@@ -346,22 +404,30 @@ def build_baseline(data: TrainingData, grid: tuple[int, int], *, seed: int = 0) 
 
 
 def describe_model(model: Model) -> dict[str, Any]:
-    """A JSON-ready description of a model (kind, pixels, options)."""
+    """A JSON-ready description of a model (kind, pixels, options).
+
+    ``count_classes`` appears only for classified counts, so descriptions (and the
+    resume check against checkpoints) of regressing models are unchanged.
+    """
     if isinstance(model, MincamCamera):
-        return {
+        desc = {
             "kind": "mincam",
             "pixels": model.num_pixels,
             "detectors": model.detectors.tolist(),
             "sensor_model": model.sensor_model,
             "history": model.history,
         }
-    return {
-        "kind": "baseline",
-        "pixels": model.num_pixels,
-        "grid": list(model.grid),
-        "exposure_w": float(model.exposure_w),
-        "history": model.history,
-    }
+    else:
+        desc = {
+            "kind": "baseline",
+            "pixels": model.num_pixels,
+            "grid": list(model.grid),
+            "exposure_w": float(model.exposure_w),
+            "history": model.history,
+        }
+    if model.head.count_classes:
+        desc["count_classes"] = dict(model.head.count_classes)
+    return desc
 
 
 # ---------------------------------------------------------------------------------------
@@ -1041,6 +1107,7 @@ def greedy_prune(
                 train.label_specs,
                 target_mean=train.target_stats()[0],
                 target_std=train.target_stats()[1],
+                count_classes=model.head.count_classes,
             )
         finally:
             ctx.__exit__(None, None, None)
@@ -1100,13 +1167,20 @@ def sweep(
     out = Path(out_dir) if out_dir is not None else None
     jobs: list[tuple[str, Callable[[], Model]]] = []
     for k in pixel_counts:
-        jobs.append((f"mincam_{k}px", lambda k=k: build_mincam(train, k, seed=config.seed)))
+        jobs.append(
+            (
+                f"mincam_{k}px",
+                lambda k=k: build_mincam(train, k, count_loss=config.count_loss, seed=config.seed),
+            )
+        )
     for g in baseline_grids:
         grid = _parse_grid(g)
         jobs.append(
             (
                 f"baseline_{grid[0]}x{grid[1]}",
-                lambda grid=grid: build_baseline(train, grid, seed=config.seed),
+                lambda grid=grid: build_baseline(
+                    train, grid, count_loss=config.count_loss, seed=config.seed
+                ),
             )
         )
     for name, make in jobs:
@@ -1300,9 +1374,17 @@ def train_run(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if baseline_grid is not None:
-        model: Model = build_baseline(train, baseline_grid, seed=config.seed)
+        model: Model = build_baseline(
+            train, baseline_grid, count_loss=config.count_loss, seed=config.seed
+        )
     else:
-        model = build_mincam(train, pixels, sensor_model=sensor_model, seed=config.seed)
+        model = build_mincam(
+            train,
+            pixels,
+            sensor_model=sensor_model,
+            count_loss=config.count_loss,
+            seed=config.seed,
+        )
     run = {
         "model": describe_model(model),
         "camera": _camera_dict(train.camera),

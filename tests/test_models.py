@@ -12,6 +12,7 @@ from mincam_render.maskplane import transmittance
 from mincam_render.models import (
     INIT_TRANSMITTANCE,
     BaselineCamera,
+    CountLoss,
     Head,
     MincamCamera,
     box_pixels,
@@ -98,6 +99,46 @@ def test_loss_per_kind_closed_form():
     assert pred["count"].item() == pytest.approx(3.0)
     torch.testing.assert_close(pred["zones"], torch.sigmoid(out["zones"]))
     torch.testing.assert_close(pred["speed"], torch.tensor([[15.0, 15.0]]))
+
+
+def test_count_cross_entropy_closed_form():
+    """Classified count: cross-entropy of softmax, expected-count prediction, gradient."""
+    specs = (LabelSpec(name="count", kind=LabelKind.COUNT, size=2), SPECS[2])
+    head = Head(2, specs, count_classes={"count": 3})
+    assert head.count_loss("count") is CountLoss.CROSS_ENTROPY
+    assert head.count_loss("speed") is CountLoss.MSE
+    out = head(torch.zeros(4, 2))
+    assert {k: tuple(v.shape) for k, v in out.items()} == {"count": (4, 6), "speed": (4, 2)}
+    # element-major: [element 0 classes 0..2, element 1 classes 0..2]
+    z = np.array([[[0.0, 1.0, 2.0], [2.0, 0.0, -1.0]]])
+    logits = torch.tensor(z.reshape(1, 6), dtype=torch.float64, requires_grad=True)
+    lab = torch.tensor([[2.0, 7.0]], dtype=torch.float64)  # 7 is clipped to the top class
+    total, parts = task_loss(
+        head, {"count": logits, "speed": torch.zeros(1, 2)}, {"count": lab, "speed": lab}
+    )
+    p = np.exp(z) / np.exp(z).sum(-1, keepdims=True)
+    assert parts["count"].item() == pytest.approx(-np.log(p[0, [0, 1], [2, 2]]).mean(), rel=1e-12)
+    parts["count"].backward()
+    onehot = np.zeros_like(p)
+    onehot[0, :, 2] = 1.0
+    np.testing.assert_allclose(
+        logits.grad.numpy(), ((p - onehot) / 2).reshape(1, 6), rtol=1e-12, atol=1e-15
+    )
+    pred = head.predict({"count": logits.detach(), "speed": torch.zeros(1, 2)})["count"]
+    np.testing.assert_allclose(pred.numpy(), (p @ np.arange(3.0)), rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("classes", "match"),
+    [
+        ({"zones": 3}, "not a COUNT label"),
+        ({"nope": 3}, "not a COUNT label"),
+        ({"count": 1}, ">= 2"),
+    ],
+)
+def test_count_classes_are_checked(classes, match):
+    with pytest.raises(ValueError, match=match):
+        Head(2, SPECS, count_classes=classes)
 
 
 def test_gradients_reach_logits_by_value(variant, rng):

@@ -11,6 +11,7 @@ import torch
 from mincam_render import train as tr
 from mincam_render.camera import MM, DetectorLayout, FreeformCamera
 from mincam_render.generators.base import LabelKind, LabelSpec
+from mincam_render.models import CountLoss
 
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
 
@@ -98,6 +99,53 @@ def test_pruning_drops_the_dark_detector_first(variant):
     assert [r["pixels"] for r in records] == [3, 2]
     assert records[1]["removed"] == [1]
     assert records[1]["kept"] == [0, 2]
+
+
+@pytest.mark.parametrize(
+    ("family", "explicit", "expected"),
+    [
+        ("patches", None, CountLoss.CROSS_ENTROPY),  # paper Sec. 5
+        ("workspace", None, CountLoss.MSE),  # paper supplement C
+        ("synthetic", None, CountLoss.MSE),
+        ("patches", CountLoss.MSE, CountLoss.MSE),
+        ("synthetic", "cross_entropy", CountLoss.CROSS_ENTROPY),
+    ],
+)
+def test_count_loss_defaults_to_the_papers_choice(family, explicit, expected):
+    from dataclasses import replace
+
+    data = replace(linear_task(40), source={"family": family})
+    assert tr.count_loss_for(data, explicit) is expected
+    classes = tr.count_classes_for(data, explicit)
+    top = int(data.labels["count"].max())
+    assert classes == ({"count": top + 1} if expected is CountLoss.CROSS_ENTROPY else {})
+    model = tr.build_mincam(data, 2, count_loss=explicit)
+    assert model.head.count_classes == classes
+    assert ("count_classes" in tr.describe_model(model)) == bool(classes)
+
+
+def test_train_config_count_loss_is_checked():
+    assert tr.TrainConfig(count_loss="cross_entropy").count_loss is CountLoss.CROSS_ENTROPY
+    with pytest.raises(ValueError, match="count_loss"):
+        tr.TrainConfig(count_loss="huber")
+
+
+def test_cross_entropy_count_trains_resumes_and_prunes(variant, tmp_path):
+    train, val, test = linear_task(260, k=3).split((0.7, 0.15, 0.15))
+    ce = CountLoss.CROSS_ENTROPY
+    model = tr.build_mincam(train, 3, count_loss=ce)
+    before = tr.predict(model, val)[2]
+    tr.train_model(model, train, val, CFG, out_dir=tmp_path)
+    after = tr.predict(model, val)[2]
+    err = tr.evaluate(model, test)["error"]
+    assert after < before  # cross-entropy over ~15 classes falls slower than MSE
+    assert err < 0.7 * float(test.labels["count"].std())  # measured 0.57 x
+    with pytest.raises(ValueError, match="written for"):  # an MSE head is another model
+        tr.train_model(
+            tr.build_mincam(train, 3, count_loss=CountLoss.MSE), train, val, CFG, out_dir=tmp_path
+        )
+    records = tr.greedy_prune(model, train, val, test, replace_cfg(max_steps=10), min_pixels=2)
+    assert [r["pixels"] for r in records] == [3, 2]
 
 
 def replace_cfg(**kw) -> tr.TrainConfig:
