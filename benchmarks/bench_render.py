@@ -13,7 +13,9 @@ update, labels, transport render, float16 encoding: everything but the disk
 write) and reports frames/s and detector-samples/s (median and spread). A plain
 ``mi.render`` of the same scene, updated to the same frames, with a perspective
 sensor of as many pixels as rendered texels and the same spp and integrator, is
-timed alongside: ``overhead = ours / plain - 1``.
+timed alongside: ``overhead = ours / plain - 1``. For differentially rendered
+frames the rays are those of ``X`` (one board-centre detector when the
+difference is shared).
 
 Differentially rendered families (:mod:`mincam_render.differential`) render their
 static backgrounds once per dataset: the plan is made for ``--dataset-frames``
@@ -43,7 +45,11 @@ import drjit as dr
 import mitsuba as mi
 
 from mincam_render import backend
-from mincam_render.differential import BackgroundSettings, render_background
+from mincam_render.differential import (
+    BackgroundSettings,
+    difference_camera,
+    render_background,
+)
 from mincam_render.generators.registry import FAMILY_NAMES
 from mincam_render.render_job import (
     RenderRequest,
@@ -105,7 +111,11 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
     r = job["render"]
     camera, render_cam = _render_camera(job)
     rows, cols = camera.mask_resolution
-    rendered_texels = render_cam.num_detectors * rows * cols
+    # the rays a frame traces: differential frames render X only, from the board
+    # centre when the difference is shared
+    background = r.get("background") or {}
+    traced_cam = difference_camera(render_cam, bool(background.get("shared_difference")))
+    rendered_texels = traced_cam.num_detectors * rows * cols
     detector_samples = camera.num_detectors * rows * cols * r["spp"]
 
     backgrounds, seconds_per_background = render_backgrounds(job, render_cam, frames)
@@ -131,7 +141,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
             ),
             "film": {
                 "type": "hdrfilm",
-                "width": cols * render_cam.num_detectors,
+                "width": cols * traced_cam.num_detectors,
                 "height": rows,
                 "rfilter": {"type": "box"},
                 "pixel_format": "luminance",
