@@ -315,12 +315,15 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
             "max_depth": max_depth,
             "shared_difference": diff.get("shared_difference", {}).get("value", False),
         }
-        for name, value in (("spp", diff["frame_spp"]), ("max_depth", diff["frame_max_depth"])):
+        for name, value, in_background in (
+            ("spp", diff["frame_spp"], diff["background_spp"]),
+            ("max_depth", diff["frame_max_depth"], max_depth),
+        ):
             decisions[name]["plain_value"] = decisions[name]["value"]
             decisions[name]["value"] = value
             decisions[name]["reason"] += (
                 f"; differential rendering renders frames with {name} {value} and backgrounds "
-                f"with {decisions[name]['plain_value']} (see 'differential')"
+                f"with {in_background} (see 'differential')"
             )
         spp, max_depth = diff["frame_spp"], diff["frame_max_depth"]
 
