@@ -216,6 +216,10 @@ def write_table(results: dict, path: Path) -> None:
         f"{results['frames']} frames: {results['train_samples']} train / "
         f"{results['test_samples']} test)",
         "",
+        f"Scene {results.get('scene', 'patches')}: "
+        + ", ".join(f"{k} {v}" for k, v in results.get("generator_ranges", {}).items())
+        + ".",
+        "",
         f"Count loss {results['count_loss']}; batch {results['config']['batch_size']}; "
         f"{results['config']['max_steps']} steps; predict-the-mean RMSE "
         f"{results['predict_mean_rmse']:.3f}. Test RMSE (rounded counts) at each point of "
@@ -282,6 +286,11 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     ap.add_argument("--json-name", default=None, help="default patches_paper[_linear].json")
     ap.add_argument(
+        "--scene",
+        default="patches",
+        help="patches description (TOML path) for sensitivity runs; default: the shipped one",
+    )
+    ap.add_argument(
         "--cache",
         type=Path,
         default=None,
@@ -299,8 +308,18 @@ def main() -> None:
         ap.error("--workers > 1 is implemented for --transport linear")
 
     t0 = time.perf_counter()
-    fam = load_family("patches", seed=a.seed, num_frames=a.frames)
-    source = {"family": "patches", "seed": a.seed, "transport": a.transport}
+    fam = load_family(a.scene, seed=a.seed, num_frames=a.frames)
+    source = {
+        "family": "patches",
+        "scene": str(a.scene),
+        "description": {
+            "patch_size": list(fam.config.patch_size),
+            "patch_radiance_w_m2_sr": list(fam.config.patch_radiance_w_m2_sr),
+            "illumination_amplitude": list(fam.config.illumination_amplitude),
+        },
+        "seed": a.seed,
+        "transport": a.transport,
+    }
     linear_info = None
     if a.transport == "linear":
         cache = a.cache or Path(tempfile.mkdtemp(prefix="patches_linear_"))
@@ -352,6 +371,8 @@ def main() -> None:
     results = {
         "machine": machine(),
         "transport": a.transport,
+        "scene": source["scene"],
+        "generator_ranges": source["description"],
         "frames": a.frames,
         "spp": a.spp if a.transport == "mitsuba" else None,
         "linear_transport": linear_info,
