@@ -38,11 +38,8 @@ the base setting's Monte Carlo error in quadrature, ``sqrt(max(e^2 - e_base^2,
 own Monte Carlo error (from its two independent halves) is reported as
 ``reference_noise``; errors below it are not resolved.
 
-Renders are traced (``freeze=False``): in one process that renders several
-camera shapes and depths, replaying a frozen pass recorded earlier returned
-wrong values (order-dependent; reproduced with the patches family: a 16x16
-depth-1 pass replayed after an 8x8 depth-16 pass). Traced kernels still come
-from Dr.Jit's cache, so timings exclude compilation either way.
+Traced kernels come from Dr.Jit's cache after the warm-up, so timings exclude
+compilation.
 
 Seconds are render seconds per frame (median over ``repeats`` timed runs after
 one untimed warm-up run that compiles the kernels); storage adds its encode and
@@ -275,13 +272,11 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
         cam, *, spp, max_depth=None, shared=False, seed_offset=0, point=False, warm_up=False
     ):
         out = []
-        # the warm-up renders one frame: enough to compile (or record) the kernels
+        # the warm-up renders one frame: enough to compile the kernels
         for i in frames[:1] if warm_up else frames:
             family.set_frame(scene, i)
             seed = (cfg.seed * 1_000_003 + i * 7919 + seed_offset * 104_729) % 2**63
-            # traced, not frozen: replaying a recorded pass after passes of another
-            # shape returned garbage here (Dr.Jit 1.5.0; see the module doc)
-            t = render_transport(scene, cam, spp=spp, seed=seed, max_depth=max_depth, freeze=False)
+            t = render_transport(scene, cam, spp=spp, seed=seed, max_depth=max_depth)
             if point:
                 # power scales with detector area: rescale to the real diode's
                 t = t * np.float32((camera.detector_size_m / POINT_DETECTOR_SIZE_M) ** 2)

@@ -417,9 +417,7 @@ def simulate_volts(
         i = int(i)
         if i not in cache:
             family.set_frame(scene, i)
-            t = render_transport(
-                scene, camera, spp=spp, seed=_frame_seed(seed, i, stream), freeze=False
-            )
+            t = render_transport(scene, camera, spp=spp, seed=_frame_seed(seed, i, stream))
             cache[i] = np.einsum("prc,prc->p", t[pixels].astype(np.float64), masks)
         power[n] = cache[i]
     volts = detector_voltage(torch.from_numpy(power), camera.electronics, noise=False).numpy()

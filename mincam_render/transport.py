@@ -24,11 +24,9 @@ All detectors, texels and samples of a pass form one wavefront (one kernel
 launch). Repeated calls on a scene whose parameters changed reuse the compiled
 kernel from Dr.Jit's cache (no recompilation; scalars live in arrays so kernel
 hashes stay stable); only the Python trace (~2 ms) is redone. Replaying a
-frozen recording (``freeze=True``) skips that trace too; it is opt-in because
-it saved little here (4.3 vs 6.0 ms for 8x16x16 texels x 4 spp, slower for
-large passes) and recordings are fragile (they refuse scenes while other
-scenes are alive, re-record when many meshes move, and one sequence of renders
-of different shapes was reported to replay wrong values).
+Dr.Jit frozen recording instead was tried and removed: it was slower for the
+patches family (15 vs 10 ms per frame) and, after the plane's texture was
+updated, replayed garbage (sums of 1e21-1e28 W).
 """
 
 from __future__ import annotations
@@ -56,7 +54,7 @@ _RESPONSE_TABLE_SIZE = 181
 
 @dataclass(frozen=True)
 class _PassGeometry:
-    """Dr.Jit arrays describing one camera (inputs of the frozen pass).
+    """Dr.Jit arrays describing one camera (inputs of the transport pass).
 
     Scalars live in one array of >= 15 floats, not in size-1 arrays: the load
     alignment Dr.Jit emits for a size-1 array depends on its address, which
@@ -64,7 +62,7 @@ class _PassGeometry:
     """
 
     params: mi.Float  # [a_det, w_mask, d, right xyz, up xyz, fwd xyz, c, 0, 0, centres xyz * K] (m)
-    response: mi.Float  # f(theta) on a uniform grid over [0, pi/2]
+    response: mi.Float | None  # f(theta) on a uniform grid over [0, pi/2]; None: f = 1
 
 
 _COSINE_FRACTION_INDEX = 12
@@ -128,15 +126,17 @@ def _transport_pass(
     radiance, _, _ = integrator.sample(scene, sampler, ray, active=on_detector)
 
     cos_theta = dist * inv_r
-    theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))
-    n_tab = _RESPONSE_TABLE_SIZE
-    pos = dr.clip(theta * ((n_tab - 1) / (0.5 * math.pi)), 0.0, n_tab - 1.0)
-    i0 = mi.UInt32(dr.floor(pos))
-    i1 = dr.minimum(i0 + 1, n_tab - 1)
-    frac = pos - mi.Float(i0)
-    f_dir = dr.lerp(
-        dr.gather(mi.Float, geo.response, i0), dr.gather(mi.Float, geo.response, i1), frac
-    )
+    f_dir = 1.0
+    if geo.response is not None:  # else Lambert only: no table lookup per sample
+        theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))
+        n_tab = _RESPONSE_TABLE_SIZE
+        pos = dr.clip(theta * ((n_tab - 1) / (0.5 * math.pi)), 0.0, n_tab - 1.0)
+        i0 = mi.UInt32(dr.floor(pos))
+        i1 = dr.minimum(i0 + 1, n_tab - 1)
+        frac = pos - mi.Float(i0)
+        f_dir = dr.lerp(
+            dr.gather(mi.Float, geo.response, i0), dr.gather(mi.Float, geo.response, i1), frac
+        )
     # cos_q cos_x / r^2 = d^2 / r^4, per unit detector area and unit mask area
     g = (cos_theta * cos_theta) * (inv_r * inv_r)
     # pdf of q per unit detector area under the two-technique mixture
@@ -148,38 +148,20 @@ def _transport_pass(
     return dr.block_sum(value, spp) * (1.0 / spp)
 
 
-#: Frozen passes keyed by the integrator's configuration and the pass shape:
-#: scene parameters are traced inputs of a recording, but scalar integrator
-#: settings (max_depth, rr_depth) are baked into it, and one recording per shape
-#: keeps replays from ever mixing shapes. None marks a key whose recording
-#: failed (then it is traced).
-_frozen_passes: dict[str, object | None] = {}
-
-
-def _pass_key(integrator: mi.Integrator, shape: tuple[int, ...]) -> str:
-    return f"{type(integrator).__name__}:{integrator}:{shape}"
-
-
-def _frozen_pass_for(integrator: mi.Integrator, shape: tuple[int, ...]):
-    key = _pass_key(integrator, shape)
-    if key not in _frozen_passes:
-        _frozen_passes[key] = dr.freeze(_transport_pass)
-    return _frozen_passes[key]
-
-
 def _geometry(camera: FreeformCamera, parallax: bool = True) -> _PassGeometry:
     right, up, fwd = camera.frame
     centers = camera.detector_centers_m
     if not parallax:
         centers = np.broadcast_to(np.asarray(camera.position, dtype=np.float64), centers.shape)
-    if camera.directional_response is None:
-        table = np.ones(_RESPONSE_TABLE_SIZE, dtype=np.float32)
-    else:
-        table = camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE)
+    table = (
+        None
+        if camera.directional_response is None
+        else mi.Float(camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE))
+    )
     sizes = [camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m]
     extra = [cosine_sampling_fraction(camera), 0.0, 0.0]
     flat = np.concatenate([sizes, right, up, fwd, extra, centers.ravel()])
-    return _PassGeometry(params=mi.Float(flat.astype(np.float32)), response=mi.Float(table))
+    return _PassGeometry(params=mi.Float(flat.astype(np.float32)), response=table)
 
 
 def cosine_sampling_fraction(camera: FreeformCamera) -> float:
@@ -208,7 +190,6 @@ def render_transport(
     seed: int = 0,
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
-    freeze: bool = False,
     parallax: bool = True,
 ) -> np.ndarray:
     """Render the transport images of every detector of ``camera`` in ``scene``.
@@ -223,10 +204,6 @@ def render_transport(
             integrator of this depth (1 = emitters seen directly, 2 = direct light).
         max_rays_per_pass: cap on the rays of one kernel launch; more samples run
             as several passes accumulated in float64.
-        freeze: True replays a recorded kernel (Dr.Jit frozen function) instead
-            of re-tracing Python on every call (opt-in, see the module doc);
-            False (default) traces, and the compiled kernel is reused from
-            Dr.Jit's cache.
         parallax: False renders every detector from the board centre (the
             paper's single training camera): same sample streams as with
             parallax, so the difference of the two renders is the parallax
@@ -280,21 +257,11 @@ def render_transport(
     geo = _geometry(camera, parallax)
     shape = (camera.num_detectors, rows, cols, spp_pass)
 
-    run_pass = (_frozen_pass_for(integrator, shape) if freeze else None) or _transport_pass
     total = np.zeros(n_texels, dtype=np.float64)
     for i in range(n_pass):
-        args = (mi_scene, integrator, sampler, geo, mi.UInt32(_pass_seed(seed, i)), shape)
-        try:
-            mean = run_pass(*args)
-        except RuntimeError as err:
-            # Recording refuses virtual calls on instances outside its inputs,
-            # e.g. when several scenes are alive at once: trace from now on.
-            if run_pass is _transport_pass or "frozen function" not in str(err):
-                raise
-            log.info("transport kernel not frozen (%s); tracing it", str(err).splitlines()[0][:120])
-            _frozen_passes[_pass_key(integrator, shape)] = None
-            run_pass = _transport_pass
-            mean = run_pass(*args)
+        mean = _transport_pass(
+            mi_scene, integrator, sampler, geo, mi.UInt32(_pass_seed(seed, i)), shape
+        )
         total += mean.numpy().astype(np.float64)
     log.debug("render_transport: %d pass(es) of %d spp, %d texels", n_pass, spp_pass, n_texels)
     return (total / n_pass).astype(np.float32).reshape(camera.num_detectors, rows, cols)

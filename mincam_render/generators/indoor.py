@@ -1436,8 +1436,7 @@ class IndoorRig:
         import mitsuba as mi
 
         # scalars go in as opaque variables, not literals: a literal's value is
-        # baked into the kernel, so each new value would re-record the frozen
-        # transport pass
+        # baked into the kernel, so each new value would compile a new kernel
 
         if len(state.people) > self.slots:
             raise ValueError(

@@ -102,7 +102,19 @@ class PatchesFamily(SceneFamily):
         return centre, up, np.asarray(cam.position), side
 
     def image(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
-        """Radiance image ``L[row, col]`` (W m^-2 sr^-1) of frame ``index`` and its parameters."""
+        """Radiance image ``L[row, col]`` (W m^-2 sr^-1) of frame ``index`` and its parameters.
+
+        The last frame's result is kept: a render asks for it twice (set_frame,
+        frame_state). Treat the returned arrays as read-only.
+        """
+        last = getattr(self, "_last_image", None)
+        if last is not None and last[0] == index:
+            return last[1]
+        result = self._draw_image(index)
+        self._last_image = (index, result)
+        return result
+
+    def _draw_image(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
         self.check_index(index)
         c = self.config
         rng = np.random.default_rng([self.seed, index])
