@@ -103,6 +103,32 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     return path
 
 
+def remove_stale_temporaries(root: str | os.PathLike) -> list[Path]:
+    """Delete temporaries of :func:`atomic_write_bytes` left by killed processes.
+
+    A process killed between opening and renaming its temporary leaves
+    ``.<name>.<pid>.<hex>.tmp`` behind; files of processes still running are kept.
+
+    Returns:
+        the files removed.
+    """
+    removed = []
+    for tmp in Path(root).rglob(".*.tmp"):
+        parts = tmp.name.rsplit(".", 3)
+        if len(parts) != 4 or not parts[1].isdigit():
+            continue
+        try:
+            os.kill(int(parts[1]), 0)
+            continue  # its writer is alive
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            continue  # alive, owned by someone else
+        tmp.unlink(missing_ok=True)
+        removed.append(tmp)
+    return removed
+
+
 def json_bytes(obj: Any) -> bytes:
     """Canonical JSON (sorted keys, fixed indentation) so equal content gives equal bytes."""
     return (json.dumps(obj, indent=1, sort_keys=True, default=_json_default) + "\n").encode()

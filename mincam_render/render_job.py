@@ -710,6 +710,8 @@ def render_dataset(
     out = Path(out)
     t_start = time.perf_counter()
     manifest = _open_or_plan(request, out)
+    for tmp in ds.remove_stale_temporaries(out):
+        log.info("removed %s, left by a killed render", tmp)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
     job = manifest["job"]
     num_shards = manifest["num_shards"]

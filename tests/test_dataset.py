@@ -228,3 +228,24 @@ def test_export_exr_round_trip(tiny_dataset, tmp_path):
 def test_parse_frame_list_rejects_out_of_range():
     with pytest.raises(ValueError, match=r"\[0, 9\]"):
         ds.parse_frame_list("5,12", 10)
+
+
+def test_stale_temporaries_of_dead_writers_are_removed(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    (tmp_path / "shards").mkdir()
+    stale = tmp_path / "shards" / f".shard-00001.npy.{dead}.0123abcd.tmp"
+    live = tmp_path / f".manifest.json.{os.getpid()}.89abcdef.tmp"
+    other = tmp_path / ".notes.tmp"
+    for p in (stale, live, other):
+        p.write_bytes(b"partial")
+    assert ds.remove_stale_temporaries(tmp_path) == [stale]
+    assert not stale.exists() and live.exists() and other.exists()
