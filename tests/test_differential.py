@@ -246,3 +246,15 @@ def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
         assert "error_vs_reference" in d
     else:
         assert settings["background"] is None
+
+
+@pytest.mark.slow
+def test_ray_renders_differential_datasets_byte_identically(differential_dataset, tmp_path):
+    pytest.importorskip("ray")
+    from mincam_render.render_job import render_dataset
+
+    request, out = differential_dataset
+    render_dataset(request, tmp_path / "ray", ray_address="local")
+    for rec in ds.read_manifest(out)["shards"]:
+        for name in ("transport", "metadata"):
+            assert (tmp_path / "ray" / rec[name]).read_bytes() == (out / rec[name]).read_bytes()
