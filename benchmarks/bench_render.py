@@ -45,11 +45,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mincam_render import backend
-from mincam_render.differential import (
-    BackgroundSettings,
-    difference_camera,
-    render_background,
-)
+from mincam_render.differential import difference_camera
 from mincam_render.generators.registry import FAMILY_NAMES
 from mincam_render.render_job import (
     RenderRequest,
@@ -58,6 +54,7 @@ from mincam_render.render_job import (
     background_keys,
     frame_seed,
     plan_render,
+    render_backgrounds,
     render_shard,
 )
 
@@ -74,29 +71,15 @@ def rss_bytes() -> int:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-def render_backgrounds(job: dict, render_cam, frames: int) -> tuple[dict | None, float]:
+def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, float]:
     """Backgrounds of the first ``frames`` frames of a differential job, and seconds per background."""
     if job["render"].get("background") is None:
         return None, 0.0
-    settings = BackgroundSettings.from_dict(job["render"]["background"])
     family = _load_family(job)
-    scene = family.build_scene()
     keys = background_keys(family, job)
     needed = list(dict.fromkeys(keys[:frames]))
     t0 = time.perf_counter()
-    out = {
-        k: render_background(
-            family,
-            scene,
-            render_cam,
-            keys.index(k),
-            settings,
-            dataset_seed=job["seed"],
-            spp=job["render"]["spp"],
-            max_depth=job["render"]["max_depth"] or None,
-        )
-        for k in needed
-    }
+    out = {bg.key: bg for bg in render_backgrounds(job, family, keys, needed)}
     return out, (time.perf_counter() - t0) / len(needed)
 
 
@@ -118,7 +101,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
     rendered_texels = traced_cam.num_detectors * rows * cols
     detector_samples = camera.num_detectors * rows * cols * r["spp"]
 
-    backgrounds, seconds_per_background = render_backgrounds(job, render_cam, frames)
+    backgrounds, seconds_per_background = time_backgrounds(job, frames)
     render_shard(job, 0, backgrounds)  # warm-up: scene build, JIT, kernel recording
     ours = []
     for _ in range(repeats):
@@ -198,12 +181,9 @@ def bench_memory(name: str, frames: int, every: int) -> dict:
     job = plan_render(request)["job"]
     samples = []
     t0 = time.perf_counter()
-    family = _load_family(job)
-    keys = background_keys(family, job) if job["render"].get("background") else None
-    _, render_cam = _render_camera(job)
-    backgrounds = render_backgrounds(job, render_cam, frames)[0]
+    backgrounds = time_backgrounds(job, frames)[0]  # all the frames' (None: plain renders)
     for shard in range(-(-frames // every)):
-        render_shard(job, shard, backgrounds and {k: backgrounds[k] for k in keys})
+        render_shard(job, shard, backgrounds)
         samples.append(
             {
                 "frames": min(frames, (shard + 1) * every),

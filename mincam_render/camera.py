@@ -16,7 +16,7 @@ column 0 its left edge (``-right``), as in an ordinary photo seen from the camer
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -343,6 +343,10 @@ class FreeformCamera:
         up /= np.linalg.norm(up)
         right = np.cross(fwd, up)
         return np.stack([right, up, fwd])
+
+    def centre_camera(self) -> FreeformCamera:
+        """This camera with one detector at the board centre (shared renders)."""
+        return replace(self, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
 
     @property
     def detector_centers_m(self) -> np.ndarray:

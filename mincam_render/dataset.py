@@ -345,15 +345,7 @@ def write_shard(
     meta = dict(metadata, transport_sha256=sha_npy)
     meta_data = json_bytes(meta)
     atomic_write_bytes(json_path, meta_data)
-    return {
-        "index": index,
-        "start": int(meta["start"]),
-        "stop": int(meta["stop"]),
-        "transport": f"{SHARD_DIR}/{npy_path.name}",
-        "transport_sha256": sha_npy,
-        "metadata": f"{SHARD_DIR}/{json_path.name}",
-        "metadata_sha256": hashlib.sha256(meta_data).hexdigest(),
-    }
+    return _shard_record(index, meta, sha_npy, hashlib.sha256(meta_data).hexdigest())
 
 
 def verify_shard(
@@ -385,7 +377,13 @@ def verify_shard(
     sha_npy = sha256_file(npy_path)
     if sha_npy != meta.get("transport_sha256"):
         return None, f"{npy_path.name} does not match its sha256 (corrupted or truncated)"
-    record = {
+    return _shard_record(index, meta, sha_npy, sha_meta), ""
+
+
+def _shard_record(index: int, meta: dict, sha_npy: str, sha_meta: str) -> dict:
+    """The manifest's record of shard ``index`` from its metadata and checksums."""
+    npy_path, json_path = shard_paths("", index)
+    return {
         "index": index,
         "start": int(meta["start"]),
         "stop": int(meta["stop"]),
@@ -394,7 +392,6 @@ def verify_shard(
         "metadata": f"{SHARD_DIR}/{json_path.name}",
         "metadata_sha256": sha_meta,
     }
-    return record, ""
 
 
 def read_manifest(root: str | os.PathLike) -> dict:

@@ -87,8 +87,7 @@ class Background:
         seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
         converged_w: ``B``, many samples, full depth, ``[detector, row, col]``.
         same_seed_w: ``C``, the frames' samples, depth and seed; ``[1, row, col]``
-            (board centre) when ``shared_difference``.
-        shared_difference: whether frames render ``X`` from the board centre.
+            (board centre) when the difference is shared by all detectors.
     """
 
     key: str
@@ -96,18 +95,16 @@ class Background:
     seed: int
     converged_w: np.ndarray
     same_seed_w: np.ndarray
-    shared_difference: bool = False
+
+    @property
+    def shared_difference(self) -> bool:
+        """Whether frames render ``X`` once, from the board centre (``C`` has one detector)."""
+        return self.same_seed_w.shape[0] == 1 < self.converged_w.shape[0]
 
 
 def difference_camera(camera: FreeformCamera, shared: bool) -> FreeformCamera:
     """The camera ``X`` and ``C`` are rendered with: one detector at the board centre if shared."""
-    from dataclasses import replace
-
-    from .camera import DetectorLayout
-
-    if not shared:
-        return camera
-    return replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+    return camera.centre_camera() if shared else camera
 
 
 def background_seed(dataset_seed: int, key: str) -> int:
@@ -164,7 +161,6 @@ def render_background(
         seed=seed,
         converged_w=converged,
         same_seed_w=same_seed,
-        shared_difference=settings.shared_difference,
     )
 
 

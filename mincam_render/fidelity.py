@@ -38,7 +38,6 @@ source (``flag``, ``auto`` or ``full``), the bound and the measured figures.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import re
@@ -142,7 +141,6 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         setting a decision record ``{"value", "source", "reason", ...measured}``.
     """
     from . import backend
-    from .camera import DetectorLayout
     from .render_job import Fidelity, frame_seed
     from .transport import render_transport
 
@@ -165,7 +163,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
-    centre_cam = dataclasses.replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+    centre_cam = camera.centre_camera()
 
     # ---- shared render ------------------------------------------------------------------
     offsets = np.asarray(camera.layout.positions_m)

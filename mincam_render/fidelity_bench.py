@@ -247,7 +247,6 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
         ConfigError: unknown family.
     """
     from . import backend
-    from .camera import DetectorLayout
     from .dataset import decode_transport, encode_transport
     from .fidelity import _scene_max_depth
     from .generators import load_family
@@ -283,10 +282,9 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
-    centre = DetectorLayout(positions_m=((0.0, 0.0),))
-    centre_cam = dataclasses.replace(camera, layout=centre)
+    centre_cam = camera.centre_camera()
     point_cam = dataclasses.replace(camera, detector_size_m=POINT_DETECTOR_SIZE_M)
-    paper_cam = dataclasses.replace(camera, layout=centre, detector_size_m=POINT_DETECTOR_SIZE_M)
+    paper_cam = dataclasses.replace(centre_cam, detector_size_m=POINT_DETECTOR_SIZE_M)
 
     masks_random = random_masks(cfg.num_masks, (k, rows, cols), lo_hi, cfg.seed)
     masks_trained = smooth_masks(cfg.num_masks, (k, rows, cols), lo_hi, cfg.seed + 1)

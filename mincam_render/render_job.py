@@ -253,12 +253,10 @@ def _load_family(job: dict):
 
 def _render_camera(job: dict):
     """``(camera of the dataset, camera actually rendered)``; they differ for shared renders."""
-    from .camera import DetectorLayout
-
     camera = ds.camera_from_dict(job["camera"])
     if job["render"]["shared_render"]:
         # one representative detector at the board centre, replicated to all K
-        return camera, dataclasses.replace(camera, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+        return camera, camera.centre_camera()
     return camera, camera
 
 
@@ -395,7 +393,43 @@ def _background_path(out: Path, index: int, part: str) -> Path:
     return out / ds.BACKGROUND_DIR / f"background-{index:05d}-{part}.npy"
 
 
-def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> list[int]:
+def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
+    """Render the backgrounds ``wanted`` (keys) of a differential job, in order.
+
+    Args:
+        job: the ``job`` section of a manifest.
+        family: the job's family (:func:`_load_family`); its scene is built here.
+        keys: every frame's background key (:func:`background_keys`).
+        wanted: keys to render.
+
+    Yields:
+        :class:`~mincam_render.differential.Background` per wanted key.
+    """
+    from .differential import BackgroundSettings, render_background
+
+    r = job["render"]
+    settings = BackgroundSettings.from_dict(r["background"])
+    scene = family.build_scene()
+    _, render_cam = _render_camera(job)
+    first_frame: dict[str, int] = {}
+    for i, key in enumerate(keys):
+        first_frame.setdefault(key, i)
+    for key in wanted:
+        yield render_background(
+            family,
+            scene,
+            render_cam,
+            first_frame[key],
+            settings,
+            dataset_seed=job["seed"],
+            spp=r["spp"],
+            max_depth=r["max_depth"] or None,
+        )
+
+
+def ensure_backgrounds(
+    out: Path, manifest: dict, family, keys: list[str], *, progress: bool = False
+) -> list[int]:
     """Render (in this process) every background of ``manifest`` that is missing or corrupt.
 
     Each is written atomically as ``backgrounds/background-NNNNN-converged.npy``
@@ -403,16 +437,20 @@ def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> 
     and recorded with its key, seed and the files' sha256 in
     ``manifest["backgrounds"]``.
 
+    Args:
+        out: dataset directory.
+        manifest: its manifest (updated and rewritten after each background).
+        family: the job's family.
+        keys: every frame's background key (:func:`background_keys`).
+        progress: show a progress bar.
+
     Returns:
         indices of the backgrounds rendered.
     """
-    from .differential import BackgroundSettings, render_background
-
     job = manifest["job"]
-    keys = job["backgrounds"]
     records = manifest["backgrounds"]
     todo = []
-    for b, key in enumerate(keys):
+    for b, key in enumerate(job["backgrounds"]):
         rec = records[b]
         if rec is not None:
             intact = rec["key"] == key and all(
@@ -426,31 +464,14 @@ def ensure_backgrounds(out: Path, manifest: dict, *, progress: bool = False) -> 
         todo.append(b)
     if not todo:
         return []
-    r = job["render"]
-    settings = BackgroundSettings.from_dict(r["background"])
-    family = _load_family(job)
-    scene = family.build_scene()
-    _, render_cam = _render_camera(job)
-    first_frame: dict[str, int] = {}
-    for i, key in enumerate(background_keys(family, job)):
-        first_frame.setdefault(key, i)
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(todo), unit="background", desc="backgrounds", dynamic_ncols=True)
     try:
-        for b in todo:
-            bg = render_background(
-                family,
-                scene,
-                render_cam,
-                first_frame[keys[b]],
-                settings,
-                dataset_seed=job["seed"],
-                spp=r["spp"],
-                max_depth=r["max_depth"] or None,
-            )
+        wanted = [job["backgrounds"][b] for b in todo]
+        for b, bg in zip(todo, render_backgrounds(job, family, keys, wanted), strict=True):
             record = {"index": b, "key": bg.key, "seed": bg.seed}
             for part, array in zip(
                 _BACKGROUND_PARTS, (bg.converged_w, bg.same_seed_w), strict=True
@@ -489,7 +510,6 @@ def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
             seed=int(rec["seed"]),
             converged_w=b,
             same_seed_w=c,
-            shared_difference=settings.shared_difference,
         )
     return out_map
 
@@ -839,8 +859,9 @@ def _shard_backgrounds(out: Path, manifest: dict, progress: bool) -> Callable[[i
     job = manifest["job"]
     if job["render"].get("background") is None:
         return lambda shard: None
-    ensure_backgrounds(out, manifest, progress=progress)
-    keys = background_keys(_load_family(job), job)
+    family = _load_family(job)
+    keys = background_keys(family, job)
+    ensure_backgrounds(out, manifest, family, keys, progress=progress)
     loaded = load_backgrounds(out, manifest, keys)
     size = job["shard_frames"]
 

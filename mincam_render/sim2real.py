@@ -656,18 +656,13 @@ def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
     import torch
     from torch import nn
 
-    from .models import Head, temporal_features
-    from .train import _seeded
+    from .models import temporal_features
+    from .train import build_head
 
     class MeasurementHead(nn.Module):
         def __init__(self) -> None:
             super().__init__()
-            mean, std = data.target_stats()
-            ctx = _seeded(seed)
-            try:
-                self.head = Head(num_inputs, data.label_specs, target_mean=mean, target_std=std)
-            finally:
-                ctx.__exit__(None, None, None)
+            self.head = build_head(data, num_inputs, seed=seed)
 
         def forward(self, t, *, gain=None, noise=True, generator=None):
             v = t.reshape(t.shape[0], -1, t.shape[-3]) if t.ndim == 5 else t[:, None, :, 0, 0]

@@ -319,12 +319,28 @@ class TrainConfig:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
 
 
-def _seeded(seed: int):
-    """Context in which torch's global RNG (used by nn.Linear init) is seeded, then restored."""
-    ctx = torch.random.fork_rng(devices=[])
-    ctx.__enter__()
-    torch.manual_seed(int(seed))
-    return ctx
+def build_head(
+    data: TrainingData,
+    in_features: int,
+    *,
+    count_classes: dict[str, int] | None = None,
+    seed: int = 0,
+) -> Head:
+    """A :class:`Head` for ``data``'s labels (targets standardised by its statistics).
+
+    Its initial weights come from ``seed``; torch's global RNG (used by
+    ``nn.Linear``) is restored afterwards.
+    """
+    mean, std = data.target_stats()
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        return Head(
+            in_features,
+            data.label_specs,
+            target_mean=mean,
+            target_std=std,
+            count_classes=count_classes,
+        )
 
 
 def build_mincam(
@@ -350,18 +366,12 @@ def build_mincam(
     detectors = list(detectors)
     if any(not 0 <= d < k_data for d in detectors):
         raise ValueError(f"detectors {detectors} outside the data's [0, {k_data})")
-    mean, std = data.target_stats()
-    ctx = _seeded(seed)
-    try:
-        head = Head(
-            len(detectors) * max(data.history - 1, 1),
-            data.label_specs,
-            target_mean=mean,
-            target_std=std,
-            count_classes=count_classes_for(data, count_loss),
-        )
-    finally:
-        ctx.__exit__(None, None, None)
+    head = build_head(
+        data,
+        len(detectors) * max(data.history - 1, 1),
+        count_classes=count_classes_for(data, count_loss),
+        seed=seed,
+    )
     return MincamCamera(
         data.camera,
         head,
@@ -383,18 +393,12 @@ def build_baseline(
 
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
     """
-    mean, std = data.target_stats()
-    ctx = _seeded(seed)
-    try:
-        head = Head(
-            grid[0] * grid[1] * max(data.history - 1, 1),
-            data.label_specs,
-            target_mean=mean,
-            target_std=std,
-            count_classes=count_classes_for(data, count_loss),
-        )
-    finally:
-        ctx.__exit__(None, None, None)
+    head = build_head(
+        data,
+        grid[0] * grid[1] * max(data.history - 1, 1),
+        count_classes=count_classes_for(data, count_loss),
+        seed=seed,
+    )
     return BaselineCamera(
         grid,
         head,
@@ -1100,17 +1104,12 @@ def greedy_prune(
         j = int(np.argmin(scores))
         removed.append(keep.pop(j))
         dets = [int(d) for d in model.detectors[keep]]
-        ctx = _seeded(config.seed + len(keep))
-        try:
-            head = Head(
-                len(keep) * max(train.history - 1, 1),
-                train.label_specs,
-                target_mean=train.target_stats()[0],
-                target_std=train.target_stats()[1],
-                count_classes=model.head.count_classes,
-            )
-        finally:
-            ctx.__exit__(None, None, None)
+        head = build_head(
+            train,
+            len(keep) * max(train.history - 1, 1),
+            count_classes=model.head.count_classes,
+            seed=config.seed + len(keep),
+        )
         nxt = MincamCamera(
             model.camera,
             head,

@@ -79,6 +79,10 @@ class PatchesFamily(SceneFamily):
     name = "patches"
     config_type = PatchesConfig
 
+    def __init__(self, config: PatchesConfig, *, seed: int, num_frames: int) -> None:
+        super().__init__(config, seed=seed, num_frames=num_frames)
+        self._last_image: tuple[int, tuple[np.ndarray, dict[str, Any]]] | None = None
+
     @property
     def fps(self) -> float:
         return self.config.fps
@@ -107,9 +111,8 @@ class PatchesFamily(SceneFamily):
         The last frame's result is kept: a render asks for it twice (set_frame,
         frame_state). Treat the returned arrays as read-only.
         """
-        last = getattr(self, "_last_image", None)
-        if last is not None and last[0] == index:
-            return last[1]
+        if self._last_image is not None and self._last_image[0] == index:
+            return self._last_image[1]
         result = self._draw_image(index)
         self._last_image = (index, result)
         return result
