@@ -20,9 +20,10 @@ difference is shared).
 Differentially rendered families (:mod:`mincam_render.differential`) render their
 static backgrounds once per dataset: the plan is made for ``--dataset-frames``
 frames (e.g. 68000, the paper's workspace training set), the backgrounds of
-the timed frames are rendered and timed apart, and
-``frames_per_s_with_backgrounds`` charges every frame its share of all the
-dataset's backgrounds.
+the timed frames are rendered and timed apart (converged renders and ``C``
+separately), and ``frames_per_s_with_backgrounds`` charges every frame its
+share of all the dataset's backgrounds (its count of converged renders, about
+one per background since a window's end is the next one's start, and of ``C``).
 
 Memory: renders ``--memory-frames`` frames of the first family in ONE process
 (no worker recycling, the harshest case) and samples the resident set size
@@ -45,7 +46,7 @@ import drjit as dr
 import mitsuba as mi
 
 from mincam_render import backend
-from mincam_render.differential import difference_camera
+from mincam_render.differential import BackgroundSettings, difference_camera
 from mincam_render.generators.registry import FAMILY_NAMES
 from mincam_render.render_job import (
     RenderRequest,
@@ -57,6 +58,7 @@ from mincam_render.render_job import (
     render_backgrounds,
     render_shard,
 )
+from mincam_render.transport import render_transport
 
 
 def git_revision() -> str:
@@ -71,16 +73,54 @@ def rss_bytes() -> int:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, float]:
-    """Backgrounds of the first ``frames`` frames of a differential job, and seconds per background."""
+def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, dict]:
+    """Backgrounds of the first ``frames`` frames of a differential job, and their costs.
+
+    A background is two converged renders (``B_0``, ``B_1``: its window's start
+    and end) and one render of ``C``; the end of a window is the next one's
+    start, so a dataset makes about one converged render per background. The
+    converged renders and ``C`` are timed apart (after a warm-up) and charged
+    by the dataset's own counts.
+    """
     if job["render"].get("background") is None:
-        return None, 0.0
+        return None, {}
+    r = job["render"]
+    settings = BackgroundSettings.from_dict(r["background"])
     family = _load_family(job)
     keys = background_keys(family, job)
     needed = list(dict.fromkeys(keys[:frames]))
+    list(render_backgrounds(job, family, keys, needed[:1]))  # warm-up: JIT compilation
     t0 = time.perf_counter()
     out = {bg.key: bg for bg in render_backgrounds(job, family, keys, needed)}
-    return out, (time.perf_counter() - t0) / len(needed)
+    total = time.perf_counter() - t0
+    # C alone, to split the total
+    scene = family.build_scene()
+    first = keys.index(needed[0])
+    family.set_background(scene, first, settings.interval_s)
+    cam = difference_camera(_render_camera(job)[1], settings.shared_difference)
+    t0 = time.perf_counter()
+    render_transport(scene, cam, spp=r["spp"], seed=1, max_depth=r["max_depth"] or None)
+    seconds_c = time.perf_counter() - t0
+    converged_needed = {
+        family.background_key(keys.index(k), settings.interval_s, at=at)
+        for k in needed
+        for at in (0.0, 1.0)
+    }
+    seconds_converged = max(total - len(needed) * seconds_c, 0.0) / len(converged_needed)
+    n_converged = len(
+        {
+            family.background_key(i, settings.interval_s, at=at)
+            for i in range(job["num_frames"])
+            for at in (0.0, 1.0)
+        }
+    )
+    n_backgrounds = len(job["backgrounds"])
+    return out, {
+        "converged_renders": n_converged,
+        "seconds_per_converged_render": seconds_converged,
+        "seconds_per_same_seed_render": seconds_c,
+        "seconds_all_backgrounds": n_converged * seconds_converged + n_backgrounds * seconds_c,
+    }
 
 
 def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> dict:
@@ -101,7 +141,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
     rendered_texels = traced_cam.num_detectors * rows * cols
     detector_samples = camera.num_detectors * rows * cols * r["spp"]
 
-    backgrounds, seconds_per_background = time_backgrounds(job, frames)
+    backgrounds, background_costs = time_backgrounds(job, frames)
     render_shard(job, 0, backgrounds)  # warm-up: scene build, JIT, kernel recording
     ours = []
     for _ in range(repeats):
@@ -148,7 +188,8 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
         plain.append(time.perf_counter() - t0)
     med, pmed = statistics.median(ours), statistics.median(plain)
     n_backgrounds = len(job.get("backgrounds", []))
-    amortized_s = med / frames + n_backgrounds * seconds_per_background / job["num_frames"]
+    background_s = background_costs.get("seconds_all_backgrounds", 0.0)
+    amortized_s = med / frames + background_s / job["num_frames"]
     return {
         "family": name,
         "detectors": camera.num_detectors,
@@ -164,7 +205,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
         "dataset_frames": job["num_frames"],
         "differential": job["render"].get("background"),
         "backgrounds": n_backgrounds,
-        "seconds_per_background": seconds_per_background,
+        **background_costs,
         "frames_per_s_with_backgrounds": 1.0 / amortized_s,
         "frames_per_s": frames / med,
         "frames_per_s_min_max": [frames / max(ours), frames / min(ours)],
@@ -239,8 +280,10 @@ def main() -> None:
         )
         if row["differential"]:
             print(
-                f"  differential: {row['backgrounds']} backgrounds for {row['dataset_frames']} "
-                f"frames at {row['seconds_per_background']:.1f} s each: "
+                f"  differential: {row['backgrounds']} backgrounds ({row['converged_renders']} "
+                f"converged renders at {row['seconds_per_converged_render']:.1f} s, "
+                f"{row['seconds_per_same_seed_render']:.2f} s per C) for "
+                f"{row['dataset_frames']} frames: "
                 f"{row['frames_per_s_with_backgrounds']:.2f} frames/s including backgrounds"
             )
     memory = None

@@ -42,7 +42,8 @@ from .generators.base import LabelKind, LabelSpec
 log = logging.getLogger(__name__)
 
 FORMAT_NAME = "mincam_render.transport_dataset"
-FORMAT_VERSION = 1
+#: 2: differential backgrounds carry B_1 (window end) and frames interpolate daylight.
+FORMAT_VERSION = 2
 MANIFEST_NAME = "manifest.json"
 SHARD_DIR = "shards"
 #: Static backgrounds of differentially rendered datasets (mincam_render.differential).

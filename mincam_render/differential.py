@@ -2,30 +2,42 @@ r"""Differential rendering: a converged static background plus what the movers c
 
 Most of an indoor scene does not move: people and a door change a few per cent
 of the light a detector receives, while walls, furniture, lamps and daylight
-stay put. A frame's transport image is estimated as
+stay put or drift slowly. A frame at time ``t`` in the background window
+``[t_0, t_0 + \Delta)`` (``interval_s``) is estimated as
 
 .. math::
 
-    \hat T(\text{frame}) = B + X(\text{frame}; s) - C(s)
+    \hat T(\text{frame}) = (1 - \alpha) B_0 + \alpha B_1 + X(\text{frame}; s) - C(s),
+    \qquad \alpha = (t - t_0) / \Delta
 
-- ``B``: the frame's *background* (its scene with the movers removed, the
-  frame's lights, the daylight of the start of its ``interval_s`` window),
-  rendered once per background at many samples and the full path depth;
-- ``X``: the frame itself, at few samples, path depth ``d`` and seed ``s``;
-- ``C``: the background at the same samples, depth and seed ``s`` as ``X``.
+- ``B_0``, ``B_1``: the frame's *background* (its scene with the movers removed
+  and the frame's lights) with the daylight of the start and of the end of the
+  window, each rendered once at many samples and the full path depth. The end
+  of one window is the start of the next, so each is rendered once. Linear
+  interpolation follows the daylight's slow drift (a few per cent of the light
+  per minute in the time-lapsed workspace) to second order; the fidelity
+  module measures what it leaves;
+- ``X``: the frame's movers, door and lights with the daylight of ``t_0``, at
+  few samples, path depth ``d`` (the fidelity module uses the backgrounds')
+  and seed ``s``;
+- ``C``: the background at ``t_0`` with the same samples, depth and seed ``s``.
 
-``X`` and ``C`` use common random numbers (same seed, same wavefront): a path
-that never meets a mover is the same path in both, so it cancels exactly, and
-the noise of ``X - C`` comes only from paths that meet a person or the door.
-``E[X - C]`` is the light the movers change, so the estimate is unbiased up to
-the movers' effect on bounces deeper than ``d`` (measured by
-:mod:`mincam_render.fidelity`). This is Debevec's differential rendering (1998)
-with common random numbers instead of a photographed background.
+``X`` and ``C`` see the same daylight and use common random numbers (same seed,
+same wavefront): a path that never meets a mover is the same path in both, so it
+cancels exactly, and the noise of ``X - C`` comes only from paths that meet a
+person or the door. ``E[X - C]`` is the light the movers change at ``t_0``, so
+the estimate is unbiased up to the movers' effect on bounces deeper than ``d``,
+the change of that effect within the window, and the interpolation of the
+background (the interpolation is measured by :mod:`mincam_render.fidelity`,
+and every term by its check against a plain reference). This is Debevec's
+differential rendering (1998) with common random numbers instead of a
+photographed background.
 
 With several detectors, ``X - C`` can be rendered once from the board centre
-and added to every detector's own ``B`` (``shared_difference``): parallax then
-acts on the movers' change only, a few per cent of the light, while ``B`` keeps
-each detector's exact view; the fidelity module measures the error this adds.
+and added to every detector's own background (``shared_difference``): parallax
+then acts on the movers' change only, a few per cent of the light, while ``B``
+keeps each detector's exact view; the fidelity module measures the error this
+adds.
 
 All frames of one background share the seed ``s`` (so ``C`` is rendered once),
 which makes the residual noise of ``X - C`` correlated across those frames;
@@ -85,21 +97,30 @@ class Background:
         key: the family's background key.
         interval_s: the window the key was made with (s).
         seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
-        converged_w: ``B``, many samples, full depth, ``[detector, row, col]``.
-        same_seed_w: ``C``, the frames' samples, depth and seed; ``[1, row, col]``
-            (board centre) when the difference is shared by all detectors.
+        converged_w: ``B_0``, the window's start, many samples, full depth.
+        converged_end_w: ``B_1``, the window's end (the next window's start).
+        same_seed_w: ``C``, the frames' samples, depth and seed at the window's
+            start; ``[1, row, col]`` (board centre) when the difference is shared.
     """
 
     key: str
     interval_s: float
     seed: int
     converged_w: np.ndarray
+    converged_end_w: np.ndarray
     same_seed_w: np.ndarray
 
     @property
     def shared_difference(self) -> bool:
         """Whether frames render ``X`` once, from the board centre (``C`` has one detector)."""
         return self.same_seed_w.shape[0] == 1 < self.converged_w.shape[0]
+
+    def at(self, fraction: float) -> np.ndarray:
+        """``(1 - fraction) B_0 + fraction B_1`` in float64 (W)."""
+        b0 = self.converged_w.astype(np.float64)
+        if fraction == 0.0:
+            return b0
+        return b0 + fraction * (self.converged_end_w.astype(np.float64) - b0)
 
 
 def difference_camera(camera: FreeformCamera, shared: bool) -> FreeformCamera:
@@ -113,6 +134,11 @@ def background_seed(dataset_seed: int, key: str) -> int:
     return int.from_bytes(digest[:8], "little") & (2**63 - 1)
 
 
+def converged_seed(dataset_seed: int, key: str) -> int:
+    """Seed of the converged render of the static scene ``key`` (start or end of a window)."""
+    return background_seed(background_seed(dataset_seed, key), "converged")
+
+
 def render_background(
     family,
     scene,
@@ -123,8 +149,11 @@ def render_background(
     dataset_seed: int,
     spp: int,
     max_depth: int | None,
+    converged_cache: dict[str, np.ndarray] | None = None,
 ) -> Background:
-    """Render the background of frame ``index`` (``B`` and ``C``); leaves ``scene`` at it.
+    """Render the background of frame ``index`` (``B_0``, ``B_1`` and ``C``).
+
+    Leaves ``scene`` at the background's start.
 
     Args:
         family: a family with ``has_background``.
@@ -135,19 +164,28 @@ def render_background(
         dataset_seed: the dataset's seed (``s`` derives from it and the key).
         spp: the frames' samples per texel (for ``C``).
         max_depth: the frames' path depth (for ``C``; None: the scene's integrator).
+        converged_cache: ``{static scene key: B}`` of converged renders already
+            made with these settings (read and extended): the end of a window is
+            the start of the next, with the same key and seed, so the same array.
     """
     from .transport import render_transport
 
+    cache = {} if converged_cache is None else converged_cache
+    converged = []
+    for at in (1.0, 0.0):  # the start last: the scene is left there
+        static_key = family.background_key(index, settings.interval_s, at=at)
+        family.set_background(scene, index, settings.interval_s, at=at)
+        if static_key not in cache:
+            cache[static_key] = render_transport(
+                scene,
+                camera,
+                spp=settings.spp,
+                seed=converged_seed(dataset_seed, static_key),
+                max_depth=settings.max_depth,
+            )
+        converged.append(cache[static_key])
     key = family.background_key(index, settings.interval_s)
     seed = background_seed(dataset_seed, key)
-    family.set_background(scene, index, settings.interval_s)
-    converged = render_transport(
-        scene,
-        camera,
-        spp=settings.spp,
-        seed=background_seed(seed, "converged"),
-        max_depth=settings.max_depth,
-    )
     same_seed = render_transport(
         scene,
         difference_camera(camera, settings.shared_difference),
@@ -159,7 +197,8 @@ def render_background(
         key=key,
         interval_s=settings.interval_s,
         seed=seed,
-        converged_w=converged,
+        converged_w=converged[1],
+        converged_end_w=converged[0],
         same_seed_w=same_seed,
     )
 
@@ -174,7 +213,7 @@ def render_frame(
     spp: int,
     max_depth: int | None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """``(B + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
+    """``((1 - a) B_0 + a B_1 + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
 
     Raises:
         ValueError: ``background`` is not frame ``index``'s.
@@ -184,7 +223,7 @@ def render_frame(
     key = family.background_key(index, background.interval_s)
     if key != background.key:
         raise ValueError(f"frame {index} has background {key!r}, not {background.key!r}")
-    labels = family.set_frame(scene, index)
+    labels = family.set_frame_in_window(scene, index, background.interval_s)
     x = render_transport(
         scene,
         difference_camera(camera, background.shared_difference),
@@ -193,5 +232,6 @@ def render_frame(
         max_depth=max_depth,
     )
     # [1, R, C] differences broadcast over the detectors' own backgrounds
-    estimate = background.converged_w.astype(np.float64) + x - background.same_seed_w
+    fraction = family.window_fraction(index, background.interval_s)
+    estimate = background.at(fraction) + x - background.same_seed_w
     return estimate.astype(np.float32), labels

@@ -20,6 +20,15 @@ sequence, at fixed seeds) and decides:
   error of measurements, estimated from two renders with different seeds at a
   pilot sample count, falls as ``1/sqrt(spp)``; the choice is then checked
   against a reference at 8x the samples;
+- **differential rendering** (families with a static background, see
+  :mod:`mincam_render.differential`) when its cost per frame, counted in paths
+  traced with the backgrounds amortized, is lower than the plain
+  render's. Its settings come from an error budget of ``PLAN_ERROR_SHARE`` of
+  the target: the biases are measured first (sharing ``X - C`` from the board
+  centre, interpolating the daylight within a window), and the noises of
+  ``X - C`` and of the backgrounds share what is left in the cheapest split
+  (:func:`_split_noise_budget`); ``X - C`` is traced as deep as the
+  backgrounds; the choice is checked against a reference;
 - **storage float16** when the relative measurement error it adds (per-frame
   power-of-two scaling, see :mod:`mincam_render.dataset`) stays below
   ``dtype_error_bound`` for random printable masks, else float32;
@@ -70,19 +79,26 @@ SHARED_ERROR_SHARE = 0.5
 FULL_SPP = 64
 #: Rays per side of the grid cast to estimate scene depth.
 DEPTH_GRID = 16
-#: Differential rendering: share of the target error given to the converged
-#: background ``B`` and to the per-frame difference ``X - C`` (in quadrature ~1).
-BACKGROUND_ERROR_SHARE = 0.5
-DIFFERENCE_ERROR_SHARE = 0.85
 #: Cap on the background's spp.
 MAX_BACKGROUND_SPP = 16384
-#: spp of the renders that measure how deep ``X - C`` must go: the change the
-#: movers make to deep bounces is small, so its estimate needs more samples than
-#: the pilot's for its own noise to stay below the bound.
-DIFFERENCE_DEPTH_SPP = 32
+#: spp of the two renders whose difference gives the noise of ``X - C``: more than
+#: PILOT_SPP, because the rare paths that find the sunlit floor make its noise
+#: heavy-tailed and a small pilot underestimates it.
+DIFFERENCE_PILOT_SPP = 16
+#: Times the differential spp are raised when the check against the reference
+#: misses the target (each by the squared ratio of the error found to the planned).
+MAX_SPP_RAISES = 2
+#: spp of the frame render that relative errors of ``X - C`` are taken against.
+DIFFERENCE_BASE_SPP = 32
+#: Differential settings are planned for this share of the target error; the rest
+#: covers the uncertainty of figures measured on a few probe frames.
+PLAN_ERROR_SHARE = 0.9
 #: spp of the renders that measure the parallax error of one ``X - C`` for all
 #: detectors (a difference of noise levels: it needs noise well below the bound).
 SHARED_DIFFERENCE_SPP = 128
+#: spp cap of the renders that measure the daylight interpolation of backgrounds
+#: (common random numbers: the drift's change, not noise, dominates).
+INTERPOLATION_SPP = 256
 
 
 def _scene_max_depth(scene) -> int | None:
@@ -326,8 +342,8 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         spp, max_depth = diff["frame_spp"], diff["frame_max_depth"]
 
     # ---- check against a reference -------------------------------------------------------
-    if background is not None:
-        chosen = np.stack(
+    def differential_probes():
+        return np.stack(
             [
                 _differential_probe(
                     family, scene, render_cam, i, request, background, spp, max_depth, shared, k
@@ -335,7 +351,10 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
                 for i in probes
             ]
         )
-        ref_spp = min(MAX_REFERENCE_SPP, 2 * background["spp"])
+
+    if background is not None:
+        chosen = differential_probes()
+        ref_spp = MAX_REFERENCE_SPP
         ref_depth = background["max_depth"]
     else:
         chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)
@@ -343,13 +362,44 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         ref_depth = max_depth
     if auto:
         ref = render(render_cam, spp=ref_spp, seed_offset=3, max_depth=ref_depth, shared=shared)
-        check = {
-            "error_vs_reference": measurement_relative_error(chosen, ref, lo_hi),
-            "reference_spp": ref_spp,
-        }
+        error = measurement_relative_error(chosen, ref, lo_hi)
+        # the reference's own Monte Carlo error is part of the figure
+        ref_noise = e_pilot * math.sqrt(PILOT_SPP / ref_spp) if e_pilot is not None else 0.0
+        check = {"error_vs_reference": error, "reference_spp": ref_spp}
         if e_pilot is not None:
-            # the reference's own Monte Carlo error, part of the figure above
-            check["reference_noise_rms"] = e_pilot * math.sqrt(PILOT_SPP / ref_spp)
+            check["reference_noise_rms"] = ref_noise
+        if background is not None:
+            raises = []
+            own_spp = request.spp is None, request.background_spp is None
+            for _ in range(MAX_SPP_RAISES if any(own_spp) else 0):
+                found = math.sqrt(max(error["rms"] ** 2 - ref_noise**2, 0.0))
+                if found <= request.target_error:
+                    break
+                factor = (found / (PLAN_ERROR_SHARE * request.target_error)) ** 2
+                if own_spp[0]:
+                    spp = _round_up_spp(spp * factor, MAX_AUTO_SPP)
+                if own_spp[1]:
+                    background["spp"] = _round_up_spp(
+                        background["spp"] * factor, MAX_BACKGROUND_SPP
+                    )
+                raises.append(
+                    {
+                        "error_found_rms": found,
+                        "frame_spp": spp,
+                        "background_spp": background["spp"],
+                    }
+                )
+                chosen = differential_probes()
+                error = measurement_relative_error(chosen, ref, lo_hi)
+            if raises:
+                check["spp_raised"] = raises
+                check["error_vs_reference"] = error
+                diff["frame_spp"] = decisions["spp"]["value"] = spp
+                diff["background_spp"] = background["spp"]
+                diff["reason"] += (
+                    f"; raised to {spp} spp (backgrounds {background['spp']}) after the check "
+                    "against the reference missed the target"
+                )
         (diff if background is not None else decisions["spp"]).update(check)
 
     # ---- storage type ------------------------------------------------------------------
@@ -401,15 +451,20 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     return settings, decisions
 
 
-def _path_segments(depth: int | None) -> int:
-    """Path segments per sample at ``depth`` (None, the scene's: as the deep reference)."""
-    return DEEP_REFERENCE_DEPTH if depth is None else depth
+def _spp_for(error_at_pilot: float, target: float, cap: int, steps_per_octave: int = 1) -> int:
+    """Smallest spp whose predicted error (1/sqrt(spp)) meets ``target`` (rounded up)."""
+    return _round_up_spp(PILOT_SPP * (error_at_pilot / target) ** 2, cap, steps_per_octave)
 
 
-def _spp_for(error_at_pilot: float, target: float, cap: int) -> int:
-    """Smallest power of two of spp whose predicted error (1/sqrt(spp)) meets ``target``."""
-    need = PILOT_SPP * (error_at_pilot / target) ** 2
-    return int(min(cap, 2 ** max(0, math.ceil(math.log2(max(need, 1.0))))))
+def _round_up_spp(need: float, cap: int, steps_per_octave: int = 4) -> int:
+    """``need`` rounded up to a power of two, in [1, cap].
+
+    With ``steps_per_octave`` = 4: to ``m 2^e`` with ``m`` in 4..7 (at most 25 % above).
+    """
+    need = max(need, 1.0)
+    octave = 2 ** math.floor(math.log2(need))
+    step = max(octave // steps_per_octave, 1)
+    return int(min(cap, step * math.ceil(need / step - 1e-9)))
 
 
 def _differential_probe(
@@ -433,6 +488,76 @@ def _differential_probe(
     return np.repeat(t, k, axis=0) if shared else t
 
 
+def _split_noise_budget(target, biases, difference, background) -> dict[str, Any]:
+    """Share the error left by ``biases`` between the noises of ``X - C`` and of ``B``.
+
+    Errors add in quadrature: ``target^2 = sum(bias^2) + x^2 + y^2`` with ``x``
+    the noise of ``X - C`` and ``y`` that of the background. With ``x = a_x
+    sqrt(PILOT_SPP / spp_x)`` and cost ``c_x spp_x`` per frame (likewise for
+    ``y``), the cheapest split has ``x^2 / y^2 = a_x sqrt(c_x) / (a_y sqrt(c_y))``.
+    A noise whose spp is set by a flag takes its share first.
+
+    Args:
+        target: target relative measurement error.
+        biases: ``{name: rms}`` of the fixed (sample-independent) errors.
+        difference: ``(noise at PILOT_SPP, cost per sample per frame, spp flag or None)``.
+        background: the same for the background.
+
+    Returns:
+        ``{"target", **biases, "difference_noise", "background_noise",
+        "biases_exceed_target"}``: the noise each may have.
+    """
+    fixed2 = sum(b * b for b in biases.values())
+    # biases eating the budget leave each noise at least a tenth of the target
+    left2 = max(target * target - fixed2, 0.1 * target * target)
+    noises = {"difference_noise": difference, "background_noise": background}
+    shares = {
+        name: pilot * math.sqrt(PILOT_SPP / flag)
+        for name, (pilot, _, flag) in noises.items()
+        if flag is not None
+    }
+    free = [(name, pilot, cost) for name, (pilot, cost, flag) in noises.items() if flag is None]
+    rest2 = max(left2 - sum(v * v for v in shares.values()), 0.05 * left2)
+    weights = {name: pilot * math.sqrt(max(cost, 1e-12)) for name, pilot, cost in free}
+    total = sum(weights.values()) or 1.0
+    for name, w in weights.items():
+        shares[name] = math.sqrt(rest2 * w / total)
+    return {
+        "target": target,
+        **biases,
+        **shares,
+        "biases_exceed_target": fixed2 > 0.9 * target * target,
+    }
+
+
+def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
+    """Error of the background halfway through the probes' windows, interpolated from its ends.
+
+    ``B`` at the start, the middle and the end of each probe frame's window with
+    one seed (common random numbers, so the figure is the interpolation's, not
+    noise), at ``INTERPOLATION_SPP``.
+    """
+    from .render_job import frame_seed
+    from .transport import render_transport
+
+    spp = INTERPOLATION_SPP
+    ends, middles = [], []
+    for i in probes:
+        renders = []
+        for at in (0.0, 0.5, 1.0):
+            family.set_background(scene, i, interval, at=at)
+            renders.append(
+                render_transport(scene, camera, spp=spp, seed=frame_seed(i, 17), max_depth=depth)
+            )
+        ends.append(0.5 * (renders[0] + renders[2]))
+        middles.append(renders[1])
+    return {
+        "error": measurement_relative_error(np.stack(ends), np.stack(middles), lo_hi),
+        "probe_spp": spp,
+        "at": 0.5,
+    }
+
+
 def _decide_differential(
     family,
     scene,
@@ -448,9 +573,10 @@ def _decide_differential(
 
     Measured on the probe frames with common random numbers (``X`` and ``C`` with
     one seed): the bias of truncating ``X - C`` at each candidate depth against
-    the plain depth, the noise of ``X - C`` from two seeds, and the cost per
-    frame of both estimators from the pilot renders' times (backgrounds
-    amortized over the frames sharing them).
+    the plain depth, the noise of ``X - C`` from two seeds, the daylight
+    interpolation of the backgrounds; then the error budget gives the spp of
+    frames and backgrounds, and the cost per frame of both estimators (paths
+    traced, backgrounds amortized over the dataset) decides.
     """
     from .differential import difference_camera
     from .render_job import Fidelity, frame_seed
@@ -488,7 +614,9 @@ def _decide_differential(
         }
 
     keys = {family.background_key(i, interval) for i in range(family.num_frames)}
+    ends = {family.background_key(i, interval, at=1.0) for i in range(family.num_frames)}
     record["backgrounds"] = len(keys)
+    record["converged_renders"] = len(keys | ends)
     deep = max_depth or None
 
     def pair(depth, seed_offset, spp, camera=render_cam):
@@ -496,24 +624,18 @@ def _decide_differential(
         xs, cs = [], []
         for i in probes:
             seed = (frame_seed(request.seed, i) + 7919 * (seed_offset + 11)) % 2**63
-            family.set_frame(scene, i)
+            family.set_frame_in_window(scene, i, interval)
             xs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
             family.set_background(scene, i, interval)
             cs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
         return np.stack(xs), np.stack(cs)
 
-    x_ref, c_ref = pair(deep, 0, DIFFERENCE_DEPTH_SPP)
-    d_ref = x_ref - c_ref
-    changes = {}
+    # X - C is traced as deep as the backgrounds: truncating it would bias the
+    # movers' change and save little, since a path costs about the same at any
+    # depth once Russian roulette and escapes through the window set in
+    # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12)
     frame_depth = deep
-    candidates = [d for d in CANDIDATE_DEPTHS if deep is None or d < deep]
-    if request.max_depth is None:
-        for depth in candidates:
-            x, c = pair(depth, 0, DIFFERENCE_DEPTH_SPP)
-            changes[depth] = measurement_relative_error(x_ref + (x - c) - d_ref, x_ref, lo_hi)
-            if changes[depth]["rms"] < request.indirect_fraction:
-                frame_depth = depth
-                break
+    x_ref, _ = pair(deep, 0, DIFFERENCE_BASE_SPP)
     # one render of X - C from the board centre for all detectors? Its parallax
     # error p is measured against the noise of independent seeds:
     # e_shared^2 ~ noise^2 + p^2 and e_noise^2 ~ noise^2 (same spp, independent seeds)
@@ -542,45 +664,75 @@ def _decide_differential(
             "bound": bound,
         }
     diff_cam = centre_cam if shared_difference else render_cam
-    x1, c1 = pair(frame_depth, 1, PILOT_SPP, diff_cam)
-    x2, c2 = pair(frame_depth, 2, PILOT_SPP, diff_cam)
-    # [N, 1, R, C] differences broadcast over the detectors when shared
-    e_diff = measurement_relative_error(x_ref + x1 - c1, x_ref + x2 - c2, lo_hi)["rms"] / math.sqrt(
-        2.0
+    x1, c1 = pair(frame_depth, 1, DIFFERENCE_PILOT_SPP, diff_cam)
+    x2, c2 = pair(frame_depth, 2, DIFFERENCE_PILOT_SPP, diff_cam)
+    # [N, 1, R, C] differences broadcast over the detectors when shared; the
+    # noise is reported at PILOT_SPP like the others
+    e_diff = (
+        measurement_relative_error(x_ref + x1 - c1, x_ref + x2 - c2, lo_hi)["rms"]
+        / math.sqrt(2.0)
+        * math.sqrt(DIFFERENCE_PILOT_SPP / PILOT_SPP)
+    )
+    e_bg = e_plain if e_plain is not None else e_diff
+    interpolation = _interpolation_error(family, scene, render_cam, probes, interval, deep, lo_hi)
+    # the error budget: the biases measured above are fixed; the two noises share
+    # what is left, split to minimize the cost per frame (see _split_noise_budget)
+    parallax = record.get("shared_difference", {}).get("parallax_error_rms", 0.0)
+    biases = {
+        "shared_difference_parallax": parallax if shared_difference else 0.0,
+        "daylight_interpolation": interpolation["error"]["rms"],
+    }
+    # cost in paths traced per frame (samples x detectors rendered, backgrounds
+    # amortized): a deterministic stand-in for time (wall-clock figures would make
+    # two plans of one request differ). Paths, not path segments: measured on the
+    # workspace, a path costs about the same at depth 4 as at depth 12 (Russian
+    # roulette, escapes through the window, per-path camera and light sampling)
+    frame_paths = diff_cam.num_detectors
+    background_paths = k * len(keys | ends) / family.num_frames
+    planned_error = PLAN_ERROR_SHARE * request.target_error
+    budget = _split_noise_budget(
+        planned_error,
+        biases,
+        (e_diff, frame_paths, request.spp),
+        (e_bg, background_paths, request.background_spp),
     )
     frame_spp = (
         request.spp
         if request.spp is not None
-        else _spp_for(e_diff, DIFFERENCE_ERROR_SHARE * request.target_error, MAX_AUTO_SPP)
+        else _spp_for(e_diff, budget["difference_noise"], MAX_AUTO_SPP, 4)
     )
-    e_bg = e_plain if e_plain is not None else e_diff
+    # the background takes what the frame's rounded-up spp left
+    budget = _split_noise_budget(
+        planned_error,
+        biases,
+        (e_diff, frame_paths, frame_spp),
+        (e_bg, background_paths, request.background_spp),
+    )
     background_spp = (
         request.background_spp
         if request.background_spp is not None
-        else _spp_for(e_bg, BACKGROUND_ERROR_SHARE * request.target_error, MAX_BACKGROUND_SPP)
+        else _spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
     )
-    # cost in traced path segments per frame (samples x path depth x detectors
-    # rendered): a deterministic stand-in for time (wall-clock figures would make
-    # two plans of one request differ), slightly unfair to shallow depths, whose
-    # paths are never cut short by Russian roulette
-    frame_cost = frame_spp * _path_segments(frame_depth) * diff_cam.num_detectors
-    background_cost = background_spp * _path_segments(deep) * k + frame_cost
-    cost_diff = frame_cost + len(keys) / family.num_frames * background_cost
-    cost_plain = plain_spp * _path_segments(deep) * k
+    frame_cost = frame_spp * frame_paths
+    background_cost = len(keys | ends) * background_spp * k + len(keys) * frame_cost
+    cost_diff = frame_cost + background_cost / family.num_frames
+    cost_plain = plain_spp * k
     record.update(
         {
             "frame_max_depth": 0 if frame_depth is None else frame_depth,
             "frame_spp": frame_spp,
             "background_spp": background_spp,
-            "difference_change_vs_depth": {str(d): c for d, c in changes.items()},
             "difference_pilot_error_rms": e_diff,
+            "daylight_interpolation": interpolation,
+            "error_budget": budget,
             "predicted_error_rms": math.hypot(
                 e_diff * math.sqrt(PILOT_SPP / frame_spp),
                 e_bg * math.sqrt(PILOT_SPP / background_spp),
+                *biases.values(),
             ),
             "cost_per_frame": cost_diff,
             "plain_cost_per_frame": cost_plain,
-            "cost_unit": "samples x path depth x detectors per texel, backgrounds amortized",
+            "cost_unit": "paths per texel (samples x detectors rendered), backgrounds amortized",
         }
     )
     if request.differential:
@@ -590,8 +742,10 @@ def _decide_differential(
         reason = (
             f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp"
             f"{' from the board centre' if shared_difference else ''} (difference noise "
-            f"{e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) at "
-            f"{background_spp} spp: cost {cost_diff:.4g} vs plain {plain_spp} spp "
-            f"{cost_plain:.4g} (samples x depth x detectors per texel)"
+            f"{e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) from "
+            f"{len(keys | ends)} converged renders at {background_spp} spp, daylight "
+            f"interpolated within {interval:g} s windows (error "
+            f"{interpolation['error']['rms']:.3g} rms halfway): cost {cost_diff:.4g} vs plain "
+            f"{plain_spp} spp {cost_plain:.4g} (paths per texel)"
         )
     return {"value": value, "source": source, "reason": reason, **record}

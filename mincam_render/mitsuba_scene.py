@@ -230,8 +230,17 @@ def with_mask_geometry(
     return out
 
 
+#: Name of a mesh's per-vertex albedo attribute (see :func:`mesh`).
+VERTEX_ALBEDO = "vertex_albedo"
+
+
 def mesh(
-    name: str, vertices_m, faces, *, reflectance: float, radiance_w_m2_sr: float | None = None
+    name: str,
+    vertices_m,
+    faces,
+    *,
+    reflectance,
+    radiance_w_m2_sr: float | None = None,
 ):
     """A triangle mesh object (e.g. from trimesh) with a diffuse BSDF, for a scene dict.
 
@@ -242,7 +251,8 @@ def mesh(
         name: Mitsuba object id.
         vertices_m: ``(V, 3)`` vertex positions (m).
         faces: ``(F, 3)`` vertex indices.
-        reflectance: diffuse albedo, 0-1.
+        reflectance: diffuse albedo, 0-1: one number, or one per vertex (``(V,)``,
+            interpolated over faces; updatable via ``"<dict key>.vertex_albedo"``).
         radiance_w_m2_sr: makes the mesh an area emitter (W m^-2 sr^-1).
     """
     import numpy as np
@@ -250,8 +260,18 @@ def mesh(
     use_variant()
     v = np.asarray(vertices_m, dtype=np.float32)
     f = np.asarray(faces, dtype=np.uint32)
+    albedo = np.asarray(reflectance, dtype=np.float32)
+    if albedo.ndim and albedo.shape != (len(v),):
+        raise ValueError(
+            f"mesh {name!r}: reflectance of shape {albedo.shape}: allowed a number or one "
+            f"per vertex ({len(v)},)"
+        )
     props = mi.Properties()
-    props["bsdf"] = mi.load_dict(diffuse(reflectance))
+    props["bsdf"] = mi.load_dict(
+        {"type": "diffuse", "reflectance": {"type": "mesh_attribute", "name": VERTEX_ALBEDO}}
+        if albedo.ndim
+        else diffuse(float(albedo))
+    )
     if radiance_w_m2_sr is not None:
         props["emitter"] = mi.load_dict(
             {"type": "area", "radiance": {"type": "rgb", "value": float(radiance_w_m2_sr)}}
@@ -264,6 +284,8 @@ def mesh(
         has_vertex_texcoords=False,
         props=props,
     )
+    if albedo.ndim:
+        m.add_attribute(VERTEX_ALBEDO, 1, mi.Float(albedo))
     params = mi.traverse(m)
     params["vertex_positions"] = mi.Float(v.ravel())
     params["faces"] = mi.UInt32(f.ravel())

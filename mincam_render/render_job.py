@@ -385,8 +385,12 @@ def background_keys(family, job: dict) -> list[str]:
     return [family.background_key(i, interval) for i in range(job["num_frames"])]
 
 
-#: The two arrays of a background file pair: B and C (see mincam_render.differential).
-_BACKGROUND_PARTS = ("converged", "same_seed")
+#: The arrays of a background: B_0, B_1 and C (see mincam_render.differential).
+_BACKGROUND_PARTS = ("converged", "converged_end", "same_seed")
+#: Converged renders kept for reuse while rendering backgrounds in order (the
+#: end of a window is the start of the next; lights switching back and forth
+#: revisit recent ones).
+_CONVERGED_CACHE_SIZE = 8
 
 
 def _background_path(out: Path, index: int, part: str) -> Path:
@@ -414,6 +418,7 @@ def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
     first_frame: dict[str, int] = {}
     for i, key in enumerate(keys):
         first_frame.setdefault(key, i)
+    cache: dict[str, np.ndarray] = {}
     for key in wanted:
         yield render_background(
             family,
@@ -424,7 +429,10 @@ def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
             dataset_seed=job["seed"],
             spp=r["spp"],
             max_depth=r["max_depth"] or None,
+            converged_cache=cache,
         )
+        while len(cache) > _CONVERGED_CACHE_SIZE:
+            cache.pop(next(iter(cache)))
 
 
 def ensure_backgrounds(
@@ -433,7 +441,8 @@ def ensure_backgrounds(
     """Render (in this process) every background of ``manifest`` that is missing or corrupt.
 
     Each is written atomically as ``backgrounds/background-NNNNN-converged.npy``
-    (``B``) and ``...-same_seed.npy`` (``C``), float32 ``[detector, row, col]``,
+    (``B_0``), ``...-converged_end.npy`` (``B_1``) and ``...-same_seed.npy``
+    (``C``), float32 ``[detector, row, col]``,
     and recorded with its key, seed and the files' sha256 in
     ``manifest["backgrounds"]``.
 
@@ -454,7 +463,8 @@ def ensure_backgrounds(
         rec = records[b]
         if rec is not None:
             intact = rec["key"] == key and all(
-                (out / rec[part]).is_file()
+                part in rec
+                and (out / rec[part]).is_file()
                 and ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
                 for part in _BACKGROUND_PARTS
             )
@@ -474,7 +484,9 @@ def ensure_backgrounds(
         for b, bg in zip(todo, render_backgrounds(job, family, keys, wanted), strict=True):
             record = {"index": b, "key": bg.key, "seed": bg.seed}
             for part, array in zip(
-                _BACKGROUND_PARTS, (bg.converged_w, bg.same_seed_w), strict=True
+                _BACKGROUND_PARTS,
+                (bg.converged_w, bg.converged_end_w, bg.same_seed_w),
+                strict=True,
             ):
                 data = ds.npy_bytes(np.asarray(array, dtype="<f4"))
                 path = _background_path(out, b, part)
@@ -503,12 +515,13 @@ def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
         rec = index.get(key)
         if rec is None:
             raise ds.DatasetError(f"{out}: background {key!r} has not been rendered")
-        b, c = (np.load(out / rec[part]) for part in _BACKGROUND_PARTS)
+        b0, b1, c = (np.load(out / rec[part]) for part in _BACKGROUND_PARTS)
         out_map[key] = Background(
             key=key,
             interval_s=settings.interval_s,
             seed=int(rec["seed"]),
-            converged_w=b,
+            converged_w=b0,
+            converged_end_w=b1,
             same_seed_w=c,
         )
     return out_map
@@ -654,6 +667,12 @@ def _open_or_plan(request: RenderRequest, out: Path) -> dict:
         raise ds.DatasetError(f"--out {out} exists and is not a directory")
     if manifest_path.is_file():
         manifest = ds.read_manifest(out)
+        if manifest.get("format_version", 0) != ds.FORMAT_VERSION:
+            raise ds.DatasetError(
+                f"{out} was rendered by another mincam_render (dataset format version "
+                f"{manifest.get('format_version', 0)}, this one writes {ds.FORMAT_VERSION}); "
+                "it can be read but not resumed: render into another --out directory"
+            )
         _, description, _ = _describe_family(request)
         identity = request.identity(description)
         if manifest["request"] != identity:

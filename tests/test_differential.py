@@ -56,14 +56,72 @@ def test_background_seed_is_a_pure_function_of_seed_and_key():
 
 
 def test_frames_without_movers_cancel_exactly(variant):
-    """Common random numbers: X and C are the same paths, so B + X - C == B bit for bit."""
-    fam = load_family("workspace", seed=0, num_frames=4, overrides=EMPTY_ROOM)
-    assert fam.track.active[0].sum() == 0 and fam.track.door_angle_rad[0] == 0.0
+    """Common random numbers: X and C are the same paths, so the estimate is the
+    interpolated background bit for bit, also late in a window whose daylight drifts."""
+    fam = load_family("workspace", seed=0, num_frames=60, overrides={**EMPTY_ROOM, "fps": 1.0})
+    index = 40
+    assert fam.track.active[index].sum() == 0 and fam.track.door_angle_rad[index] == 0.0
     scene, cam = fam.build_scene(), _small(fam.camera())
     settings = BackgroundSettings(interval_s=60.0, spp=16, max_depth=6)
-    bg = render_background(fam, scene, cam, 0, settings, dataset_seed=1, spp=4, max_depth=3)
-    t, _ = render_frame(fam, scene, cam, 0, bg, spp=4, max_depth=3)
-    np.testing.assert_array_equal(t, bg.converged_w)
+    bg = render_background(fam, scene, cam, index, settings, dataset_seed=1, spp=4, max_depth=3)
+    fraction = fam.window_fraction(index, 60.0)
+    assert fraction == pytest.approx(40 / 60)
+    t, _ = render_frame(fam, scene, cam, index, bg, spp=4, max_depth=3)
+    np.testing.assert_array_equal(t, bg.at(fraction).astype(np.float32))
+    # the daylight does drift within the window (so X uses the window's start, not t)
+    assert np.abs(bg.converged_end_w - bg.converged_w).sum() > 0.01 * np.abs(bg.converged_w).sum()
+
+
+def test_window_fraction_follows_the_displayed_daylight(variant):
+    """0 at a window's start, (t - t0) / interval inside, on the daylight's update grid."""
+    fam = load_family(
+        "workspace", seed=0, num_frames=200, overrides={"fps": 4.0, "daylight_update_s": 2.0}
+    )
+    for index, expected in ((0, 0.0), (40, 0.0), (47, 0.0), (48, 0.2), (79, 0.8)):
+        # t = index / 4 s; windows of 10 s from t0 = 10 s on; daylight shown every 2 s
+        assert fam.window_fraction(index, 10.0) == pytest.approx(expected)
+    with pytest.raises(ValueError, match="interval_s"):
+        fam.window_fraction(3, 0.0)
+    with pytest.raises(ValueError, match="at = "):
+        fam.background_key(3, 10.0, at=1.5)
+
+
+def test_window_end_is_the_next_windows_start(variant):
+    """B_1 of a window is B_0 of the next (same key, same seed): reused, and identical
+    when rendered anew."""
+    fam = load_family("workspace", seed=0, num_frames=120, overrides={"fps": 1.0})
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    settings = BackgroundSettings(interval_s=30.0, spp=4, max_depth=3)
+    first, second = 0, 30
+    assert fam.state(first).lights_on == fam.state(second).lights_on
+    assert fam.background_key(first, 30.0, at=1.0) == fam.background_key(second, 30.0)
+    cache: dict = {}
+    kw = {"dataset_seed": 5, "spp": 2, "max_depth": 3}
+    a = render_background(fam, scene, cam, first, settings, converged_cache=cache, **kw)
+    assert len(cache) == 2
+    b = render_background(fam, scene, cam, second, settings, converged_cache=cache, **kw)
+    assert len(cache) == 3  # the shared end/start was rendered once
+    assert b.converged_w is a.converged_end_w
+    fresh = render_background(fam, scene, cam, second, settings, **kw)
+    np.testing.assert_array_equal(fresh.converged_w, a.converged_end_w)
+    np.testing.assert_array_equal(fresh.same_seed_w, b.same_seed_w)
+
+
+def test_interpolated_background_tracks_the_drifting_daylight(variant):
+    """Halfway through a window, (B_0 + B_1) / 2 matches the background rendered at
+    that time far better than B_0 does."""
+    fam = load_family("workspace", seed=0, num_frames=4)
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    lo_hi = cam.transmittance_range
+    renders = []
+    for at in (0.0, 0.5, 1.0):
+        fam.set_background(scene, 0, 60.0, at=at)
+        renders.append(render_transport(scene, cam, spp=256, seed=3, max_depth=6)[None])
+    start, middle, end = renders
+    interpolated = ds.measurement_relative_error(0.5 * (start + end), middle, lo_hi)["rms"]
+    held = ds.measurement_relative_error(start, middle, lo_hi)["rms"]
+    assert held > 0.01  # 30 s of the time-lapsed day moves the light by per cents
+    assert interpolated < 0.1 * held
 
 
 @pytest.mark.parametrize("shared", [False, True])
@@ -80,9 +138,11 @@ def test_frame_is_background_plus_difference_per_detector_or_shared(variant, sha
     diff_cam = difference_camera(cam, shared)
     assert bg.converged_w.shape == (cam.num_detectors, 8, 8)
     assert bg.same_seed_w.shape == (diff_cam.num_detectors, 8, 8)
-    fam.set_frame(scene, index)
+    fam.set_frame_in_window(scene, index, settings.interval_s)
     x = render_transport(scene, diff_cam, spp=2, seed=bg.seed, max_depth=3)
-    expected = bg.converged_w.astype(np.float64) + x - bg.same_seed_w
+    fraction = fam.window_fraction(index, settings.interval_s)
+    expected = (1 - fraction) * bg.converged_w.astype(np.float64) + fraction * bg.converged_end_w
+    expected += x - bg.same_seed_w
     np.testing.assert_allclose(t, expected.astype(np.float32), rtol=1e-6, atol=0)
     assert t.shape == (cam.num_detectors, 8, 8)
     assert np.any(x != bg.same_seed_w)  # the people do change the light
@@ -172,10 +232,11 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
     assert len(job["backgrounds"]) >= 3  # 24 s at 1 fps in 10 s windows, plus light switches
     seeds = {}
     for rec in manifest["backgrounds"]:
-        for part in ("converged", "same_seed"):
+        for part in ("converged", "converged_end", "same_seed"):
             assert ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
-        # B per detector; C (and every X) once from the board centre
+        # B_0 and B_1 per detector; C (and every X) once from the board centre
         assert np.load(out / rec["converged"]).shape == (2, 8, 8)
+        assert np.load(out / rec["converged_end"]).shape == (2, 8, 8)
         assert np.load(out / rec["same_seed"]).shape == (1, 8, 8)
         seeds[rec["key"]] = rec["seed"]
     for shard in manifest["shards"]:
@@ -258,3 +319,31 @@ def test_ray_renders_differential_datasets_byte_identically(differential_dataset
     for rec in ds.read_manifest(out)["shards"]:
         for name in ("transport", "metadata"):
             assert (tmp_path / "ray" / rec[name]).read_bytes() == (out / rec[name]).read_bytes()
+
+
+def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
+    """x^2 + y^2 + biases^2 = target^2, and no other split of the noises costs less."""
+    from mincam_render.fidelity import PILOT_SPP, _split_noise_budget
+
+    target, biases = 0.01, {"depth": 0.004, "interp": 0.003}
+    diff, bg = (0.0075, 4.0, None), (0.0975, 0.15, None)
+    b = _split_noise_budget(target, biases, diff, bg)
+    x, y = b["difference_noise"], b["background_noise"]
+    assert x**2 + y**2 + 0.004**2 + 0.003**2 == pytest.approx(target**2)
+
+    def cost(x):  # spp needed for noise x (continuous), times the cost per sample
+        y = np.sqrt(target**2 - 0.004**2 - 0.003**2 - x**2)
+        return PILOT_SPP * (diff[0] / x) ** 2 * diff[1] + PILOT_SPP * (bg[0] / y) ** 2 * bg[1]
+
+    grid = np.linspace(0.05, 0.99, 500) * np.sqrt(target**2 - 0.004**2 - 0.003**2)
+    assert cost(x) <= cost(grid).min() * (1 + 1e-6)
+    assert not b["biases_exceed_target"]
+    # a flag fixes one noise; the other takes the rest
+    fixed = _split_noise_budget(target, biases, (0.0075, 4.0, 16), bg)
+    assert fixed["difference_noise"] == pytest.approx(0.0075 * np.sqrt(PILOT_SPP / 16))
+    assert fixed["difference_noise"] ** 2 + fixed["background_noise"] ** 2 == pytest.approx(
+        target**2 - 0.004**2 - 0.003**2
+    )
+    # biases beyond the target are reported, and the noises still get a floor
+    over = _split_noise_budget(target, {"depth": 0.02}, diff, bg)
+    assert over["biases_exceed_target"] and over["difference_noise"] > 0

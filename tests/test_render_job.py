@@ -186,6 +186,18 @@ def test_mismatched_configuration_is_refused(tmp_path, tiny_request, variant):
     assert "different configuration" in res.output and "Traceback" not in res.output
 
 
+def test_dataset_of_an_older_format_is_read_but_not_resumed(tmp_path, tiny_request, variant):
+    out = tmp_path / "ds"
+    render_dataset(tiny_request, out, workers=0)
+    m = ds.read_manifest(out)
+    m["format_version"] = ds.FORMAT_VERSION - 1
+    m["shards"][2], m["complete"] = None, False
+    ds.write_manifest(out, m)
+    assert ds.read_manifest(out)["format_version"] == ds.FORMAT_VERSION - 1
+    with pytest.raises(ds.DatasetError, match="can be read but not resumed"):
+        render_dataset(tiny_request, out, workers=0)
+
+
 def test_non_empty_directory_without_manifest_is_refused(tmp_path, tiny_request):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(ds.DatasetError, match="not empty"):

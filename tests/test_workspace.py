@@ -226,3 +226,46 @@ def test_bad_descriptions_are_rejected(tmp_path, text, field):
         load_family(path, seed=0, num_frames=1)
     assert str(path) in str(err.value)
     assert field in str(err.value)
+
+
+def test_applying_only_what_changed_renders_as_a_fresh_scene(family):
+    """A scene taken through other frames (lights, door, people, daylight skipped when
+    unchanged) renders bit for bit like a fresh scene set to the last frame."""
+    import dataclasses
+
+    from mincam_render.transport import render_transport
+
+    cam = dataclasses.replace(family.camera(), mask_resolution=(4, 4))
+    busy = [i for i in range(NUM_FRAMES) if len(family.state(i).people) >= 2]
+    last = busy[-1]
+    walked = family.build_scene()
+    for i in (busy[0], 0, busy[len(busy) // 2], last, last):
+        family.set_frame(walked, i)
+    family.set_frame_in_window(walked, last, 60.0)  # other daylight, then back
+    family.set_frame(walked, last)
+    fresh = family.build_scene()
+    family.set_frame(fresh, last)
+    a = render_transport(walked, cam, spp=4, seed=2, max_depth=3)
+    b = render_transport(fresh, cam, spp=4, seed=2, max_depth=3)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
+    import mitsuba as mi
+
+    from mincam_render.generators.indoor import PEOPLE_ALBEDO_PARAM, PEOPLE_VERTICES_PARAM
+
+    scene = family.build_scene()
+    state = IndoorState(people=((PERSON, Pose(2.0, 2.0)),), lights_on=family.state(0).lights_on)
+    family.apply_state(scene, state)
+    params = mi.traverse(scene)
+    layout = family.rig.people
+    albedo = np.asarray(params[PEOPLE_ALBEDO_PARAM])
+    vertices = np.asarray(params[PEOPLE_VERTICES_PARAM]).reshape(-1, 3)
+    upper, lower, skin = layout.part_sizes
+    np.testing.assert_allclose(albedo[layout.slot(0)][:upper], PERSON.upper_albedo)
+    np.testing.assert_allclose(albedo[layout.slot(0)][upper : upper + lower], PERSON.lower_albedo)
+    np.testing.assert_allclose(albedo[layout.slot(0)][upper + lower :], PERSON.skin_albedo)
+    assert vertices[layout.slot(0)][:, 2].min() > -0.01  # standing on the floor
+    assert np.all(vertices[layout.slot(1)][:, 2] < -10.0)  # unused slots parked below it
+    np.testing.assert_allclose(albedo[layout.slot(1)], 0.3)

@@ -150,17 +150,42 @@ class SceneFamily(abc.ABC):
     #: (:meth:`background_key`, :meth:`set_background`), for differential rendering.
     has_background: ClassVar[bool] = False
 
-    def background_key(self, index: int, interval_s: float) -> str:
+    def background_key(self, index: int, interval_s: float, *, at: float = 0.0) -> str:
         """Identity of frame ``index``'s static background (its scene without movers).
 
         Frames with equal keys share one background: the lights of the frame and
         the slowly changing light (daylight) of the start of its ``interval_s``
-        window. See :mod:`mincam_render.differential`.
+        window. ``at`` in [0, 1] gives the key of the same lights with the
+        daylight at that position in the window (1: its end, the next window's
+        start). See
+        :mod:`mincam_render.differential`.
         """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
-    def set_background(self, scene: mi.Scene, index: int, interval_s: float) -> None:
-        """Set ``scene`` to the static background of frame ``index`` (movers removed)."""
+    def set_background(
+        self, scene: mi.Scene, index: int, interval_s: float, *, at: float = 0.0
+    ) -> None:
+        """Set ``scene`` to the static background of frame ``index`` (movers removed).
+
+        ``at``: with the daylight at this position in the frame's window (0 its
+        start, 1 its end).
+        """
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
+    def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
+        """Set ``scene`` to frame ``index`` lit by its background's slow light; return labels.
+
+        The movers, door and lights of the frame, with the daylight of the start
+        of its ``interval_s`` window (the ``X`` of differential rendering).
+        """
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
+    def window_fraction(self, index: int, interval_s: float) -> float:
+        """Where frame ``index``'s daylight lies in its window, in [0, 1).
+
+        0 at the window's start; the frame's background is interpolated
+        linearly between the start and the end of the window with this weight.
+        """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
     def time_s(self, index: int) -> float:
