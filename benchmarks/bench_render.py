@@ -3,7 +3,7 @@
 Usage:
     python benchmarks/bench_render.py [--out benchmarks/results/render.json]
         [--families patches workspace] [--frames 64] [--dataset-frames 0] [--repeats 3]
-        [--memory-frames 2000] [--rss-every 100] [--threads 0]
+        [--memory-frames 2000] [--rss-every 100] [--threads 0] [--workers CORES]
 
 For each available scene family at its default camera: plans the render with
 ``--fidelity auto`` (the decisions and their measured errors go into the JSON),
@@ -15,7 +15,11 @@ write) and reports frames/s and detector-samples/s (median and spread). A plain
 sensor of as many pixels as rendered texels and the same spp and integrator, is
 timed alongside: ``overhead = ours / plain - 1``. For differentially rendered
 frames the rays are those of ``X`` (one board-centre detector when the
-difference is shared).
+difference is shared). Both run in one process on every core. Then
+``--workers`` processes, the cores shared among them as ``mincam-render
+render`` runs them by default, render a shard each at once:
+``frames_per_s_workers`` (one worker's scene updates and kernel tracing, which
+run on one core, overlap with another's rendering).
 
 Differentially rendered families (:mod:`mincam_render.differential`) render their
 static backgrounds once per dataset: the plan is made for ``--dataset-frames``
@@ -23,7 +27,8 @@ frames (e.g. 68000, the paper's workspace training set), the backgrounds of
 the timed frames are rendered and timed apart (converged renders and ``C``
 separately), and ``frames_per_s_with_backgrounds`` charges every frame its
 share of all the dataset's backgrounds (its count of converged renders, about
-one per background since a window's end is the next one's start, and of ``C``).
+one per background since a window's end is the next one's start, and of ``C``)
+on top of ``1 / frames_per_s_workers``.
 
 Memory: renders ``--memory-frames`` frames of the first family in ONE process
 (no worker recycling, the harshest case) and samples the resident set size
@@ -123,9 +128,36 @@ def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, dict]:
     }
 
 
-def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> dict:
+def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None) -> list[float]:
+    """Wall seconds of ``workers`` processes rendering shards 0..workers-1 at once.
+
+    As ``mincam-render render`` runs them: spawned processes, the cores shared
+    among them (:func:`render_job._worker_init`); a warm-up round first.
+    """
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, wait
+
+    from mincam_render.render_job import _threads_per_worker, _worker_init
+
+    shards = range(workers)
+    walls = []
+    with ProcessPoolExecutor(
+        max_workers=workers,
+        mp_context=mp.get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(_threads_per_worker(workers), None, None),
+    ) as pool:
+        for round_ in range(repeats + 1):
+            t0 = time.perf_counter()
+            wait([pool.submit(render_shard, job, i, backgrounds) for i in shards])
+            if round_:  # round 0 warms up: scene build, JIT, kernel recording
+                walls.append(time.perf_counter() - t0)
+    return walls
+
+
+def bench_family(name: str, frames: int, repeats: int, dataset_frames: int, workers: int) -> dict:
     request = RenderRequest(
-        family=name, num_frames=max(frames, 8, dataset_frames), shard_frames=frames
+        family=name, num_frames=max(frames * workers, 8, dataset_frames), shard_frames=frames
     )
     t0 = time.perf_counter()
     manifest = plan_render(request)
@@ -141,7 +173,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
     rendered_texels = traced_cam.num_detectors * rows * cols
     detector_samples = camera.num_detectors * rows * cols * r["spp"]
 
-    backgrounds, background_costs = time_backgrounds(job, frames)
+    backgrounds, background_costs = time_backgrounds(job, frames * workers)
     render_shard(job, 0, backgrounds)  # warm-up: scene build, JIT, kernel recording
     ours = []
     for _ in range(repeats):
@@ -187,9 +219,11 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
         plain_pass()
         plain.append(time.perf_counter() - t0)
     med, pmed = statistics.median(ours), statistics.median(plain)
+    walls = time_workers(job, workers, repeats, backgrounds)
+    workers_fps = workers * frames / statistics.median(walls)
     n_backgrounds = len(job.get("backgrounds", []))
     background_s = background_costs.get("seconds_all_backgrounds", 0.0)
-    amortized_s = med / frames + background_s / job["num_frames"]
+    amortized_s = 1.0 / workers_fps + background_s / job["num_frames"]
     return {
         "family": name,
         "detectors": camera.num_detectors,
@@ -209,6 +243,12 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int) -> d
         "frames_per_s_with_backgrounds": 1.0 / amortized_s,
         "frames_per_s": frames / med,
         "frames_per_s_min_max": [frames / max(ours), frames / min(ours)],
+        "workers": workers,
+        "frames_per_s_workers": workers_fps,
+        "frames_per_s_workers_min_max": [
+            workers * frames / max(walls),
+            workers * frames / min(walls),
+        ],
         "detector_samples_per_s": frames * detector_samples / med,
         "plain_mitsuba_frames_per_s": frames / pmed,
         "overhead_ratio": med / pmed,
@@ -255,6 +295,12 @@ def main() -> None:
         help="frames of the planned dataset (amortizes differential backgrounds); 0 = --frames",
     )
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes of the parallel timing (default: the render command's)",
+    )
     ap.add_argument("--memory-frames", type=int, default=2000)
     ap.add_argument("--rss-every", type=int, default=100)
     ap.add_argument("--threads", type=int, default=0, help="Dr.Jit threads (0 = all cores)")
@@ -265,7 +311,7 @@ def main() -> None:
     results, skipped = [], {}
     for name in args.families or FAMILY_NAMES:
         try:
-            row = bench_family(name, args.frames, args.repeats, args.dataset_frames)
+            row = bench_family(name, args.frames, args.repeats, args.dataset_frames, args.workers)
         except Exception as err:  # a family still being written, missing SUMO, ...
             skipped[name] = f"{type(err).__name__}: {err}"
             print(f"{name}: skipped ({skipped[name][:160]})")
@@ -276,7 +322,8 @@ def main() -> None:
             f"{row['mask_resolution'][1]} x {row['spp']} spp (shared={row['shared_render']}, "
             f"max_depth={row['max_depth']}, {row['dtype']}): {row['frames_per_s']:.1f} frames/s, "
             f"{row['detector_samples_per_s'] / 1e6:.2f} M detector-samples/s; plain Mitsuba "
-            f"{row['plain_mitsuba_frames_per_s']:.1f} frames/s; ratio {row['overhead_ratio']:.2f}"
+            f"{row['plain_mitsuba_frames_per_s']:.1f} frames/s; ratio {row['overhead_ratio']:.2f}; "
+            f"{row['workers']} workers: {row['frames_per_s_workers']:.1f} frames/s"
         )
         if row["differential"]:
             print(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from pathlib import Path
 
@@ -833,9 +834,10 @@ def _render_settings(ctx, param, values):
 @click.option(
     "--workers",
     type=click.IntRange(0, 256),
-    default=1,
-    show_default=True,
-    help="Local worker processes (0 = in this process).",
+    default=None,
+    help="Local worker processes, the cores shared among them (0 = in this process; "
+    "default: one per CPU core, which overlaps one worker's scene updates and kernel "
+    "tracing with another's rendering).",
 )
 @click.option(
     "--ray",
@@ -910,7 +912,11 @@ def render_cmd(
             dtype_error_bound=dtype_error,
         )
         summary = render_dataset(
-            request, out, workers=workers, ray_address=ray_address, progress=not no_progress
+            request,
+            out,
+            workers=(os.cpu_count() or 1) if workers is None else workers,
+            ray_address=ray_address,
+            progress=not no_progress,
         )
     except (ValueError, DatasetError, RenderError, OSError, ImportError) as err:
         raise click.ClickException(str(err)) from None

@@ -920,9 +920,10 @@ def _run_processes(
     if progress_q is not None:
         drainer = threading.Thread(target=drain, daemon=True)
         drainer.start()
+    workers = min(workers, len(todo))  # and the cores go to the workers that run
     threads = _threads_per_worker(workers)
     executor = ProcessPoolExecutor(
-        max_workers=min(workers, len(todo)),
+        max_workers=workers,
         mp_context=ctx,
         initializer=_worker_init,
         initargs=(threads, progress_q, os.getpid()),

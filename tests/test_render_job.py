@@ -103,9 +103,12 @@ def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
         for q in (f, f.with_suffix(".npy"))
     }
 
-    p = _cli([*CLI_TINY, "--out", str(killed), "--workers", "1"])
+    # resumed with the default workers: one per core
+    p = _cli([*CLI_TINY, "--out", str(killed)])
     out, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
+    log = [json.loads(line) for line in (killed / ds.LOG_NAME).read_text().splitlines()]
+    assert [e["workers"] for e in log if e["event"] == "start"][-1] == (os.cpu_count() or 1)
     got, want = _files(killed), _files(ref)
     assert sorted(got) == sorted(want)
     for name in want:
