@@ -26,9 +26,9 @@ static backgrounds once per dataset: the plan is made for ``--dataset-frames``
 frames (e.g. 68000, the paper's workspace training set), the backgrounds of
 the timed frames are rendered and timed apart (converged renders and ``C``
 separately), and ``frames_per_s_with_backgrounds`` charges every frame its
-share of all the dataset's backgrounds (its count of converged renders, about
-one per background since a window's end is the next one's start, and of ``C``)
-on top of ``1 / frames_per_s_workers``.
+share of all the dataset's backgrounds (its count of converged components,
+each light alone and the daylight at every window end, and of ``C`` per
+background) on top of ``1 / frames_per_s_workers``.
 
 Memory: renders ``--memory-frames`` frames of the first family in ONE process
 (no worker recycling, the harshest case) and samples the resident set size
@@ -73,6 +73,16 @@ def git_revision() -> str:
         return "unknown"
 
 
+def cpu_times() -> tuple[int, int]:
+    """``(steal, total)`` CPU ticks of the machine so far (``/proc/stat``; zeros elsewhere)."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return 0, 0
+    return (fields[7] if len(fields) > 7 else 0), sum(fields)
+
+
 def rss_bytes() -> int:
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
@@ -81,11 +91,10 @@ def rss_bytes() -> int:
 def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, dict]:
     """Backgrounds of the first ``frames`` frames of a differential job, and their costs.
 
-    A background is two converged renders (``B_0``, ``B_1``: its window's start
-    and end) and one render of ``C``; the end of a window is the next one's
-    start, so a dataset makes about one converged render per background. The
-    converged renders and ``C`` are timed apart (after a warm-up) and charged
-    by the dataset's own counts.
+    A background is a weighted sum of converged components (each light alone,
+    the daylight at the ends of its window) shared between backgrounds, plus
+    one render of ``C``. Components and ``C`` are timed apart (after a
+    warm-up) and charged by the dataset's own counts.
     """
     if job["render"].get("background") is None:
         return None, {}
@@ -100,31 +109,21 @@ def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, dict]:
     total = time.perf_counter() - t0
     # C alone, to split the total
     scene = family.build_scene()
-    first = keys.index(needed[0])
-    family.set_background(scene, first, settings.interval_s)
+    family.set_background(scene, keys.index(needed[0]), settings.interval_s)
     cam = difference_camera(_render_camera(job)[1], settings.shared_difference)
-    t0 = time.perf_counter()
-    render_transport(scene, cam, spp=r["spp"], seed=1, max_depth=r["max_depth"] or None)
-    seconds_c = time.perf_counter() - t0
-    converged_needed = {
-        family.background_key(keys.index(k), settings.interval_s, at=at)
-        for k in needed
-        for at in (0.0, 1.0)
-    }
-    seconds_converged = max(total - len(needed) * seconds_c, 0.0) / len(converged_needed)
-    n_converged = len(
-        {
-            family.background_key(i, settings.interval_s, at=at)
-            for i in range(job["num_frames"])
-            for at in (0.0, 1.0)
-        }
-    )
+    for _ in range(2):  # the first call may compile (a new scene object)
+        t0 = time.perf_counter()
+        render_transport(scene, cam, spp=r["spp"], seed=1, max_depth=r["max_depth"] or None)
+        seconds_c = time.perf_counter() - t0
+    components_needed = {c for bg in out.values() for c in bg.components}
+    seconds_component = max(total - len(needed) * seconds_c, 0.0) / max(len(components_needed), 1)
+    n_components = len(job["background_components"])
     n_backgrounds = len(job["backgrounds"])
     return out, {
-        "converged_renders": n_converged,
-        "seconds_per_converged_render": seconds_converged,
+        "converged_renders": n_components,
+        "seconds_per_converged_render": seconds_component,
         "seconds_per_same_seed_render": seconds_c,
-        "seconds_all_backgrounds": n_converged * seconds_converged + n_backgrounds * seconds_c,
+        "seconds_all_backgrounds": n_components * seconds_component + n_backgrounds * seconds_c,
     }
 
 
@@ -310,8 +309,13 @@ def main() -> None:
         dr.set_thread_count(args.threads)
     results, skipped = [], {}
     for name in args.families or FAMILY_NAMES:
+        steal0, total0 = cpu_times()
         try:
             row = bench_family(name, args.frames, args.repeats, args.dataset_frames, args.workers)
+            steal1, total1 = cpu_times()
+            # CPU time the hypervisor gave to other machines: timings of a
+            # shared host vary with it (same code, 1.7x slower at 13 % steal)
+            row["cpu_steal_fraction"] = (steal1 - steal0) / max(total1 - total0, 1)
         except Exception as err:  # a family still being written, missing SUMO, ...
             skipped[name] = f"{type(err).__name__}: {err}"
             print(f"{name}: skipped ({skipped[name][:160]})")
@@ -323,7 +327,8 @@ def main() -> None:
             f"max_depth={row['max_depth']}, {row['dtype']}): {row['frames_per_s']:.1f} frames/s, "
             f"{row['detector_samples_per_s'] / 1e6:.2f} M detector-samples/s; plain Mitsuba "
             f"{row['plain_mitsuba_frames_per_s']:.1f} frames/s; ratio {row['overhead_ratio']:.2f}; "
-            f"{row['workers']} workers: {row['frames_per_s_workers']:.1f} frames/s"
+            f"{row['workers']} workers: {row['frames_per_s_workers']:.1f} frames/s "
+            f"(CPU steal {100 * row['cpu_steal_fraction']:.0f} %)"
         )
         if row["differential"]:
             print(

@@ -791,7 +791,8 @@ def _render_settings(ctx, param, values):
     type=click.FloatRange(1e-3, 1e6),
     default=60.0,
     show_default=True,
-    help="Scene seconds one static background's daylight stands for (--differential).",
+    help="Scene seconds between the daylight components a background is interpolated "
+    "between (--differential).",
 )
 @click.option(
     "--shared-difference/--per-detector-difference",

@@ -7,22 +7,27 @@ stay put or drift slowly. A frame at time ``t`` in the background window
 
 .. math::
 
-    \hat T(\text{frame}) = (1 - \alpha) B_0 + \alpha B_1 + X(\text{frame}; s) - C(s),
+    \hat T(\text{frame}) = B(t) + X(\text{frame}; s) - C(s), \qquad
+    B(t) = (1 - \alpha) D(t_0) + \alpha D(t_0 + \Delta) + \sum_{i\,\text{on}} L_i,
     \qquad \alpha = (t - t_0) / \Delta
 
-- ``B_0``, ``B_1``: the frame's *background* (its scene with the movers removed
-  and the frame's lights) with the daylight of the start and of the end of the
-  window, each rendered once at many samples and the full path depth. The end
-  of one window is the start of the next, so each is rendered once. Linear
-  interpolation follows the daylight's slow drift (a few per cent of the light
-  per minute in the time-lapsed workspace) to second order; the fidelity
-  module measures what it leaves;
+- ``B(t)``: the frame's *background* (its scene with the movers removed and the
+  frame's lights), as a weighted sum of *components* rendered once per
+  dataset at many samples and the full path depth (light transport is linear
+  in the emitters): ``D``, the daylight with every light off, at the ends of
+  the window (the end of one window is the start of the next), and ``L_i``,
+  light ``i`` alone. Lights switching on and off then cost no new render, and
+  linear interpolation follows the daylight's slow drift (a few per cent of the
+  light per minute in the time-lapsed workspace) to second order; the fidelity
+  module measures what it leaves. The family names the components and their
+  weights (``background_components``);
 - ``X``: the frame's movers, door and lights with the daylight of ``t_0``, at
   few samples, path depth ``d`` (the fidelity module uses the backgrounds')
   and seed ``s``;
-- ``C``: the background at ``t_0`` with the same samples, depth and seed ``s``.
+- ``C``: the background at ``t_0`` (the frame's lights) with the same samples,
+  depth and seed ``s``.
 
-``X`` and ``C`` see the same daylight and use common random numbers (same seed,
+``X`` and ``C`` see the same light and use common random numbers (same seed,
 same wavefront): a path that never meets a mover is the same path in both, so it
 cancels exactly, and the noise of ``X - C`` comes only from paths that meet a
 person or the door. ``E[X - C]`` is the light the movers change at ``t_0``, so
@@ -97,8 +102,9 @@ class Background:
         key: the family's background key.
         interval_s: the window the key was made with (s).
         seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
-        converged_w: ``B_0``, the window's start, many samples, full depth.
-        converged_end_w: ``B_1``, the window's end (the next window's start).
+        components: ``{component key: converged render}`` of every component its
+            frames use (many samples, full depth, per detector; shared with
+            other backgrounds).
         same_seed_w: ``C``, the frames' samples, depth and seed at the window's
             start; ``[1, row, col]`` (board centre) when the difference is shared.
     """
@@ -106,21 +112,35 @@ class Background:
     key: str
     interval_s: float
     seed: int
-    converged_w: np.ndarray
-    converged_end_w: np.ndarray
+    components: dict[str, np.ndarray]
     same_seed_w: np.ndarray
 
     @property
     def shared_difference(self) -> bool:
         """Whether frames render ``X`` once, from the board centre (``C`` has one detector)."""
-        return self.same_seed_w.shape[0] == 1 < self.converged_w.shape[0]
+        return self.same_seed_w.shape[0] == 1 < self.detectors
 
-    def at(self, fraction: float) -> np.ndarray:
-        """``(1 - fraction) B_0 + fraction B_1`` in float64 (W)."""
-        b0 = self.converged_w.astype(np.float64)
-        if fraction == 0.0:
-            return b0
-        return b0 + fraction * (self.converged_end_w.astype(np.float64) - b0)
+    @property
+    def detectors(self) -> int:
+        """Detectors of the converged renders (those of ``C`` when there are none)."""
+        for array in self.components.values():
+            return array.shape[0]
+        return self.same_seed_w.shape[0]
+
+    def converged(self, weights: dict[str, float]) -> np.ndarray:
+        """``sum_j w_j R_j`` in float64 (W) for ``{component key: weight}``.
+
+        Raises:
+            ValueError: a component is not among :attr:`components`.
+        """
+        missing = sorted(set(weights) - set(self.components))
+        if missing:
+            raise ValueError(f"background {self.key!r} has no component(s) {missing}")
+        total = np.zeros((self.detectors, *self.same_seed_w.shape[1:]), dtype=np.float64)
+        for key, w in sorted(weights.items()):  # a fixed order: same bytes every time
+            if w != 0.0:
+                total += w * self.components[key].astype(np.float64)
+        return total
 
 
 def difference_camera(camera: FreeformCamera, shared: bool) -> FreeformCamera:
@@ -134,9 +154,25 @@ def background_seed(dataset_seed: int, key: str) -> int:
     return int.from_bytes(digest[:8], "little") & (2**63 - 1)
 
 
-def converged_seed(dataset_seed: int, key: str) -> int:
-    """Seed of the converged render of the static scene ``key`` (start or end of a window)."""
-    return background_seed(background_seed(dataset_seed, key), "converged")
+def component_seed(dataset_seed: int, key: str) -> int:
+    """Seed of the converged render of background component ``key``."""
+    return background_seed(dataset_seed, f"component|{key}")
+
+
+def render_component(
+    family, scene, camera: FreeformCamera, key: str, settings: BackgroundSettings, *, dataset_seed
+) -> np.ndarray:
+    """The converged render of background component ``key`` (``[detector, row, col]``, W)."""
+    from .transport import render_transport
+
+    family.set_background_component(scene, key)
+    return render_transport(
+        scene,
+        camera,
+        spp=settings.spp,
+        seed=component_seed(dataset_seed, key),
+        max_depth=settings.max_depth,
+    )
 
 
 def render_background(
@@ -149,43 +185,39 @@ def render_background(
     dataset_seed: int,
     spp: int,
     max_depth: int | None,
-    converged_cache: dict[str, np.ndarray] | None = None,
+    component_cache: dict[str, np.ndarray] | None = None,
 ) -> Background:
-    """Render the background of frame ``index`` (``B_0``, ``B_1`` and ``C``).
+    """Render the background of frame ``index``: its components and ``C``.
 
     Leaves ``scene`` at the background's start.
 
     Args:
         family: a family with ``has_background``.
         scene: the family's scene (Mitsuba), updated in place.
-        camera: the dataset's camera (``B`` is rendered per detector).
+        camera: the dataset's camera (components are rendered per detector).
         index: any frame of the background.
-        settings: how ``B`` is rendered.
-        dataset_seed: the dataset's seed (``s`` derives from it and the key).
+        settings: how components are rendered.
+        dataset_seed: the dataset's seed (seeds derive from it and the keys).
         spp: the frames' samples per texel (for ``C``).
         max_depth: the frames' path depth (for ``C``; None: the scene's integrator).
-        converged_cache: ``{static scene key: B}`` of converged renders already
-            made with these settings (read and extended): the end of a window is
-            the start of the next, with the same key and seed, so the same array.
+        component_cache: ``{component key: render}`` already made with these
+            settings (read and extended): components are shared between
+            backgrounds, and a key's seed is fixed, so a cached render is the
+            one a new render would give.
     """
     from .transport import render_transport
 
-    cache = {} if converged_cache is None else converged_cache
-    converged = []
-    for at in (1.0, 0.0):  # the start last: the scene is left there
-        static_key = family.background_key(index, settings.interval_s, at=at)
-        family.set_background(scene, index, settings.interval_s, at=at)
-        if static_key not in cache:
-            cache[static_key] = render_transport(
-                scene,
-                camera,
-                spp=settings.spp,
-                seed=converged_seed(dataset_seed, static_key),
-                max_depth=settings.max_depth,
+    cache = {} if component_cache is None else component_cache
+    # every frame of this background uses the same components (its lights, its window)
+    parts = family.background_components(index, settings.interval_s)
+    for part in parts:
+        if part not in cache:
+            cache[part] = render_component(
+                family, scene, camera, part, settings, dataset_seed=dataset_seed
             )
-        converged.append(cache[static_key])
     key = family.background_key(index, settings.interval_s)
     seed = background_seed(dataset_seed, key)
+    family.set_background(scene, index, settings.interval_s)
     same_seed = render_transport(
         scene,
         difference_camera(camera, settings.shared_difference),
@@ -197,8 +229,7 @@ def render_background(
         key=key,
         interval_s=settings.interval_s,
         seed=seed,
-        converged_w=converged[1],
-        converged_end_w=converged[0],
+        components={part: cache[part] for part in parts},
         same_seed_w=same_seed,
     )
 
@@ -213,7 +244,7 @@ def render_frame(
     spp: int,
     max_depth: int | None,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """``((1 - a) B_0 + a B_1 + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
+    """``(B(t) + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
 
     Raises:
         ValueError: ``background`` is not frame ``index``'s.
@@ -232,6 +263,6 @@ def render_frame(
         max_depth=max_depth,
     )
     # [1, R, C] differences broadcast over the detectors' own backgrounds
-    fraction = family.window_fraction(index, background.interval_s)
-    estimate = background.at(fraction) + x - background.same_seed_w
+    converged = background.converged(family.background_components(index, background.interval_s))
+    estimate = converged + x - background.same_seed_w
     return estimate.astype(np.float32), labels

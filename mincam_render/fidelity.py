@@ -613,10 +613,15 @@ def _decide_differential(
             **record,
         }
 
-    keys = {family.background_key(i, interval) for i in range(family.num_frames)}
-    ends = {family.background_key(i, interval, at=1.0) for i in range(family.num_frames)}
+    keys: set[str] = set()
+    components: set[str] = set()
+    for i in range(family.num_frames):
+        key = family.background_key(i, interval)
+        if key not in keys:
+            keys.add(key)
+            components.update(family.background_components(i, interval))
     record["backgrounds"] = len(keys)
-    record["converged_renders"] = len(keys | ends)
+    record["converged_renders"] = len(components)
     deep = max_depth or None
 
     def pair(depth, seed_offset, spp, camera=render_cam):
@@ -688,7 +693,7 @@ def _decide_differential(
     # workspace, a path costs about the same at depth 4 as at depth 12 (Russian
     # roulette, escapes through the window, per-path camera and light sampling)
     frame_paths = diff_cam.num_detectors
-    background_paths = k * len(keys | ends) / family.num_frames
+    background_paths = k * len(components) / family.num_frames
     planned_error = PLAN_ERROR_SHARE * request.target_error
     budget = _split_noise_budget(
         planned_error,
@@ -714,7 +719,7 @@ def _decide_differential(
         else _spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
     )
     frame_cost = frame_spp * frame_paths
-    background_cost = len(keys | ends) * background_spp * k + len(keys) * frame_cost
+    background_cost = len(components) * background_spp * k + len(keys) * frame_cost
     cost_diff = frame_cost + background_cost / family.num_frames
     cost_plain = plain_spp * k
     record.update(
@@ -743,7 +748,7 @@ def _decide_differential(
             f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp"
             f"{' from the board centre' if shared_difference else ''} (difference noise "
             f"{e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) from "
-            f"{len(keys | ends)} converged renders at {background_spp} spp, daylight "
+            f"{len(components)} converged components at {background_spp} spp, daylight "
             f"interpolated within {interval:g} s windows (error "
             f"{interpolation['error']['rms']:.3g} rms halfway): cost {cost_diff:.4g} vs plain "
             f"{plain_spp} spp {cost_plain:.4g} (paths per texel)"

@@ -385,16 +385,22 @@ def background_keys(family, job: dict) -> list[str]:
     return [family.background_key(i, interval) for i in range(job["num_frames"])]
 
 
-#: The arrays of a background: B_0, B_1 and C (see mincam_render.differential).
-_BACKGROUND_PARTS = ("converged", "converged_end", "same_seed")
-#: Converged renders kept for reuse while rendering backgrounds in order (the
-#: end of a window is the start of the next; lights switching back and forth
-#: revisit recent ones).
-_CONVERGED_CACHE_SIZE = 8
+def background_components(family, job: dict) -> dict[str, list[str]]:
+    """``{background key: its component keys}`` of a differential job, in first-use order."""
+    interval = job["render"]["background"]["interval_s"]
+    out: dict[str, list[str]] = {}
+    for i, key in enumerate(background_keys(family, job)):
+        if key not in out:
+            out[key] = sorted(family.background_components(i, interval))
+    return out
 
 
-def _background_path(out: Path, index: int, part: str) -> Path:
-    return out / ds.BACKGROUND_DIR / f"background-{index:05d}-{part}.npy"
+def _component_path(out: Path, index: int) -> Path:
+    return out / ds.BACKGROUND_DIR / f"component-{index:05d}.npy"
+
+
+def _background_path(out: Path, index: int) -> Path:
+    return out / ds.BACKGROUND_DIR / f"background-{index:05d}-same_seed.npy"
 
 
 def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
@@ -407,7 +413,8 @@ def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
         wanted: keys to render.
 
     Yields:
-        :class:`~mincam_render.differential.Background` per wanted key.
+        :class:`~mincam_render.differential.Background` per wanted key (components
+        shared between them are rendered once).
     """
     from .differential import BackgroundSettings, render_background
 
@@ -429,79 +436,121 @@ def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
             dataset_seed=job["seed"],
             spp=r["spp"],
             max_depth=r["max_depth"] or None,
-            converged_cache=cache,
+            component_cache=cache,
         )
-        while len(cache) > _CONVERGED_CACHE_SIZE:
-            cache.pop(next(iter(cache)))
+
+
+def _intact(out: Path, record: dict | None, key: str) -> bool:
+    return (
+        record is not None
+        and record.get("key") == key
+        and (out / record["file"]).is_file()
+        and ds.sha256_file(out / record["file"]) == record["sha256"]
+    )
+
+
+def _write_array(out: Path, path: Path, array: np.ndarray) -> dict:
+    data = ds.npy_bytes(np.asarray(array, dtype="<f4"))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds.atomic_write_bytes(path, data)
+    return {"file": f"{ds.BACKGROUND_DIR}/{path.name}", "sha256": hashlib.sha256(data).hexdigest()}
 
 
 def ensure_backgrounds(
     out: Path, manifest: dict, family, keys: list[str], *, progress: bool = False
-) -> list[int]:
-    """Render (in this process) every background of ``manifest`` that is missing or corrupt.
+) -> list[str]:
+    """Render (in this process) every background file of ``manifest`` missing or corrupt.
 
-    Each is written atomically as ``backgrounds/background-NNNNN-converged.npy``
-    (``B_0``), ``...-converged_end.npy`` (``B_1``) and ``...-same_seed.npy``
-    (``C``), float32 ``[detector, row, col]``,
-    and recorded with its key, seed and the files' sha256 in
+    Components (``backgrounds/component-NNNNN.npy``, converged renders shared
+    between backgrounds) and each background's ``C``
+    (``backgrounds/background-NNNNN-same_seed.npy``) are float32 ``[detector,
+    row, col]`` files written atomically and recorded with their key, seed and
+    sha256 in ``manifest["background_components"]`` and
     ``manifest["backgrounds"]``.
 
     Args:
         out: dataset directory.
-        manifest: its manifest (updated and rewritten after each background).
+        manifest: its manifest (updated and rewritten after each file).
         family: the job's family.
         keys: every frame's background key (:func:`background_keys`).
         progress: show a progress bar.
 
     Returns:
-        indices of the backgrounds rendered.
+        the keys of the components and backgrounds rendered.
     """
+    from .differential import (
+        BackgroundSettings,
+        background_seed,
+        component_seed,
+        difference_camera,
+        render_component,
+    )
+    from .transport import render_transport
+
     job = manifest["job"]
-    records = manifest["backgrounds"]
-    todo = []
-    for b, key in enumerate(job["backgrounds"]):
-        rec = records[b]
-        if rec is not None:
-            intact = rec["key"] == key and all(
-                part in rec
-                and (out / rec[part]).is_file()
-                and ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
-                for part in _BACKGROUND_PARTS
-            )
-            if intact:
-                continue
-            log.warning("background %d: missing or not matching its sha256; re-rendering it", b)
-        todo.append(b)
-    if not todo:
+    r = job["render"]
+    settings = BackgroundSettings.from_dict(r["background"])
+    components, records = manifest["background_components"], manifest["backgrounds"]
+    todo_c = [
+        c
+        for c, key in enumerate(job["background_components"])
+        if not _intact(out, components[c], key)
+    ]
+    todo_b = [b for b, key in enumerate(job["backgrounds"]) if not _intact(out, records[b], key)]
+    for what, todo, table in (("component", todo_c, components), ("background", todo_b, records)):
+        for i in todo:
+            if table[i] is not None:
+                log.warning("%s %d: missing or not matching its sha256; re-rendering it", what, i)
+    if not todo_c and not todo_b:
         return []
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(todo), unit="background", desc="backgrounds", dynamic_ncols=True)
+        bar = tqdm(
+            total=len(todo_c) + len(todo_b), unit="render", desc="backgrounds", dynamic_ncols=True
+        )
+    done = []
     try:
-        wanted = [job["backgrounds"][b] for b in todo]
-        for b, bg in zip(todo, render_backgrounds(job, family, keys, wanted), strict=True):
-            record = {"index": b, "key": bg.key, "seed": bg.seed}
-            for part, array in zip(
-                _BACKGROUND_PARTS,
-                (bg.converged_w, bg.converged_end_w, bg.same_seed_w),
-                strict=True,
-            ):
-                data = ds.npy_bytes(np.asarray(array, dtype="<f4"))
-                path = _background_path(out, b, part)
-                path.parent.mkdir(parents=True, exist_ok=True)
-                ds.atomic_write_bytes(path, data)
-                record[part] = f"{ds.BACKGROUND_DIR}/{path.name}"
-                record[f"{part}_sha256"] = hashlib.sha256(data).hexdigest()
-            records[b] = record
+        scene = family.build_scene()
+        _, render_cam = _render_camera(job)
+        for c in todo_c:
+            key = job["background_components"][c]
+            array = render_component(
+                family, scene, render_cam, key, settings, dataset_seed=job["seed"]
+            )
+            record = {"index": c, "key": key, "seed": component_seed(job["seed"], key)}
+            components[c] = record | _write_array(out, _component_path(out, c), array)
             ds.write_manifest(out, manifest)
+            done.append(key)
+            if bar is not None:
+                bar.update(1)
+        first_frame: dict[str, int] = {}
+        for i, key in enumerate(keys):
+            first_frame.setdefault(key, i)
+        camera = difference_camera(render_cam, settings.shared_difference)
+        for b in todo_b:
+            key = job["backgrounds"][b]
+            seed = background_seed(job["seed"], key)
+            family.set_background(scene, first_frame[key], settings.interval_s)
+            array = render_transport(
+                scene, camera, spp=r["spp"], seed=seed, max_depth=r["max_depth"] or None
+            )
+            record = {
+                "index": b,
+                "key": key,
+                "seed": seed,
+                "components": job["background_parts"][key],
+            }
+            records[b] = record | _write_array(out, _background_path(out, b), array)
+            ds.write_manifest(out, manifest)
+            done.append(key)
             if bar is not None:
                 bar.update(1)
     finally:
         if bar is not None:
             bar.close()
-    return todo
+    return done
 
 
 def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
@@ -509,20 +558,23 @@ def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
     from .differential import Background, BackgroundSettings
 
     index = {rec["key"]: rec for rec in manifest["backgrounds"] if rec is not None}
+    files = {rec["key"]: rec["file"] for rec in manifest["background_components"] if rec}
     settings = BackgroundSettings.from_dict(manifest["job"]["render"]["background"])
+    loaded: dict[str, np.ndarray] = {}
     out_map = {}
     for key in set(keys):
         rec = index.get(key)
-        if rec is None:
+        if rec is None or any(part not in files for part in rec["components"]):
             raise ds.DatasetError(f"{out}: background {key!r} has not been rendered")
-        b0, b1, c = (np.load(out / rec[part]) for part in _BACKGROUND_PARTS)
+        for part in rec["components"]:
+            if part not in loaded:
+                loaded[part] = np.load(out / files[part])
         out_map[key] = Background(
             key=key,
             interval_s=settings.interval_s,
             seed=int(rec["seed"]),
-            converged_w=b0,
-            converged_end_w=b1,
-            same_seed_w=c,
+            components={part: loaded[part] for part in rec["components"]},
+            same_seed_w=np.load(out / rec["file"]),
         )
     return out_map
 
@@ -597,11 +649,14 @@ def plan_render(request: RenderRequest) -> dict:
             "background": settings["background"],
         },
     }
-    backgrounds = None
+    backgrounds = components = None
     if settings["background"] is not None:
-        keys = background_keys(family, job)
-        job["backgrounds"] = list(dict.fromkeys(keys))
+        parts = background_components(family, job)
+        job["backgrounds"] = list(parts)
+        job["background_parts"] = parts
+        job["background_components"] = list(dict.fromkeys(c for p in parts.values() for c in p))
         backgrounds = [None] * len(job["backgrounds"])
+        components = [None] * len(job["background_components"])
     info = backend.describe()
     return {
         "format": ds.FORMAT_NAME,
@@ -634,6 +689,7 @@ def plan_render(request: RenderRequest) -> dict:
         "versions": package_versions(),
         "shards": [None] * num_shards,
         "backgrounds": backgrounds,
+        "background_components": components,
         "complete": False,
     }
 

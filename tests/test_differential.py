@@ -64,46 +64,87 @@ def test_frames_without_movers_cancel_exactly(variant):
     scene, cam = fam.build_scene(), _small(fam.camera())
     settings = BackgroundSettings(interval_s=60.0, spp=16, max_depth=6)
     bg = render_background(fam, scene, cam, index, settings, dataset_seed=1, spp=4, max_depth=3)
-    fraction = fam.window_fraction(index, 60.0)
-    assert fraction == pytest.approx(40 / 60)
+    weights = fam.background_components(index, 60.0)
+    assert weights["daylight_s=0"] == pytest.approx(20 / 60)
+    assert weights["daylight_s=60"] == pytest.approx(40 / 60)
     t, _ = render_frame(fam, scene, cam, index, bg, spp=4, max_depth=3)
-    np.testing.assert_array_equal(t, bg.at(fraction).astype(np.float32))
+    np.testing.assert_array_equal(t, bg.converged(weights).astype(np.float32))
     # the daylight does drift within the window (so X uses the window's start, not t)
-    assert np.abs(bg.converged_end_w - bg.converged_w).sum() > 0.01 * np.abs(bg.converged_w).sum()
+    start, end = bg.components["daylight_s=0"], bg.components["daylight_s=60"]
+    assert np.abs(end - start).sum() > 0.01 * np.abs(start).sum()
 
 
-def test_window_fraction_follows_the_displayed_daylight(variant):
-    """0 at a window's start, (t - t0) / interval inside, on the daylight's update grid."""
+def test_components_follow_the_lights_and_the_window(variant):
+    """Lights on weigh 1, the daylight at the window's ends 1 - a and a (a on the
+    daylight's update grid); bad component keys are refused."""
     fam = load_family(
         "workspace", seed=0, num_frames=200, overrides={"fps": 4.0, "daylight_update_s": 2.0}
     )
-    for index, expected in ((0, 0.0), (40, 0.0), (47, 0.0), (48, 0.2), (79, 0.8)):
-        # t = index / 4 s; windows of 10 s from t0 = 10 s on; daylight shown every 2 s
-        assert fam.window_fraction(index, 10.0) == pytest.approx(expected)
+    lights = [li.key for li in fam.rig.lights]
+    for index, a in ((0, 0.0), (40, 0.0), (47, 0.0), (48, 0.2), (79, 0.8)):
+        # t = index / 4 s; windows of 10 s; daylight shown every 2 s
+        on = [k for k, v in zip(lights, fam.state(index).lights_on, strict=True) if v]
+        t0 = 10 * (index // 40)
+        expected = {f"light={k}": 1.0 for k in on}
+        expected[f"daylight_s={t0}"] = 1.0 - a
+        expected[f"daylight_s={t0 + 10}"] = a
+        got = fam.background_components(index, 10.0)
+        assert got.keys() == expected.keys()
+        for k, w in expected.items():
+            assert got[k] == pytest.approx(w)
     with pytest.raises(ValueError, match="interval_s"):
-        fam.window_fraction(3, 0.0)
+        fam.background_components(3, 0.0)
     with pytest.raises(ValueError, match="at = "):
-        fam.background_key(3, 10.0, at=1.5)
+        fam.set_background(fam.build_scene(), 3, 10.0, at=1.5)
+    with pytest.raises(ValueError, match="not a background component"):
+        fam.set_background_component(fam.build_scene(), "light=nosuchlamp")
 
 
-def test_window_end_is_the_next_windows_start(variant):
-    """B_1 of a window is B_0 of the next (same key, same seed): reused, and identical
-    when rendered anew."""
+def test_components_sum_to_the_background(variant):
+    """Linearity: daylight with the lights off plus each light alone is the background
+    with its lights on (statistically, 3 sigma of independent renders)."""
+    fam = load_family("workspace", seed=0, num_frames=4)
+    scene, cam = fam.build_scene(), _small(fam.camera())
+    lo_hi = cam.transmittance_range
+    state = fam.state(0)
+    keys = [f"light={li.key}" for li in fam.rig.lights] + ["daylight_s=0"]
+    total = 0.0
+    for i, key in enumerate(keys):
+        fam.set_background_component(scene, key)
+        total = total + render_transport(scene, cam, spp=512, seed=10 + i, max_depth=6)
+    from mincam_render.generators.indoor import IndoorState
+
+    all_on = (True,) * len(fam.rig.lights)
+    fam.rig.apply(scene, IndoorState(lights_on=all_on, daylight_time_s=state.daylight_time_s))
+    full = [render_transport(scene, cam, spp=512, seed=s, max_depth=6) for s in (1, 2)]
+    err = ds.measurement_relative_error(total[None], full[0][None], lo_hi)["rms"]
+    noise = ds.measurement_relative_error(full[1][None], full[0][None], lo_hi)["rms"]
+    assert err < 3 * noise
+    # and each part matters: the daylight alone is far from the whole
+    fam.set_background_component(scene, "daylight_s=0")
+    day = render_transport(scene, cam, spp=512, seed=3, max_depth=6)
+    assert ds.measurement_relative_error(day[None], full[0][None], lo_hi)["rms"] > 10 * noise
+
+
+def test_components_are_shared_between_backgrounds(variant):
+    """A window's end is the next one's start: rendered once, and identical when
+    rendered anew (its seed depends on its key only)."""
     fam = load_family("workspace", seed=0, num_frames=120, overrides={"fps": 1.0})
     scene, cam = fam.build_scene(), _small(fam.camera())
     settings = BackgroundSettings(interval_s=30.0, spp=4, max_depth=3)
     first, second = 0, 30
     assert fam.state(first).lights_on == fam.state(second).lights_on
-    assert fam.background_key(first, 30.0, at=1.0) == fam.background_key(second, 30.0)
+    lights_on = sum(fam.state(first).lights_on)
     cache: dict = {}
     kw = {"dataset_seed": 5, "spp": 2, "max_depth": 3}
-    a = render_background(fam, scene, cam, first, settings, converged_cache=cache, **kw)
-    assert len(cache) == 2
-    b = render_background(fam, scene, cam, second, settings, converged_cache=cache, **kw)
-    assert len(cache) == 3  # the shared end/start was rendered once
-    assert b.converged_w is a.converged_end_w
+    a = render_background(fam, scene, cam, first, settings, component_cache=cache, **kw)
+    assert len(cache) == 2 + lights_on
+    b = render_background(fam, scene, cam, second, settings, component_cache=cache, **kw)
+    assert len(cache) == 3 + lights_on  # only the second window's end is new
+    assert b.components["daylight_s=30"] is a.components["daylight_s=30"]
     fresh = render_background(fam, scene, cam, second, settings, **kw)
-    np.testing.assert_array_equal(fresh.converged_w, a.converged_end_w)
+    for key, array in fresh.components.items():
+        np.testing.assert_array_equal(array, b.components[key])
     np.testing.assert_array_equal(fresh.same_seed_w, b.same_seed_w)
 
 
@@ -136,14 +177,16 @@ def test_frame_is_background_plus_difference_per_detector_or_shared(variant, sha
     bg = render_background(fam, scene, cam, index, settings, dataset_seed=0, spp=2, max_depth=3)
     t, _ = render_frame(fam, scene, cam, index, bg, spp=2, max_depth=3)
     diff_cam = difference_camera(cam, shared)
-    assert bg.converged_w.shape == (cam.num_detectors, 8, 8)
+    assert all(c.shape == (cam.num_detectors, 8, 8) for c in bg.components.values())
     assert bg.same_seed_w.shape == (diff_cam.num_detectors, 8, 8)
     fam.set_frame_in_window(scene, index, settings.interval_s)
     x = render_transport(scene, diff_cam, spp=2, seed=bg.seed, max_depth=3)
-    fraction = fam.window_fraction(index, settings.interval_s)
-    expected = (1 - fraction) * bg.converged_w.astype(np.float64) + fraction * bg.converged_end_w
+    weights = fam.background_components(index, settings.interval_s)
+    expected = sum(w * bg.components[k].astype(np.float64) for k, w in weights.items())
     expected += x - bg.same_seed_w
-    np.testing.assert_allclose(t, expected.astype(np.float32), rtol=1e-6, atol=0)
+    # float32 rounding of sums taken in another order
+    atol = 1e-6 * np.abs(expected).max()
+    np.testing.assert_allclose(t, expected.astype(np.float32), rtol=1e-6, atol=atol)
     assert t.shape == (cam.num_detectors, 8, 8)
     assert np.any(x != bg.same_seed_w)  # the people do change the light
 
@@ -232,13 +275,22 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
     assert len(job["backgrounds"]) >= 3  # 24 s at 1 fps in 10 s windows, plus light switches
     seeds = {}
     for rec in manifest["backgrounds"]:
-        for part in ("converged", "converged_end", "same_seed"):
-            assert ds.sha256_file(out / rec[part]) == rec[f"{part}_sha256"]
-        # B_0 and B_1 per detector; C (and every X) once from the board centre
-        assert np.load(out / rec["converged"]).shape == (2, 8, 8)
-        assert np.load(out / rec["converged_end"]).shape == (2, 8, 8)
-        assert np.load(out / rec["same_seed"]).shape == (1, 8, 8)
+        assert ds.sha256_file(out / rec["file"]) == rec["sha256"]
+        # C (and every X) once from the board centre
+        assert np.load(out / rec["file"]).shape == (1, 8, 8)
+        assert rec["components"] == job["background_parts"][rec["key"]]
         seeds[rec["key"]] = rec["seed"]
+    # components per detector, each rendered once, all of them used
+    assert len(manifest["background_components"]) == len(job["background_components"])
+    for rec in manifest["background_components"]:
+        assert ds.sha256_file(out / rec["file"]) == rec["sha256"]
+        assert np.load(out / rec["file"]).shape == (2, 8, 8)
+    used = {c for parts in job["background_parts"].values() for c in parts}
+    assert used == set(job["background_components"])
+    # 24 s at 1 fps in 10 s windows: the daylight at 0, 10, 20, 30 s plus lights
+    assert {c for c in used if c.startswith("daylight")} == {
+        f"daylight_s={t}" for t in (0, 10, 20, 30)
+    }
     for shard in manifest["shards"]:
         for frame in json.loads((out / shard["metadata"]).read_text())["frames"]:
             assert frame["background"] == keys[frame["index"]]
@@ -255,7 +307,7 @@ def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     manifest = ds.read_manifest(copy)
-    bg_file = copy / manifest["backgrounds"][1]["converged"]
+    bg_file = copy / manifest["background_components"][1]["file"]
     bg_file.write_bytes(bg_file.read_bytes()[:-16])  # truncated
     for rec in manifest["shards"][1:]:
         (copy / rec["transport"]).unlink()

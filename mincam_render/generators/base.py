@@ -150,15 +150,12 @@ class SceneFamily(abc.ABC):
     #: (:meth:`background_key`, :meth:`set_background`), for differential rendering.
     has_background: ClassVar[bool] = False
 
-    def background_key(self, index: int, interval_s: float, *, at: float = 0.0) -> str:
+    def background_key(self, index: int, interval_s: float) -> str:
         """Identity of frame ``index``'s static background (its scene without movers).
 
         Frames with equal keys share one background: the lights of the frame and
         the slowly changing light (daylight) of the start of its ``interval_s``
-        window. ``at`` in [0, 1] gives the key of the same lights with the
-        daylight at that position in the window (1: its end, the next window's
-        start). See
-        :mod:`mincam_render.differential`.
+        window. See :mod:`mincam_render.differential`.
         """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
@@ -168,8 +165,22 @@ class SceneFamily(abc.ABC):
         """Set ``scene`` to the static background of frame ``index`` (movers removed).
 
         ``at``: with the daylight at this position in the frame's window (0 its
-        start, 1 its end).
+        start, the ``C`` of differential rendering; 1 its end).
         """
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
+    def background_components(self, index: int, interval_s: float) -> dict[str, float]:
+        """``{component key: weight}``: frame ``index``'s background as a weighted sum.
+
+        Light transport is linear in the emitters, so the converged background
+        is a sum of renders of static components (each light alone, the
+        daylight at the ends of the frame's window), each rendered once per
+        dataset and shared by every frame that uses it.
+        """
+        raise NotImplementedError(f"family {self.name!r} has no static background")
+
+    def set_background_component(self, scene: mi.Scene, key: str) -> None:
+        """Set ``scene`` to one static component (see :meth:`background_components`)."""
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
     def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
@@ -177,14 +188,6 @@ class SceneFamily(abc.ABC):
 
         The movers, door and lights of the frame, with the daylight of the start
         of its ``interval_s`` window (the ``X`` of differential rendering).
-        """
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
-    def window_fraction(self, index: int, interval_s: float) -> float:
-        """Where frame ``index``'s daylight lies in its window, in [0, 1).
-
-        0 at the window's start; the frame's background is interpolated
-        linearly between the start and the end of the window with this weight.
         """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 

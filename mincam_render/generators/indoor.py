@@ -1310,12 +1310,16 @@ class IndoorState:
         door_angle_rad: opening of the door (0 = closed); ignored without a door.
         lights_on: on/off per switchable light, in the family's order.
         daylight_time_s: time (s) whose sun and sky light the window.
+        daylight: False turns the sun and sky off (one light's background
+            component); the sky keeps a 1e-6 W m^-2 sr^-1 floor so its sampling
+            stays defined (about 1e-7 of the daylit sky).
     """
 
     people: tuple[tuple[Appearance, Pose], ...] = ()
     door_angle_rad: float = 0.0
     lights_on: tuple[bool, ...] = ()
     daylight_time_s: float = 0.0
+    daylight: bool = True
 
 
 #: Parameter keys of the sun and sky (checked against mi.traverse at build time).
@@ -1498,7 +1502,9 @@ class IndoorRig:
         wanted["lights"] = tuple(state.lights_on)
         wanted["door"] = state.door_angle_rad if self.door is not None else None
         wanted["daylight"] = (
-            self.daylight_time_s(state.daylight_time_s) if self.window is not None else None
+            (self.daylight_time_s(state.daylight_time_s), state.daylight)
+            if self.window is not None
+            else None
         )
         todo = {k: v for k, v in wanted.items() if k not in applied or applied[k] != v}
         slots = [s for s in range(self.slots) if f"slot{s}" in todo]
@@ -1520,9 +1526,10 @@ class IndoorRig:
             )
         if self.window is not None and "daylight" in todo:
             day = self.sky(state.daylight_time_s)
-            params[SUN_IRRADIANCE_PARAM] = dr.opaque(mi.Float, float(day.sun_irradiance_w_m2))
+            on = 1.0 if state.daylight else 0.0
+            params[SUN_IRRADIANCE_PARAM] = dr.opaque(mi.Float, on * day.sun_irradiance_w_m2)
             params[SUN_TO_WORLD_PARAM] = ms.directional_light_to_world(-day.sun_direction)
-            sky = np.maximum(day.sky_radiance_w_m2_sr, 1e-6)
+            sky = np.maximum(on * day.sky_radiance_w_m2_sr, 1e-6)
             params[SKY_DATA_PARAM] = (
                 ms.portal_sky_data(sky)
                 if self.sky_sampling is SkySampling.PORTAL
@@ -1690,32 +1697,61 @@ class IndoorFamily(SceneFamily):
             raise ValueError(f"interval_s = {interval_s!r}: allowed a number > 0 (s)")
         return math.floor(self.time_s(index) / interval_s + 1e-9) * interval_s
 
-    def _background_state(self, index: int, interval_s: float, at: float) -> IndoorState:
+    def background_key(self, index: int, interval_s: float) -> str:
+        lights = "".join("1" if on else "0" for on in self.state(index).lights_on)
+        if self.rig.window is None:  # no daylight: the lights alone make the background
+            return f"lights={lights}"
+        return f"lights={lights};daylight_s={self._window_start_s(index, interval_s):.10g}"
+
+    def set_background(self, scene, index: int, interval_s: float, *, at: float = 0.0) -> None:
         # nobody in the room, the door closed, the frame's lights, and the daylight
         # at position ``at`` of the frame's interval (0 its start, 1 its end)
         if not 0.0 <= at <= 1.0:
             raise ValueError(f"at = {at!r}: allowed a number in [0, 1]")
         start = self._window_start_s(index, interval_s)
-        return IndoorState(
-            lights_on=self.state(index).lights_on,
-            daylight_time_s=start + at * interval_s,
+        state = IndoorState(
+            lights_on=self.state(index).lights_on, daylight_time_s=start + at * interval_s
         )
+        self.rig.apply(scene, state)
 
-    def background_key(self, index: int, interval_s: float, *, at: float = 0.0) -> str:
-        b = self._background_state(index, interval_s, at)
-        lights = "".join("1" if on else "0" for on in b.lights_on)
-        if self.rig.window is None:  # no daylight: the lights alone make the background
-            return f"lights={lights}"
-        return f"lights={lights};daylight_s={b.daylight_time_s:.10g}"
+    def background_components(self, index: int, interval_s: float) -> dict[str, float]:
+        # each light alone (weight 1 when on), and the daylight with every light
+        # off at the ends of the frame's window (linear in time between them)
+        parts = {
+            f"light={li.key}": 1.0
+            for li, on in zip(self.rig.lights, self.state(index).lights_on, strict=True)
+            if on
+        }
+        if self.rig.window is not None:
+            start = self._window_start_s(index, interval_s)
+            a = self.window_fraction(index, interval_s)
+            for t, w in ((start, 1.0 - a), (start + interval_s, a)):
+                key = f"daylight_s={t:.10g}"
+                parts[key] = parts.get(key, 0.0) + w
+        return parts
 
-    def set_background(self, scene, index: int, interval_s: float, *, at: float = 0.0) -> None:
-        self.rig.apply(scene, self._background_state(index, interval_s, at))
+    def set_background_component(self, scene, key: str) -> None:
+        off = (False,) * len(self.rig.lights)
+        name, _, value = key.partition("=")
+        if name == "daylight_s" and self.rig.window is not None:
+            state = IndoorState(lights_on=off, daylight_time_s=float(value))
+        elif name == "light" and value in (keys := [li.key for li in self.rig.lights]):
+            on = tuple(k == value for k in keys)
+            state = IndoorState(lights_on=on, daylight=False)
+        else:
+            raise ValueError(f"{key!r} is not a background component of family {self.name!r}")
+        self.rig.apply(scene, state)
 
     def set_frame_in_window(self, scene, index: int, interval_s: float) -> dict[str, np.ndarray]:
         state = replace(self.state(index), daylight_time_s=self._window_start_s(index, interval_s))
         return self.apply_state(scene, state)
 
     def window_fraction(self, index: int, interval_s: float) -> float:
+        """Where frame ``index``'s daylight lies in its window, in [0, 1) (0: its start).
+
+        On the daylight's update grid: the frame's background is interpolated
+        linearly between the window's ends with this weight.
+        """
         if self.rig.window is None:
             return 0.0
         start = self._window_start_s(index, interval_s)
