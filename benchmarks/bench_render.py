@@ -33,7 +33,9 @@ background) on top of ``1 / frames_per_s_workers``.
 Memory: renders ``--memory-frames`` frames of the first family in ONE process
 (no worker recycling, the harshest case) and samples the resident set size
 every ``--rss-every`` frames; growth is measured from the first sample after
-warm-up to the last. ``--memory-frames 10000`` reproduces the issue's target.
+warm-up to the last, and (robust to the allocator's swings) as the median of
+the second half of the samples against the first half's.
+``--memory-frames 10000`` reproduces the issue's target.
 """
 
 from __future__ import annotations
@@ -271,14 +273,27 @@ def bench_memory(name: str, frames: int, every: int) -> dict:
                 "seconds": time.perf_counter() - t0,
             }
         )
-    base = samples[min(1, len(samples) - 1)]["rss_mb"]
+    return {"family": name, "frames": frames, "rss_every": every, **memory_summary(samples)}
+
+
+def memory_summary(samples: list[dict]) -> dict:
+    """Growth of the resident set over a long render, from ``samples`` (first one: warm-up).
+
+    ``rss_growth_fraction``: last sample against the first after warm-up; it
+    swings with the allocator (the RSS of one render moves by +-10 % between
+    samples). ``rss_growth_median_fraction``: median of the second half of
+    the samples against the first half's, which a leak moves and a swing does not.
+    """
+    after = [s["rss_mb"] for s in samples[1:]] or [samples[0]["rss_mb"]]
+    half = max(len(after) // 2, 1)
+    first, second = statistics.median(after[:half]), statistics.median(after[half:] or after)
     return {
-        "family": name,
-        "frames": frames,
-        "rss_every": every,
         "samples": samples,
-        "rss_growth_fraction": samples[-1]["rss_mb"] / base - 1.0,
+        "rss_growth_fraction": after[-1] / after[0] - 1.0,
+        "rss_growth_median_fraction": second / first - 1.0,
         "rss_peak_mb": max(s["rss_mb"] for s in samples),
+        "rss_peak_first_half_mb": max(after[:half]),
+        "rss_peak_second_half_mb": max(after[half:] or after),
     }
 
 
@@ -344,7 +359,9 @@ def main() -> None:
         print(
             f"memory ({memory['family']}, {memory['frames']} frames, one process): RSS "
             f"{memory['samples'][0]['rss_mb']:.0f} -> {memory['samples'][-1]['rss_mb']:.0f} MB, "
-            f"growth after warm-up {100 * memory['rss_growth_fraction']:+.1f} %"
+            f"growth after warm-up {100 * memory['rss_growth_fraction']:+.1f} % (last sample), "
+            f"{100 * memory['rss_growth_median_fraction']:+.1f} % (median of the second half "
+            "against the first)"
         )
     report = {
         "benchmark": "bench_render",
