@@ -159,6 +159,47 @@ def component_seed(dataset_seed: int, key: str) -> int:
     return background_seed(dataset_seed, f"component|{key}")
 
 
+def background_parts(family, num_frames: int, interval_s: float) -> dict[str, list[str]]:
+    """``{background key: its component keys}`` over frames ``[0, num_frames)``, first-use order."""
+    parts: dict[str, list[str]] = {}
+    for i in range(num_frames):
+        key = family.background_key(i, interval_s)
+        if key not in parts:
+            parts[key] = sorted(family.background_components(i, interval_s))
+    return parts
+
+
+def render_same_seed(
+    family,
+    scene,
+    camera: FreeformCamera,
+    index: int,
+    settings: BackgroundSettings,
+    *,
+    dataset_seed: int,
+    spp: int,
+    max_depth: int | None,
+) -> tuple[str, int, np.ndarray]:
+    """``(key, seed s, C)`` of frame ``index``'s background; leaves ``scene`` at it.
+
+    ``C`` is the background at its window's start with the frames' samples,
+    depth and seed (``[1, row, col]`` from the board centre when shared).
+    """
+    from .transport import render_transport
+
+    key = family.background_key(index, settings.interval_s)
+    seed = background_seed(dataset_seed, key)
+    family.set_background(scene, index, settings.interval_s)
+    same_seed = render_transport(
+        scene,
+        difference_camera(camera, settings.shared_difference),
+        spp=spp,
+        seed=seed,
+        max_depth=max_depth,
+    )
+    return key, seed, same_seed
+
+
 def render_component(
     family, scene, camera: FreeformCamera, key: str, settings: BackgroundSettings, *, dataset_seed
 ) -> np.ndarray:
@@ -205,8 +246,6 @@ def render_background(
             backgrounds, and a key's seed is fixed, so a cached render is the
             one a new render would give.
     """
-    from .transport import render_transport
-
     cache = {} if component_cache is None else component_cache
     # every frame of this background uses the same components (its lights, its window)
     parts = family.background_components(index, settings.interval_s)
@@ -215,14 +254,14 @@ def render_background(
             cache[part] = render_component(
                 family, scene, camera, part, settings, dataset_seed=dataset_seed
             )
-    key = family.background_key(index, settings.interval_s)
-    seed = background_seed(dataset_seed, key)
-    family.set_background(scene, index, settings.interval_s)
-    same_seed = render_transport(
+    key, seed, same_seed = render_same_seed(
+        family,
         scene,
-        difference_camera(camera, settings.shared_difference),
+        camera,
+        index,
+        settings,
+        dataset_seed=dataset_seed,
         spp=spp,
-        seed=seed,
         max_depth=max_depth,
     )
     return Background(

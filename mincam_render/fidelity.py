@@ -569,16 +569,16 @@ def _decide_differential(
     plain_spp,
     e_plain,
 ) -> dict[str, Any]:
-    """Differential rendering or not, with its frame depth, spp and background spp.
+    """Differential rendering or not, with its frame spp and background spp.
 
     Measured on the probe frames with common random numbers (``X`` and ``C`` with
-    one seed): the bias of truncating ``X - C`` at each candidate depth against
-    the plain depth, the noise of ``X - C`` from two seeds, the daylight
-    interpolation of the backgrounds; then the error budget gives the spp of
-    frames and backgrounds, and the cost per frame of both estimators (paths
-    traced, backgrounds amortized over the dataset) decides.
+    one seed): the parallax of sharing ``X - C`` from the board centre, the
+    noise of ``X - C`` from two seeds, the daylight interpolation of the
+    backgrounds; then the error budget gives the spp of frames and backgrounds,
+    and the cost per frame of both estimators (paths traced, backgrounds
+    amortized over the dataset) decides. ``X - C`` is traced at the plain depth.
     """
-    from .differential import difference_camera
+    from .differential import background_parts, difference_camera
     from .render_job import Fidelity, frame_seed
     from .transport import render_transport
 
@@ -613,14 +613,9 @@ def _decide_differential(
             **record,
         }
 
-    keys: set[str] = set()
-    components: set[str] = set()
-    for i in range(family.num_frames):
-        key = family.background_key(i, interval)
-        if key not in keys:
-            keys.add(key)
-            components.update(family.background_components(i, interval))
-    record["backgrounds"] = len(keys)
+    parts = background_parts(family, family.num_frames, interval)
+    components = {c for p in parts.values() for c in p}
+    record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
     deep = max_depth or None
 
@@ -638,9 +633,16 @@ def _decide_differential(
     # X - C is traced as deep as the backgrounds: truncating it would bias the
     # movers' change and save little, since a path costs about the same at any
     # depth once Russian roulette and escapes through the window set in
-    # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12)
-    frame_depth = deep
-    x_ref, _ = pair(deep, 0, DIFFERENCE_BASE_SPP)
+    # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12).
+    # Relative errors of X - C are taken against the probes' X:
+    x_ref = []
+    for i in probes:
+        family.set_frame_in_window(scene, i, interval)
+        seed = frame_seed(request.seed, i)
+        x_ref.append(
+            render_transport(scene, render_cam, spp=DIFFERENCE_BASE_SPP, seed=seed, max_depth=deep)
+        )
+    x_ref = np.stack(x_ref)
     # one render of X - C from the board centre for all detectors? Its parallax
     # error p is measured against the noise of independent seeds:
     # e_shared^2 ~ noise^2 + p^2 and e_noise^2 ~ noise^2 (same spp, independent seeds)
@@ -651,9 +653,9 @@ def _decide_differential(
         shared_difference = request.shared_difference
         record["shared_difference"] = {"value": shared_difference, "source": "flag"}
     elif k > 1:
-        xa, ca = pair(frame_depth, 3, SHARED_DIFFERENCE_SPP)
-        xb, cb = pair(frame_depth, 4, SHARED_DIFFERENCE_SPP)
-        xc, cc = pair(frame_depth, 5, SHARED_DIFFERENCE_SPP, centre_cam)
+        xa, ca = pair(deep, 3, SHARED_DIFFERENCE_SPP)
+        xb, cb = pair(deep, 4, SHARED_DIFFERENCE_SPP)
+        xc, cc = pair(deep, 5, SHARED_DIFFERENCE_SPP, centre_cam)
         e_shared = measurement_relative_error(xa + (xc - cc) - (xa - ca), xa, lo_hi)["rms"]
         e_noise = measurement_relative_error(xa + (xb - cb) - (xa - ca), xa, lo_hi)["rms"]
         parallax_error = math.sqrt(max(e_shared**2 - e_noise**2, 0.0))
@@ -669,8 +671,8 @@ def _decide_differential(
             "bound": bound,
         }
     diff_cam = centre_cam if shared_difference else render_cam
-    x1, c1 = pair(frame_depth, 1, DIFFERENCE_PILOT_SPP, diff_cam)
-    x2, c2 = pair(frame_depth, 2, DIFFERENCE_PILOT_SPP, diff_cam)
+    x1, c1 = pair(deep, 1, DIFFERENCE_PILOT_SPP, diff_cam)
+    x2, c2 = pair(deep, 2, DIFFERENCE_PILOT_SPP, diff_cam)
     # [N, 1, R, C] differences broadcast over the detectors when shared; the
     # noise is reported at PILOT_SPP like the others
     e_diff = (
@@ -719,12 +721,12 @@ def _decide_differential(
         else _spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
     )
     frame_cost = frame_spp * frame_paths
-    background_cost = len(components) * background_spp * k + len(keys) * frame_cost
+    background_cost = len(components) * background_spp * k + len(parts) * frame_cost
     cost_diff = frame_cost + background_cost / family.num_frames
     cost_plain = plain_spp * k
     record.update(
         {
-            "frame_max_depth": 0 if frame_depth is None else frame_depth,
+            "frame_max_depth": 0 if deep is None else deep,
             "frame_spp": frame_spp,
             "background_spp": background_spp,
             "difference_pilot_error_rms": e_diff,
@@ -747,7 +749,7 @@ def _decide_differential(
         reason = (
             f"B + X - C: X at depth {record['frame_max_depth']} x {frame_spp} spp"
             f"{' from the board centre' if shared_difference else ''} (difference noise "
-            f"{e_diff:.3g} at {PILOT_SPP} spp), {len(keys)} background(s) from "
+            f"{e_diff:.3g} at {PILOT_SPP} spp), {len(parts)} background(s) from "
             f"{len(components)} converged components at {background_spp} spp, daylight "
             f"interpolated within {interval:g} s windows (error "
             f"{interpolation['error']['rms']:.3g} rms halfway): cost {cost_diff:.4g} vs plain "

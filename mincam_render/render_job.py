@@ -385,16 +385,6 @@ def background_keys(family, job: dict) -> list[str]:
     return [family.background_key(i, interval) for i in range(job["num_frames"])]
 
 
-def background_components(family, job: dict) -> dict[str, list[str]]:
-    """``{background key: its component keys}`` of a differential job, in first-use order."""
-    interval = job["render"]["background"]["interval_s"]
-    out: dict[str, list[str]] = {}
-    for i, key in enumerate(background_keys(family, job)):
-        if key not in out:
-            out[key] = sorted(family.background_components(i, interval))
-    return out
-
-
 def _component_path(out: Path, index: int) -> Path:
     return out / ds.BACKGROUND_DIR / f"component-{index:05d}.npy"
 
@@ -480,12 +470,10 @@ def ensure_backgrounds(
     """
     from .differential import (
         BackgroundSettings,
-        background_seed,
         component_seed,
-        difference_camera,
         render_component,
+        render_same_seed,
     )
-    from .transport import render_transport
 
     job = manifest["job"]
     r = job["render"]
@@ -528,13 +516,16 @@ def ensure_backgrounds(
         first_frame: dict[str, int] = {}
         for i, key in enumerate(keys):
             first_frame.setdefault(key, i)
-        camera = difference_camera(render_cam, settings.shared_difference)
         for b in todo_b:
-            key = job["backgrounds"][b]
-            seed = background_seed(job["seed"], key)
-            family.set_background(scene, first_frame[key], settings.interval_s)
-            array = render_transport(
-                scene, camera, spp=r["spp"], seed=seed, max_depth=r["max_depth"] or None
+            key, seed, array = render_same_seed(
+                family,
+                scene,
+                render_cam,
+                first_frame[job["backgrounds"][b]],
+                settings,
+                dataset_seed=job["seed"],
+                spp=r["spp"],
+                max_depth=r["max_depth"] or None,
             )
             record = {
                 "index": b,
@@ -609,6 +600,7 @@ def plan_render(request: RenderRequest) -> dict:
     renders). Pure planning: writes nothing.
     """
     from . import backend
+    from .differential import background_parts
     from .fidelity import decide_fidelity
 
     backend.use_variant()
@@ -651,7 +643,7 @@ def plan_render(request: RenderRequest) -> dict:
     }
     backgrounds = components = None
     if settings["background"] is not None:
-        parts = background_components(family, job)
+        parts = background_parts(family, job["num_frames"], settings["background"]["interval_s"])
         job["backgrounds"] = list(parts)
         job["background_parts"] = parts
         job["background_components"] = list(dict.fromkeys(c for p in parts.values() for c in p))
