@@ -269,3 +269,41 @@ def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
     assert vertices[layout.slot(0)][:, 2].min() > -0.01  # standing on the floor
     assert np.all(vertices[layout.slot(1)][:, 2] < -10.0)  # unused slots parked below it
     np.testing.assert_allclose(albedo[layout.slot(1)], 0.3)
+
+
+@pytest.mark.parametrize(
+    ("target_z_m", "where"), [(1.0, "corridor"), (2.2, "wall"), (2.3, "wall")]
+)
+def test_open_doorway_shows_the_corridor_and_the_wall_above_it_faces_the_room(
+    family, target_z_m, where
+):
+    """The corridor is open on the room's side: no face in the doorway, none on the wall.
+
+    A closed corridor box put a face in the doorway and one coplanar with the
+    north wall above it, facing away from the room; rays then met either the
+    wall or that face's black back, depending on the traversal.
+    """
+    import mitsuba as mi
+
+    rig = family.rig
+    scene = rig.build_scene()
+    off = (False,) * len(rig.lights)
+    rig.apply(scene, IndoorState(door_angle_rad=math.radians(90.0), lights_on=off, daylight=False))
+    door = rig.door
+    d_room = family.config.room.size_m[1]
+    # from the middle of the room toward the doorway's centre line, below and
+    # above the door's top (2.05 m) but under the corridor's ceiling (2.35 m)
+    target = np.array([door.center[0], d_room, target_z_m])
+    origin = np.array([door.center[0], d_room - 2.0, 1.2])
+    direction = (target - origin) / np.linalg.norm(target - origin)
+    ray = mi.Ray3f(mi.Point3f(*map(float, origin)), mi.Vector3f(*map(float, direction)))
+    si = scene.ray_intersect(ray)
+    hit = np.array(si.p).ravel()
+    normal = np.array(si.n).ravel()
+    assert bool(si.is_valid()[0])
+    assert float(normal @ direction) < 0.0  # a front face, lit by the room or the corridor
+    if where == "corridor":
+        assert hit[1] > d_room + 0.5  # through the doorway to the corridor's far wall
+    else:
+        assert hit[1] == pytest.approx(d_room, abs=1e-5)
+        np.testing.assert_allclose(normal, [0.0, -1.0, 0.0], atol=1e-6)

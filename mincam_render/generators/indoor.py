@@ -447,10 +447,27 @@ def box_mesh(center, extents, rotation_deg: float = 0.0) -> tuple[np.ndarray, np
     return v @ rot.T + np.asarray(center), np.asarray(b.faces)
 
 
-def inward_box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
-    """A box whose faces point inward (a corridor seen from inside)."""
+def inward_box(lo, hi, *, open_axis: int | None = None, open_at: float = 0.0):
+    """A box whose faces point inward (a corridor seen from inside): ``(vertices, faces)``.
+
+    Args:
+        lo, hi: opposite corners (m, world).
+        open_axis: leave out the face lying in the plane ``x[open_axis] = open_at``
+            (the side open onto the room), or None for a closed box. A closed
+            corridor would put a face in the doorway and coplanar with the
+            room's wall, facing away from the room: rays from the room then hit
+            its black back, or the wall, depending on the traversal.
+        open_at: that plane's coordinate (m).
+    """
     b = trimesh.creation.box(bounds=[lo, hi])
-    return np.asarray(b.vertices, dtype=np.float64), np.asarray(b.faces)[:, ::-1]
+    vertices = np.asarray(b.vertices, dtype=np.float64)
+    faces = np.asarray(b.faces)[:, ::-1]
+    if open_axis is not None:
+        on_plane = np.all(np.abs(vertices[faces][:, :, open_axis] - open_at) < 1e-9, axis=1)
+        if not np.any(on_plane):
+            raise ValueError(f"inward_box: no face at x[{open_axis}] = {open_at} m")
+        faces = faces[~on_plane]
+    return vertices, faces
 
 
 def furniture_mesh(item: FurnitureConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -632,7 +649,8 @@ class Door:
         lo = np.minimum(a, b)
         hi = np.maximum(a, b)
         hi[2] = c.height_m + 0.3
-        return inward_box(lo, hi)
+        axis = int(np.argmax(np.abs(self.normal)))
+        return inward_box(lo, hi, open_axis=axis, open_at=float(self.center[axis]))
 
     def waypoints(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(corridor start, doorway, inside the room) (x, y) points of the way in."""
