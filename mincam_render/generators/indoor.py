@@ -451,7 +451,8 @@ def inward_box(lo, hi, *, open_axis: int | None = None, open_at: float = 0.0):
     """A box whose faces point inward (a corridor seen from inside): ``(vertices, faces)``.
 
     Args:
-        lo, hi: opposite corners (m, world).
+        lo: the corner with the smallest coordinates (m, world).
+        hi: the opposite corner (m, world).
         open_axis: leave out the face lying in the plane ``x[open_axis] = open_at``
             (the side open onto the room), or None for a closed box. A closed
             corridor would put a face in the doorway and coplanar with the
