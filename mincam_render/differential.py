@@ -196,6 +196,7 @@ def render_same_seed(
         spp=spp,
         seed=seed,
         max_depth=max_depth,
+        sun_window=family.sun_window(),
     )
     return key, seed, same_seed
 
@@ -213,6 +214,7 @@ def render_component(
         spp=settings.spp,
         seed=component_seed(dataset_seed, key),
         max_depth=settings.max_depth,
+        sun_window=family.sun_window(),
     )
 
 
@@ -300,6 +302,7 @@ def render_frame(
         spp=spp,
         seed=background.seed,
         max_depth=max_depth,
+        sun_window=family.sun_window(),
     )
     # [1, R, C] differences broadcast over the detectors' own backgrounds
     converged = background.converged(family.background_components(index, background.interval_s))

@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 from typing import Any
 
 import numpy as np
@@ -88,6 +87,9 @@ DIFFERENCE_PILOT_SPP = 16
 #: Times the differential spp are raised when the check against the reference
 #: misses the target (each by the squared ratio of the error found to the planned).
 MAX_SPP_RAISES = 2
+#: spp of the two renders of each probe's background whose difference gives the
+#: backgrounds' noise (see _background_noise).
+BACKGROUND_PILOT_SPP = 64
 #: spp of the frame render that relative errors of ``X - C`` are taken against.
 DIFFERENCE_BASE_SPP = 32
 #: Differential settings are planned for this share of the target error; the rest
@@ -99,14 +101,6 @@ SHARED_DIFFERENCE_SPP = 128
 #: spp cap of the renders that measure the daylight interpolation of backgrounds
 #: (common random numbers: the drift's change, not noise, dominates).
 INTERPOLATION_SPP = 256
-
-
-def _scene_max_depth(scene) -> int | None:
-    integ = scene.integrator()
-    if integ is None:
-        return None
-    m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
-    return int(m.group(1)) if m else None
 
 
 def _probe_indices(num_frames: int) -> list[int]:
@@ -158,7 +152,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     """
     from . import backend
     from .render_job import Fidelity, frame_seed
-    from .transport import render_transport
+    from .transport import render_transport, scene_max_depth
 
     auto = request.fidelity is Fidelity.AUTO
     scene = family.build_scene()
@@ -174,11 +168,19 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
             family.set_frame(scene, i)
             seed = (frame_seed(request.seed, i) + 7919 * seed_offset) % 2**63
             t = render_transport(
-                scene, cam, spp=spp, seed=seed, max_depth=max_depth or None, parallax=parallax
+                scene,
+                cam,
+                spp=spp,
+                seed=seed,
+                max_depth=max_depth or None,
+                parallax=parallax,
+                sun_window=window,
             )
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
+    # the estimator of the dataset's renders (see render_transport), reference included
+    window = family.sun_window()
     centre_cam = camera.centre_camera()
 
     # ---- shared render ------------------------------------------------------------------
@@ -233,7 +235,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     render_cam = centre_cam if shared else camera
 
     # ---- direct light only ---------------------------------------------------------------
-    scene_depth = _scene_max_depth(scene)
+    scene_depth = scene_max_depth(scene)
     measured = {"scene_integrator_max_depth": scene_depth, "bound": request.indirect_fraction}
     if request.max_depth is not None:
         max_depth, source, reason = request.max_depth, "flag", "set by --max-depth"
@@ -319,7 +321,6 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         lo_hi,
         max_depth,
         spp,
-        e_pilot,
     )
     decisions["differential"] = diff
     if diff["value"]:
@@ -457,14 +458,20 @@ def _spp_for(error_at_pilot: float, target: float, cap: int, steps_per_octave: i
 
 
 def _round_up_spp(need: float, cap: int, steps_per_octave: int = 4) -> int:
-    """``need`` rounded up to a power of two, in [1, cap].
+    """``need`` rounded up on a grid of ``steps_per_octave`` steps per octave, in [1, cap].
 
-    With ``steps_per_octave`` = 4: to ``m 2^e`` with ``m`` in 4..7 (at most 25 % above).
+    With ``steps_per_octave`` = 4: to ``m 2^e`` with ``m`` in 4..7 (at most 25 %
+    above), then up to the next full stratification grid (a multiple of its
+    integer square root, at most ``2 / sqrt(n)`` more), so that a frame's
+    samples take one pass (:func:`mincam_render.transport.sample_passes`).
     """
     need = max(need, 1.0)
     octave = 2 ** math.floor(math.log2(need))
     step = max(octave // steps_per_octave, 1)
-    return int(min(cap, step * math.ceil(need / step - 1e-9)))
+    n = int(step * math.ceil(need / step - 1e-9))
+    while n % math.isqrt(n):
+        n += 1
+    return int(min(cap, n))
 
 
 def _differential_probe(
@@ -530,6 +537,39 @@ def _split_noise_budget(target, biases, difference, background) -> dict[str, Any
     }
 
 
+def _background_noise(family, scene, camera, probes, interval, depth, lo_hi, request) -> float:
+    """Monte Carlo error of the probes' backgrounds, piloted at BACKGROUND_PILOT_SPP.
+
+    Two seeds per probe; reported at PILOT_SPP (times sqrt(BACKGROUND_PILOT_SPP /
+    PILOT_SPP)) like the other noises. Stratified samples converge faster than
+    1/sqrt(spp) (:mod:`mincam_render.transport`), so extrapolating from a pilot
+    nearer the backgrounds' spp wastes fewer samples than one at PILOT_SPP.
+    A whole background is piloted: its components, rendered apart and summed,
+    are no noisier (their weights' squares sum to at most 1 per light).
+    """
+    from .render_job import frame_seed
+    from .transport import render_transport
+
+    renders = {0: [], 1: []}
+    for i in probes:
+        family.set_background(scene, i, interval)
+        for s in renders:
+            seed = (frame_seed(request.seed, i) + 7919 * (s + 31)) % 2**63
+            renders[s].append(
+                render_transport(
+                    scene,
+                    camera,
+                    spp=BACKGROUND_PILOT_SPP,
+                    seed=seed,
+                    max_depth=depth,
+                    sun_window=family.sun_window(),
+                )
+            )
+    a, b = (np.stack(r) for r in renders.values())
+    error = measurement_relative_error(a, b, lo_hi)["rms"] / math.sqrt(2.0)
+    return error * math.sqrt(BACKGROUND_PILOT_SPP / PILOT_SPP)
+
+
 def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
     """Error of the background halfway through the probes' windows, interpolated from its ends.
 
@@ -547,7 +587,14 @@ def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
         for at in (0.0, 0.5, 1.0):
             family.set_background(scene, i, interval, at=at)
             renders.append(
-                render_transport(scene, camera, spp=spp, seed=frame_seed(i, 17), max_depth=depth)
+                render_transport(
+                    scene,
+                    camera,
+                    spp=spp,
+                    seed=frame_seed(i, 17),
+                    max_depth=depth,
+                    sun_window=family.sun_window(),
+                )
             )
         ends.append(0.5 * (renders[0] + renders[2]))
         middles.append(renders[1])
@@ -567,7 +614,6 @@ def _decide_differential(
     lo_hi,
     max_depth,
     plain_spp,
-    e_plain,
 ) -> dict[str, Any]:
     """Differential rendering or not, with its frame spp and background spp.
 
@@ -618,6 +664,7 @@ def _decide_differential(
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
     deep = max_depth or None
+    window = family.sun_window()
 
     def pair(depth, seed_offset, spp, camera=render_cam):
         """(X, C) per probe with one seed each (common random numbers)."""
@@ -625,9 +672,17 @@ def _decide_differential(
         for i in probes:
             seed = (frame_seed(request.seed, i) + 7919 * (seed_offset + 11)) % 2**63
             family.set_frame_in_window(scene, i, interval)
-            xs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
+            xs.append(
+                render_transport(
+                    scene, camera, spp=spp, seed=seed, max_depth=depth, sun_window=window
+                )
+            )
             family.set_background(scene, i, interval)
-            cs.append(render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
+            cs.append(
+                render_transport(
+                    scene, camera, spp=spp, seed=seed, max_depth=depth, sun_window=window
+                )
+            )
         return np.stack(xs), np.stack(cs)
 
     # X - C is traced as deep as the backgrounds: truncating it would bias the
@@ -640,7 +695,14 @@ def _decide_differential(
         family.set_frame_in_window(scene, i, interval)
         seed = frame_seed(request.seed, i)
         x_ref.append(
-            render_transport(scene, render_cam, spp=DIFFERENCE_BASE_SPP, seed=seed, max_depth=deep)
+            render_transport(
+                scene,
+                render_cam,
+                spp=DIFFERENCE_BASE_SPP,
+                seed=seed,
+                max_depth=deep,
+                sun_window=window,
+            )
         )
     x_ref = np.stack(x_ref)
     # one render of X - C from the board centre for all detectors? Its parallax
@@ -680,7 +742,7 @@ def _decide_differential(
         / math.sqrt(2.0)
         * math.sqrt(DIFFERENCE_PILOT_SPP / PILOT_SPP)
     )
-    e_bg = e_plain if e_plain is not None else e_diff
+    e_bg = _background_noise(family, scene, render_cam, probes, interval, deep, lo_hi, request)
     interpolation = _interpolation_error(family, scene, render_cam, probes, interval, deep, lo_hi)
     # the error budget: the biases measured above are fixed; the two noises share
     # what is left, split to minimize the cost per frame (see _split_noise_budget)
@@ -730,6 +792,8 @@ def _decide_differential(
             "frame_spp": frame_spp,
             "background_spp": background_spp,
             "difference_pilot_error_rms": e_diff,
+            "background_pilot_error_rms": e_bg,
+            "background_pilot_spp": BACKGROUND_PILOT_SPP,
             "daylight_interpolation": interpolation,
             "error_budget": budget,
             "predicted_error_rms": math.hypot(

@@ -248,9 +248,8 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
     """
     from . import backend
     from .dataset import decode_transport, encode_transport
-    from .fidelity import _scene_max_depth
     from .generators import load_family
-    from .transport import render_transport
+    from .transport import render_transport, scene_max_depth
 
     cfg = config or FidelityBenchConfig()
     backend.use_variant()
@@ -265,7 +264,7 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
     k = camera.num_detectors
     rows, cols = camera.mask_resolution
     lo_hi = camera.transmittance_range
-    scene_depth = _scene_max_depth(scene)
+    scene_depth = scene_max_depth(scene)
 
     def render(
         cam, *, spp, max_depth=None, shared=False, seed_offset=0, point=False, warm_up=False

@@ -332,7 +332,14 @@ def render_shard(
         else:
             lab = family.set_frame(scene, i)
             seed = frame_seed(job["seed"], i)
-            t = render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)
+            t = render_transport(
+                scene,
+                render_cam,
+                spp=r["spp"],
+                seed=seed,
+                max_depth=max_depth,
+                sun_window=family.sun_window(),
+            )
         if r["shared_render"]:
             t = np.repeat(t, k, axis=0)
         images.append(t)

@@ -20,6 +20,13 @@ scene's integrator, and weights radiance by ``A_t d^2 / |x-q|^4 f / p(q)``.
 ``q`` comes from a one-sample mixture of uniform area sampling and
 cosine-weighted directions from ``x`` (see :func:`cosine_sampling_fraction`); for
 the prototype this is plain area sampling, ``p = 1 / A_d``.
+The samples of a texel are stratified (Mitsuba's ``multijitter`` sampler: a
+jittered ``a x b`` grid with N-rooks marginals in every dimension, scrambled per
+texel and seed): a texel sees a wide cone of the scene through the detector, and
+stratifying its samples cuts the noise of the workspace's daylit background at
+256 spp from 1.35 % to 0.86 % and of the frames' ``X - C`` at 16 spp from
+2.3 % to 1.7 % at the same cost (measurement error of random masks). A pass
+takes a sample count the grid divides exactly (:func:`sample_passes`).
 All detectors, texels and samples of a pass form one wavefront (one kernel
 launch). Repeated calls on a scene whose parameters changed reuse the compiled
 kernel from Dr.Jit's cache (no recompilation; scalars live in arrays so kernel
@@ -33,6 +40,8 @@ from __future__ import annotations
 
 import logging
 import math
+import re
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import drjit as dr
@@ -42,6 +51,7 @@ import numpy as np
 from .backend import use_variant
 from .camera import FreeformCamera
 from .mitsuba_scene import SceneInput, load_scene
+from .sun_patch import SunPatchPathIntegrator, sun_sampled_apart
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +185,41 @@ def cosine_sampling_fraction(camera: FreeformCamera) -> float:
     return min(0.5, a * a / (math.pi * d * d))
 
 
+def scene_max_depth(scene: mi.Scene) -> int | None:
+    """``max_depth`` of the scene's integrator (-1: unbounded), or None without one."""
+    integ = scene.integrator()
+    if integ is None:
+        return None
+    m = re.search(r"max_depth\s*=\s*(-?\d+)", str(integ))
+    return int(m.group(1)) if m else None
+
+
+def sample_passes(spp: int, cap: int) -> list[int]:
+    """Samples per texel of each pass: they sum to ``spp``, each <= ``cap`` and a full grid.
+
+    A stratified pass of ``n`` samples uses an ``a x (n / a)`` grid with
+    ``a = floor(sqrt(n))``, so ``n`` must be a multiple of ``a`` (1-4, 6, 8, 9,
+    12, 15, 16, 20, 24, ...); other counts are split, largest grid first
+    (``1792 -> 1764 + 28``). ``cap`` is the largest pass (memory).
+    """
+    passes = []
+    rest = spp
+    while rest > 0:
+        n = min(rest, cap)
+        while n % math.isqrt(n):
+            n -= 1
+        passes.append(n)
+        rest -= n
+    return passes
+
+
+def _stratified_sampler(samples_per_texel: int) -> mi.Sampler:
+    """Mitsuba's multijitter sampler stratifying ``samples_per_texel`` consecutive lanes."""
+    sampler = mi.load_dict({"type": "multijitter", "sample_count": samples_per_texel})
+    sampler.set_samples_per_wavefront(samples_per_texel)
+    return sampler
+
+
 def _pass_seed(seed: int, pass_index: int) -> int:
     # splitmix-style mixing: distinct (seed, pass) pairs give unrelated streams
     z = (seed * 0x9E3779B97F4A7C15 + pass_index * 0xBF58476D1CE4E5B9 + 1) & (2**64 - 1)
@@ -191,6 +236,7 @@ def render_transport(
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
     parallax: bool = True,
+    sun_window=None,
 ) -> np.ndarray:
     """Render the transport images of every detector of ``camera`` in ``scene``.
 
@@ -203,11 +249,17 @@ def render_transport(
         max_depth: if given, overrides the scene's integrator with a ``path``
             integrator of this depth (1 = emitters seen directly, 2 = direct light).
         max_rays_per_pass: cap on the rays of one kernel launch; more samples run
-            as several passes accumulated in float64.
+            as several passes accumulated in float64 (see :func:`sample_passes`).
         parallax: False renders every detector from the board centre (the
             paper's single training camera): same sample streams as with
             parallax, so the difference of the two renders is the parallax
             effect alone (common random numbers).
+        sun_window: ``(corner, edge_u, edge_v)`` of the window the sun shines
+            through (m, world, ``edge_u x edge_v`` outward), or None. When given,
+            paths also connect to the sunlit patches behind it
+            (:class:`mincam_render.sun_patch.SunPatchPathIntegrator`, same
+            expectation, far less noise from sunlight bounced off the patch),
+            at ``max_depth`` or the scene integrator's depth.
 
     Returns:
         ``T[detector, row, col]``, float32 numpy array (W per unit transmittance).
@@ -245,23 +297,23 @@ def render_transport(
             f"{n_texels} exceeds max_rays_per_pass = {max_rays_per_pass}: lower mask_resolution "
             "or raise max_rays_per_pass"
         )
-    spp_cap = max(1, max_rays_per_pass // n_texels)
-    n_pass = math.ceil(spp / spp_cap)
-    spp_pass = math.ceil(spp / n_pass)
+    passes = sample_passes(spp, max(1, max_rays_per_pass // n_texels))
 
-    if max_depth is None:
+    if sun_window is not None:
+        depth = max_depth if max_depth is not None else scene_max_depth(mi_scene)
+        integrator = SunPatchPathIntegrator(*sun_window, max_depth=-1 if depth is None else depth)
+    elif max_depth is None:
         integrator = mi_scene.integrator() or mi.load_dict({"type": "path"})
     else:
         integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
-    sampler = mi.load_dict({"type": "independent"})
     geo = _geometry(camera, parallax)
-    shape = (camera.num_detectors, rows, cols, spp_pass)
 
     total = np.zeros(n_texels, dtype=np.float64)
-    for i in range(n_pass):
-        mean = _transport_pass(
-            mi_scene, integrator, sampler, geo, mi.UInt32(_pass_seed(seed, i)), shape
-        )
-        total += mean.numpy().astype(np.float64)
-    log.debug("render_transport: %d pass(es) of %d spp, %d texels", n_pass, spp_pass, n_texels)
-    return (total / n_pass).astype(np.float32).reshape(camera.num_detectors, rows, cols)
+    with sun_sampled_apart(mi_scene) if sun_window is not None else nullcontext():
+        for i, n in enumerate(passes):
+            shape = (camera.num_detectors, rows, cols, n)
+            seed_i = mi.UInt32(_pass_seed(seed, i))
+            mean = _transport_pass(mi_scene, integrator, _stratified_sampler(n), geo, seed_i, shape)
+            total += mean.numpy().astype(np.float64) * n
+    log.debug("render_transport: passes of %s spp, %d texels", passes, n_texels)
+    return (total / spp).astype(np.float32).reshape(camera.num_detectors, rows, cols)

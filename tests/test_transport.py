@@ -99,7 +99,8 @@ def test_directional_response_against_quadrature(variant):
 
 def test_many_passes_accumulate_to_closed_form(variant):
     cam = single(mask_resolution=(8, 8))
-    t = render_transport(uniform_sky(), cam, spp=40, seed=0, max_rays_per_pass=8 * 8 * 7)
+    # passes of 6 x 6 + 4 + 1 samples: unequal, averaged by their sample counts
+    t = render_transport(uniform_sky(), cam, spp=41, seed=0, max_rays_per_pass=8 * 8 * 7)
     assert float(t.sum()) == pytest.approx(RADIANCE * coupling(cam), rel=0.01)
 
 
@@ -303,3 +304,15 @@ def test_without_parallax_every_detector_sees_from_the_board_centre(variant):
     # same sample streams: detector 0 moved by 10 mm shifts its image by b d / z
     shift = (centroid(with_p[0])[1] - c0) * cam.texel_size_m[1]
     assert shift == pytest.approx(0.010 * cam.mask_distance_m / depth, rel=0.05)
+
+
+@pytest.mark.parametrize(("spp", "cap"), [(1, 8), (20, 1024), (1792, 1024), (1000, 64), (7, 7)])
+def test_sample_passes_sum_to_spp_in_full_grids_under_the_cap(spp, cap):
+    import math
+
+    from mincam_render.transport import sample_passes
+
+    passes = sample_passes(spp, cap)
+    assert sum(passes) == spp
+    assert all(1 <= n <= cap and n % math.isqrt(n) == 0 for n in passes)
+    assert passes == sorted(passes, reverse=True)  # largest grid first

@@ -271,9 +271,7 @@ def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
     np.testing.assert_allclose(albedo[layout.slot(1)], 0.3)
 
 
-@pytest.mark.parametrize(
-    ("target_z_m", "where"), [(1.0, "corridor"), (2.2, "wall"), (2.3, "wall")]
-)
+@pytest.mark.parametrize(("target_z_m", "where"), [(1.0, "corridor"), (2.2, "wall"), (2.3, "wall")])
 def test_open_doorway_shows_the_corridor_and_the_wall_above_it_faces_the_room(
     family, target_z_m, where
 ):

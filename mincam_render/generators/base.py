@@ -191,6 +191,15 @@ class SceneFamily(abc.ABC):
         """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
+    def sun_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The window the sun shines through, ``(corner, edge_u, edge_v)`` (m, world), or None.
+
+        ``edge_u x edge_v`` points out of the room. Renders connect paths to the
+        sunlit patches behind it (:mod:`mincam_render.sun_patch`); None (the
+        default) renders with the scene's path tracer alone.
+        """
+        return None
+
     def time_s(self, index: int) -> float:
         """Time of frame ``index`` since the start of the sequence (s)."""
         return index / self.fps

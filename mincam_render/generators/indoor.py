@@ -1765,6 +1765,10 @@ class IndoorFamily(SceneFamily):
         state = replace(self.state(index), daylight_time_s=self._window_start_s(index, interval_s))
         return self.apply_state(scene, state)
 
+    def sun_window(self):
+        """The window opening (see the base class), or None without a window."""
+        return None if self.rig.window is None else self.rig.window_rectangle()
+
     def window_fraction(self, index: int, interval_s: float) -> float:
         """Where frame ``index``'s daylight lies in its window, in [0, 1) (0: its start).
 

@@ -12,7 +12,8 @@ in ``L``:
 
 with ``j = row * n + col`` over the ``n x n`` plane texels. :func:`build_plane_transport`
 estimates ``W`` once per camera by Monte Carlo with the same estimator as
-:func:`mincam_render.transport.render_transport` (``x`` uniform in the mask texel,
+:func:`mincam_render.transport.render_transport` (samples stratified per texel,
+``x`` uniform in the mask texel,
 ``q`` on the detector from the same one-sample mixture of area and
 cosine-weighted sampling, weight ``A_t d^2 / |x-q|^4 f(theta) / p(q)``), tracing
 the rays to the plane in numpy instead of Mitsuba. Then a frame costs one
@@ -225,6 +226,31 @@ def _response_table(camera: FreeformCamera) -> np.ndarray:
     return camera.directional_response.uniform_table(_RESPONSE_TABLE_SIZE).astype(np.float64)
 
 
+def _stratified_samples(rng: np.random.Generator, n_texels: int, spp: int) -> np.ndarray:
+    """``[n_texels * spp, 5]`` uniforms, each texel's ``spp`` stratified like the renders'.
+
+    Columns (0, 1) and (2, 3) are jittered points of an ``a x b`` grid
+    (``a = floor(sqrt(spp))``, ``b = ceil(spp / a)``; ``spp`` of its cells drawn
+    without replacement, in a random order per texel and pair) and column 4 is
+    jittered over ``spp`` strata: every sample stays uniform on its own, so the
+    operator stays unbiased, and its noise follows the stratified samples of
+    :func:`mincam_render.transport.render_transport`.
+    """
+    a = math.isqrt(spp)
+    b = -(-spp // a)
+
+    def cells(count: int) -> np.ndarray:
+        return np.argsort(rng.random((n_texels, count)), axis=1)[:, :spp].ravel()
+
+    out = np.empty((n_texels * spp, 5))
+    for col in (0, 2):
+        cell = cells(a * b)
+        out[:, col] = (cell % a + rng.random(cell.size)) / a
+        out[:, col + 1] = (cell // a + rng.random(cell.size)) / b
+    out[:, 4] = (cells(spp) + rng.random(n_texels * spp)) / spp
+    return out
+
+
 def build_plane_transport(
     plane: PlaneGeometry,
     camera: FreeformCamera,
@@ -234,7 +260,8 @@ def build_plane_transport(
 ) -> PlaneTransport:
     """Estimate ``W`` of ``camera`` seeing ``plane`` with ``render_transport``'s estimator.
 
-    Per mask texel ``(k, v, u)``, ``spp`` pairs ``(x, q)``: ``x`` uniform in the
+    Per mask texel ``(k, v, u)``, ``spp`` pairs ``(x, q)``, stratified over the
+    texel's samples (:func:`_stratified_samples`): ``x`` uniform in the
     texel, ``q`` uniform on the detector or, with probability
     :func:`~mincam_render.transport.cosine_sampling_fraction`, through a
     cosine-weighted direction from ``x``; the ray from ``x`` along ``x - q``
@@ -278,7 +305,7 @@ def build_plane_transport(
         u = texel % cols
         v = (texel // cols) % rows
         k = texel // (cols * rows)
-        xi = rng.random((m, 5))
+        xi = _stratified_samples(rng, m // spp, spp)
         x_s = (u + xi[:, 0]) * (w_mask / cols) - 0.5 * w_mask
         x_t = 0.5 * w_mask - (v + xi[:, 1]) * (w_mask / rows)
         pick_cos = xi[:, 4] < c_cos
