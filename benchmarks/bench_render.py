@@ -12,8 +12,10 @@ warms up (JIT compilation and kernel recording are not timed), then times
 update, labels, transport render, float16 encoding: everything but the disk
 write) and reports frames/s and detector-samples/s (median and spread). A plain
 ``mi.render`` of the same scene, updated to the same frames, with a perspective
-sensor of as many pixels as rendered texels and the same spp and integrator, is
-timed alongside: ``overhead = ours / plain - 1``. For differentially rendered
+sensor of as many pixels as rendered texels and the same spp, sampler
+(stratified) and integrator (the sun-patch path tracer of
+:mod:`mincam_render.sun_patch` for a family with a window, with the sun
+sampled apart), is timed alongside: ``overhead = ours / plain - 1``. For differentially rendered
 frames the rays are those of ``X`` (one board-centre detector when the
 difference is shared). Both run in one process on every core. Then
 ``--workers`` processes, the cores shared among them as ``mincam-render
@@ -47,12 +49,14 @@ import platform
 import statistics
 import subprocess
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 
 from mincam_render import backend
+from mincam_render import mitsuba_scene as ms
 from mincam_render.differential import BackgroundSettings, difference_camera
 from mincam_render.generators.registry import FAMILY_NAMES
 from mincam_render.render_job import (
@@ -65,6 +69,7 @@ from mincam_render.render_job import (
     render_backgrounds,
     render_shard,
 )
+from mincam_render.sun_patch import sun_sampled_apart
 from mincam_render.transport import render_transport
 
 
@@ -183,11 +188,18 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int, work
         ours.append(time.perf_counter() - t0)
 
     # plain Mitsuba: same scene and frames, same rays per frame, same integrator
+    # (the sun-patch path tracer for a family with a window) and samples
+    # stratified the same way
     family = _load_family(job)
     scene = family.build_scene()
-    integrator = (
-        mi.load_dict({"type": "path", "max_depth": r["max_depth"]}) if r["max_depth"] else None
-    )
+    window = family.sun_window()
+    depth = r["max_depth"] or -1
+    if window is not None:
+        integrator = mi.load_dict(ms.sun_patch_integrator(*window, max_depth=depth))
+    elif r["max_depth"]:
+        integrator = mi.load_dict({"type": "path", "max_depth": depth})
+    else:
+        integrator = None
     sensor = mi.load_dict(
         {
             "type": "perspective",
@@ -202,6 +214,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int, work
                 "rfilter": {"type": "box"},
                 "pixel_format": "luminance",
             },
+            "sampler": {"type": "multijitter", "sample_count": r["spp"]},
         }
     )
 
@@ -209,9 +222,10 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int, work
         for i in range(frames):
             family.set_frame(scene, i)
             kw = {"integrator": integrator} if integrator is not None else {}
-            mi.render(
-                scene, sensor=sensor, spp=r["spp"], seed=frame_seed(0, i) & 0xFFFFFFFF, **kw
-            ).numpy()
+            with sun_sampled_apart(scene) if window is not None else nullcontext():
+                mi.render(
+                    scene, sensor=sensor, spp=r["spp"], seed=frame_seed(0, i) & 0xFFFFFFFF, **kw
+                ).numpy()
 
     plain_pass()
     plain = []

@@ -43,7 +43,10 @@ log = logging.getLogger(__name__)
 
 FORMAT_NAME = "mincam_render.transport_dataset"
 #: 2: differential backgrounds carry B_1 (window end) and frames interpolate daylight.
-FORMAT_VERSION = 2
+#: 3: the same files; renders stratify each texel's samples and, for families with
+#: a window, sample the sun apart with sunlit-patch connections
+#: (mincam_render.sun_patch): a version-2 dataset resumed now would mix estimators.
+FORMAT_VERSION = 3
 MANIFEST_NAME = "manifest.json"
 SHARD_DIR = "shards"
 #: Static backgrounds of differentially rendered datasets (mincam_render.differential).

@@ -335,6 +335,27 @@ def portal_sky(radiance_w_m2_sr, corner_m, edge_u_m, edge_v_m) -> dict[str, Any]
     }
 
 
+def sun_patch_integrator(corner_m, edge_u_m, edge_v_m, *, max_depth: int = -1) -> dict[str, Any]:
+    """The :mod:`mincam_render.sun_patch` path tracer as an integrator dict (for ``mi.render``).
+
+    The window is the rectangle ``corner_m + a edge_u_m + b edge_v_m``, ``a, b``
+    in [0, 1] (m, world), ``edge_u_m x edge_v_m`` pointing out of the room;
+    ``max_depth`` in path segments (-1: no limit). Render inside
+    :func:`mincam_render.sun_patch.sun_sampled_apart`.
+    """
+    from . import sun_patch as sp
+
+    use_variant()
+    sp.register()
+    return {
+        "type": sp.PLUGIN_NAME,
+        "corner": mi.ScalarPoint3f(*map(float, corner_m)),
+        "edge_u": mi.ScalarVector3f(*map(float, edge_u_m)),
+        "edge_v": mi.ScalarVector3f(*map(float, edge_v_m)),
+        "max_depth": int(max_depth),
+    }
+
+
 def portal_sky_data(radiance_w_m2_sr) -> mi.Float:
     """Flat value of a :func:`portal_sky`'s ``"<key>.data"`` from ``L[row, col]``."""
     import numpy as np

@@ -54,6 +54,7 @@ lower the background's error to 0.0033 in 5.3 s.
 
 from __future__ import annotations
 
+import functools
 from contextlib import contextmanager
 
 import drjit as dr
@@ -324,3 +325,54 @@ def sun_sampled_apart(scene: mi.Scene):
     finally:
         params[key] = weight
         params.update()
+
+
+#: Plugin name registered with Mitsuba (for ``mi.render`` and scene files).
+PLUGIN_NAME = "sun_patch"
+
+
+def plugin_class() -> type:
+    """The Mitsuba plugin class of the current variant (it subclasses a variant's type)."""
+    return _plugin_class(mi.variant())
+
+
+@functools.cache
+def _plugin_class(variant: str) -> type:
+
+    class SunPatchIntegratorPlugin(mi.SamplingIntegrator):
+        """:class:`SunPatchPathIntegrator` as a Mitsuba integrator plugin (``mi.render``, XML).
+
+        Properties (see :func:`mincam_render.mitsuba_scene.sun_patch_integrator`):
+            corner, edge_u, edge_v: the window (m, world), ``edge_u x edge_v`` outward.
+            max_depth: longest path in segments, or -1 (default) for no limit.
+            rr_depth, patch_vertices: as :class:`SunPatchPathIntegrator`.
+
+        Render inside :func:`sun_sampled_apart` for the intended efficiency.
+        """
+
+        def __init__(self, props: mi.Properties) -> None:
+            super().__init__(props)
+            self.impl = SunPatchPathIntegrator(
+                np.asarray(props["corner"], dtype=np.float64),
+                np.asarray(props["edge_u"], dtype=np.float64),
+                np.asarray(props["edge_v"], dtype=np.float64),
+                max_depth=int(props.get("max_depth", -1)),
+                rr_depth=int(props.get("rr_depth", DEFAULT_RR_DEPTH)),
+                patch_vertices=int(props.get("patch_vertices", DEFAULT_PATCH_VERTICES)),
+            )
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            """Radiance along ``ray``: ``(L, valid, [])`` (``medium`` unused)."""
+            return self.impl.sample(scene, sampler, mi.Ray3f(ray), active)
+
+        def to_string(self) -> str:
+            """Short description."""
+            return f"SunPatchIntegratorPlugin[window {self.impl.area_m2:.3g} m^2]"
+
+    return SunPatchIntegratorPlugin
+
+
+def register() -> None:
+    """Register the plugin with Mitsuba (idempotent; needs the variant set)."""
+    cls = plugin_class()
+    mi.register_integrator(PLUGIN_NAME, lambda props: cls(props))

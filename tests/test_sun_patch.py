@@ -226,3 +226,37 @@ def test_two_suns_are_refused():
     )
     with pytest.raises(ValueError, match="directional emitters"):
         find_sun(scene)
+
+
+def test_plugin_renders_like_the_class_through_mi_render(workspace):
+    """The registered plugin (``mi.render``) gives the class's expectation: same mean image."""
+    import mitsuba as mi
+
+    from mincam_render import mitsuba_scene as ms
+    from mincam_render.sun_patch import sun_sampled_apart
+
+    family, scene, camera = workspace
+    family.set_background(scene, 0, 60.0)
+    integrator = mi.load_dict(ms.sun_patch_integrator(*family.sun_window(), max_depth=4))
+    sensor = mi.load_dict(
+        {
+            "type": "perspective",
+            "fov": 60.0,
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=list(camera.position), target=list(camera.look_at), up=list(camera.up)
+            ),
+            "film": {"type": "hdrfilm", "width": 8, "height": 8, "pixel_format": "luminance"},
+        }
+    )
+    with sun_sampled_apart(scene):
+        ours = [
+            mi.render(scene, sensor=sensor, integrator=integrator, spp=512, seed=s) for s in (1, 2)
+        ]
+    path = mi.load_dict({"type": "path", "max_depth": 4})
+    plain = [mi.render(scene, sensor=sensor, integrator=path, spp=512, seed=s) for s in (3, 4)]
+    ours_total = [float(np.asarray(x).sum()) for x in ours]
+    plain_total = [float(np.asarray(x).sum()) for x in plain]
+    spread = abs(ours_total[0] - ours_total[1]) + abs(plain_total[0] - plain_total[1])
+    assert abs(np.mean(ours_total) - np.mean(plain_total)) <= 3 * spread + 1e-3 * np.mean(
+        plain_total
+    )
