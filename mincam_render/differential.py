@@ -185,18 +185,15 @@ def render_same_seed(
     ``C`` is the background at its window's start with the frames' samples,
     depth and seed (``[1, row, col]`` from the board centre when shared).
     """
-    from .transport import render_transport
-
     key = family.background_key(index, settings.interval_s)
     seed = background_seed(dataset_seed, key)
     family.set_background(scene, index, settings.interval_s)
-    same_seed = render_transport(
+    same_seed = family.render_transport(
         scene,
         difference_camera(camera, settings.shared_difference),
         spp=spp,
         seed=seed,
         max_depth=max_depth,
-        sun_window=family.sun_window(),
     )
     return key, seed, same_seed
 
@@ -205,16 +202,13 @@ def render_component(
     family, scene, camera: FreeformCamera, key: str, settings: BackgroundSettings, *, dataset_seed
 ) -> np.ndarray:
     """The converged render of background component ``key`` (``[detector, row, col]``, W)."""
-    from .transport import render_transport
-
     family.set_background_component(scene, key)
-    return render_transport(
+    return family.render_transport(
         scene,
         camera,
         spp=settings.spp,
         seed=component_seed(dataset_seed, key),
         max_depth=settings.max_depth,
-        sun_window=family.sun_window(),
     )
 
 
@@ -290,19 +284,16 @@ def render_frame(
     Raises:
         ValueError: ``background`` is not frame ``index``'s.
     """
-    from .transport import render_transport
-
     key = family.background_key(index, background.interval_s)
     if key != background.key:
         raise ValueError(f"frame {index} has background {key!r}, not {background.key!r}")
     labels = family.set_frame_in_window(scene, index, background.interval_s)
-    x = render_transport(
+    x = family.render_transport(
         scene,
         difference_camera(camera, background.shared_difference),
         spp=spp,
         seed=background.seed,
         max_depth=max_depth,
-        sun_window=family.sun_window(),
     )
     # [1, R, C] differences broadcast over the detectors' own backgrounds
     converged = background.converged(family.background_components(index, background.interval_s))

@@ -152,7 +152,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     """
     from . import backend
     from .render_job import Fidelity, frame_seed
-    from .transport import render_transport, scene_max_depth
+    from .transport import scene_max_depth
 
     auto = request.fidelity is Fidelity.AUTO
     scene = family.build_scene()
@@ -167,20 +167,12 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         for i in probes:
             family.set_frame(scene, i)
             seed = (frame_seed(request.seed, i) + 7919 * seed_offset) % 2**63
-            t = render_transport(
-                scene,
-                cam,
-                spp=spp,
-                seed=seed,
-                max_depth=max_depth or None,
-                parallax=parallax,
-                sun_window=window,
+            t = family.render_transport(
+                scene, cam, spp=spp, seed=seed, max_depth=max_depth or None, parallax=parallax
             )
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
-    # the estimator of the dataset's renders (see render_transport), reference included
-    window = family.sun_window()
     centre_cam = camera.centre_camera()
 
     # ---- shared render ------------------------------------------------------------------
@@ -548,7 +540,6 @@ def _background_noise(family, scene, camera, probes, interval, depth, lo_hi, req
     are no noisier (their weights' squares sum to at most 1 per light).
     """
     from .render_job import frame_seed
-    from .transport import render_transport
 
     renders = {0: [], 1: []}
     for i in probes:
@@ -556,13 +547,8 @@ def _background_noise(family, scene, camera, probes, interval, depth, lo_hi, req
         for s in renders:
             seed = (frame_seed(request.seed, i) + 7919 * (s + 31)) % 2**63
             renders[s].append(
-                render_transport(
-                    scene,
-                    camera,
-                    spp=BACKGROUND_PILOT_SPP,
-                    seed=seed,
-                    max_depth=depth,
-                    sun_window=family.sun_window(),
+                family.render_transport(
+                    scene, camera, spp=BACKGROUND_PILOT_SPP, seed=seed, max_depth=depth
                 )
             )
     a, b = (np.stack(r) for r in renders.values())
@@ -578,7 +564,6 @@ def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
     noise), at ``INTERPOLATION_SPP``.
     """
     from .render_job import frame_seed
-    from .transport import render_transport
 
     spp = INTERPOLATION_SPP
     ends, middles = [], []
@@ -587,13 +572,8 @@ def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
         for at in (0.0, 0.5, 1.0):
             family.set_background(scene, i, interval, at=at)
             renders.append(
-                render_transport(
-                    scene,
-                    camera,
-                    spp=spp,
-                    seed=frame_seed(i, 17),
-                    max_depth=depth,
-                    sun_window=family.sun_window(),
+                family.render_transport(
+                    scene, camera, spp=spp, seed=frame_seed(i, 17), max_depth=depth
                 )
             )
         ends.append(0.5 * (renders[0] + renders[2]))
@@ -626,7 +606,6 @@ def _decide_differential(
     """
     from .differential import background_parts, difference_camera
     from .render_job import Fidelity, frame_seed
-    from .transport import render_transport
 
     available = bool(getattr(family, "has_background", False))
     interval = request.background_interval_s
@@ -664,7 +643,6 @@ def _decide_differential(
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
     deep = max_depth or None
-    window = family.sun_window()
 
     def pair(depth, seed_offset, spp, camera=render_cam):
         """(X, C) per probe with one seed each (common random numbers)."""
@@ -672,17 +650,9 @@ def _decide_differential(
         for i in probes:
             seed = (frame_seed(request.seed, i) + 7919 * (seed_offset + 11)) % 2**63
             family.set_frame_in_window(scene, i, interval)
-            xs.append(
-                render_transport(
-                    scene, camera, spp=spp, seed=seed, max_depth=depth, sun_window=window
-                )
-            )
+            xs.append(family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
             family.set_background(scene, i, interval)
-            cs.append(
-                render_transport(
-                    scene, camera, spp=spp, seed=seed, max_depth=depth, sun_window=window
-                )
-            )
+            cs.append(family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=depth))
         return np.stack(xs), np.stack(cs)
 
     # X - C is traced as deep as the backgrounds: truncating it would bias the
@@ -695,13 +665,8 @@ def _decide_differential(
         family.set_frame_in_window(scene, i, interval)
         seed = frame_seed(request.seed, i)
         x_ref.append(
-            render_transport(
-                scene,
-                render_cam,
-                spp=DIFFERENCE_BASE_SPP,
-                seed=seed,
-                max_depth=deep,
-                sun_window=window,
+            family.render_transport(
+                scene, render_cam, spp=DIFFERENCE_BASE_SPP, seed=seed, max_depth=deep
             )
         )
     x_ref = np.stack(x_ref)

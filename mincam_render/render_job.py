@@ -296,7 +296,6 @@ def render_shard(
     """
     from .backend import use_variant
     from .differential import render_frame
-    from .transport import render_transport
 
     use_variant()
     t0 = time.perf_counter()
@@ -332,13 +331,8 @@ def render_shard(
         else:
             lab = family.set_frame(scene, i)
             seed = frame_seed(job["seed"], i)
-            t = render_transport(
-                scene,
-                render_cam,
-                spp=r["spp"],
-                seed=seed,
-                max_depth=max_depth,
-                sun_window=family.sun_window(),
+            t = family.render_transport(
+                scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth
             )
         if r["shared_render"]:
             t = np.repeat(t, k, axis=0)

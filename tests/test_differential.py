@@ -180,9 +180,7 @@ def test_frame_is_background_plus_difference_per_detector_or_shared(variant, sha
     assert all(c.shape == (cam.num_detectors, 8, 8) for c in bg.components.values())
     assert bg.same_seed_w.shape == (diff_cam.num_detectors, 8, 8)
     fam.set_frame_in_window(scene, index, settings.interval_s)
-    x = render_transport(
-        scene, diff_cam, spp=2, seed=bg.seed, max_depth=3, sun_window=fam.sun_window()
-    )
+    x = fam.render_transport(scene, diff_cam, spp=2, seed=bg.seed, max_depth=3)
     weights = fam.background_components(index, settings.interval_s)
     expected = sum(w * bg.components[k].astype(np.float64) for k, w in weights.items())
     expected += x - bg.same_seed_w
@@ -209,7 +207,6 @@ def test_estimate_is_unbiased_and_less_noisy_than_plain(variant):
     scene, cam = fam.build_scene(), _small(fam.camera())
     lo_hi = cam.transmittance_range
     depth, spp, big = 8, 16, 4096
-    win = fam.sun_window()  # the estimator of dataset renders
     settings = BackgroundSettings(interval_s=60.0, spp=big, max_depth=depth)
     bg0 = render_background(
         fam, scene, cam, index, settings, dataset_seed=0, spp=spp, max_depth=depth
@@ -219,14 +216,12 @@ def test_estimate_is_unbiased_and_less_noisy_than_plain(variant):
         # a fresh seed s for X and C, the same converged B
         seed = background_seed(s, bg0.key)
         fam.set_background(scene, index, settings.interval_s)
-        same = render_transport(scene, cam, spp=spp, seed=seed, max_depth=depth, sun_window=win)
+        same = fam.render_transport(scene, cam, spp=spp, seed=seed, max_depth=depth)
         bg = dataclasses.replace(bg0, seed=seed, same_seed_w=same)
         diffs.append(render_frame(fam, scene, cam, index, bg, spp=spp, max_depth=depth)[0])
         fam.set_frame(scene, index)
-        plains.append(
-            render_transport(scene, cam, spp=spp, seed=100 + s, max_depth=depth, sun_window=win)
-        )
-    ref = render_transport(scene, cam, spp=big, seed=999, max_depth=depth, sun_window=win)
+        plains.append(fam.render_transport(scene, cam, spp=spp, seed=100 + s, max_depth=depth))
+    ref = fam.render_transport(scene, cam, spp=big, seed=999, max_depth=depth)
     diffs, plains = np.stack(diffs), np.stack(plains)
     # one estimate's relative noise (the difference of two has sqrt(2) times more)
     noise_diff = ds.measurement_relative_error(diffs[:3], diffs[3:], lo_hi)["rms"] / np.sqrt(2)

@@ -191,6 +191,35 @@ class SceneFamily(abc.ABC):
         """
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
+    def render_transport(
+        self,
+        scene: mi.Scene,
+        camera: FreeformCamera,
+        *,
+        spp: int,
+        seed: int,
+        max_depth: int | None = None,
+        parallax: bool = True,
+    ) -> np.ndarray:
+        """Transport images of ``scene`` with this family's estimator (``[detector, row, col]``, W).
+
+        :func:`mincam_render.transport.render_transport` with the family's
+        :meth:`sun_window`: every render of a dataset (frames, ``X``, ``C``,
+        background components, the planner's pilots and reference) goes
+        through here, so they all use one estimator.
+        """
+        from ..transport import render_transport
+
+        return render_transport(
+            scene,
+            camera,
+            spp=spp,
+            seed=seed,
+            max_depth=max_depth,
+            parallax=parallax,
+            sun_window=self.sun_window(),
+        )
+
     def sun_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The window the sun shines through, ``(corner, edge_u, edge_v)`` (m, world), or None.
 
