@@ -847,6 +847,12 @@ def _render_settings(ctx, param, values):
     metavar="ADDRESS",
     help="Render on a Ray cluster ('local' starts one; needs the ray extra).",
 )
+@click.option(
+    "--replan",
+    is_flag=True,
+    help="Measure the fidelity plan again instead of reusing a kept plan of the same "
+    "description, camera, targets and frame count.",
+)
 @click.option("--no-progress", is_flag=True, help="Hide the progress bar.")
 def render_cmd(
     family,
@@ -871,6 +877,7 @@ def render_cmd(
     dtype_error,
     workers,
     ray_address,
+    replan,
     no_progress,
 ):
     """Render a dataset of transport images T[frame, detector, row, col] with labels.
@@ -878,7 +885,10 @@ def render_cmd(
     FAMILY is a scene family name (patches, workspace, lighting, traffic) or a
     scene TOML file. The same command after an interruption resumes and gives
     the same bytes as an uninterrupted run; a different configuration into a
-    non-empty --out is refused. Format: docs/dataset_format.md.
+    non-empty --out is refused. The fidelity plan is measured once per
+    description, camera, targets and frame count (on the seed-0 episode, so every
+    seed shares it) and kept; shipped plans (scenes/plans/) start at once.
+    Format: docs/dataset_format.md.
 
     \b
     Example:
@@ -918,6 +928,7 @@ def render_cmd(
             workers=(os.cpu_count() or 1) if workers is None else workers,
             ray_address=ray_address,
             progress=not no_progress,
+            use_plan_cache=not replan,
         )
     except (ValueError, DatasetError, RenderError, OSError, ImportError) as err:
         raise click.ClickException(str(err)) from None

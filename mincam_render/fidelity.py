@@ -28,7 +28,8 @@ sequence, at fixed seeds) and decides:
   centre, interpolating the daylight within a window), and the noises of
   ``X - C`` and of the backgrounds share what is left in the cheapest split
   (:func:`_split_noise_budget`); ``X - C`` is traced as deep as the
-  backgrounds; the choice is checked against a reference;
+  backgrounds; the choice is checked against a plain reference whose predicted
+  noise is ``REFERENCE_NOISE_SHARE`` of the target (subtracted in quadrature);
 - **storage float16** when the relative measurement error it adds (per-frame
   power-of-two scaling, see :mod:`mincam_render.dataset`) stays below
   ``dtype_error_bound`` for random printable masks, else float32;
@@ -67,6 +68,9 @@ MAX_AUTO_SPP = 1024
 REFERENCE_SPP_FACTOR = 8
 #: Cap on the reference's spp (keeps planning a noisy scene to minutes).
 MAX_REFERENCE_SPP = 4096
+#: The reference of a differential plan gets the spp whose predicted noise is this
+#: share of the target error (its noise is subtracted in quadrature from the check).
+REFERENCE_NOISE_SHARE = 0.2
 #: Path depths tried, shallowest first, against the deep reference.
 CANDIDATE_DEPTHS = (2, 3, 4, 6, 8, 12)
 #: Path depth of the reference when the scene's integrator is unbounded (-1).
@@ -347,7 +351,14 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
 
     if background is not None:
         chosen = differential_probes()
-        ref_spp = MAX_REFERENCE_SPP
+        # as many samples as keep the reference's own noise at a small share of
+        # the target (it is subtracted in quadrature below): 4096 spp took 70 %
+        # of planning the lighting family and bought nothing the figure uses
+        ref_spp = (
+            MAX_REFERENCE_SPP
+            if e_pilot is None
+            else _spp_for(e_pilot, REFERENCE_NOISE_SHARE * request.target_error, MAX_REFERENCE_SPP)
+        )
         ref_depth = background["max_depth"]
     else:
         chosen = render(render_cam, spp=spp, seed_offset=2, max_depth=max_depth, shared=shared)

@@ -11,9 +11,11 @@ directory (format: :mod:`mincam_render.dataset`):
    a resumed render is identical to an uninterrupted one.
 2. **Check.** Every shard is verified against its sha256: intact shards are kept
    (never re-rendered); corrupted or truncated ones are re-rendered.
-3. **Render.** Missing shards are rendered by worker processes (``spawn``; each
-   replaced after a few shards so Mitsuba/Dr.Jit memory cannot accumulate; each
-   limited to ``cores / workers`` Dr.Jit threads), in-process (``workers=0``), or
+3. **Render.** Missing shards are rendered by worker processes
+   (:mod:`mincam_render.worker_pool`: ``spawn``; each replaced after a few shards
+   so Mitsuba/Dr.Jit memory cannot accumulate; each limited to
+   ``cores / workers`` Dr.Jit threads; a worker that dies or stalls stops the
+   render with an error naming its shard), in-process (``workers=0``), or
    as Ray tasks (``ray_address``). Workers return arrays; only this process
    writes files, each atomically, then updates the manifest.
 
@@ -31,11 +33,8 @@ import json
 import logging
 import math
 import os
-import queue as queue_mod
-import threading
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -262,23 +261,25 @@ def _render_camera(job: dict):
 
 # ---- worker side -----------------------------------------------------------------------
 
-_WORKER: dict[str, Any] = {"progress": None, "parent": None, "cache": {}}
+_WORKER: dict[str, Any] = {"parent": None, "cache": {}}
 
 
-def _worker_init(threads: int, progress_queue, parent_pid: int | None) -> None:
-    """Initializer of a worker process: limit Dr.Jit threads, remember the progress queue."""
+def _worker_init(threads: int, parent_pid: int | None) -> None:
+    """Initializer of a worker process: limit Dr.Jit threads, remember the parent."""
     import drjit as dr
 
     from .backend import use_variant
 
     use_variant()
     dr.set_thread_count(max(1, int(threads)))
-    _WORKER["progress"] = progress_queue
     _WORKER["parent"] = parent_pid
 
 
 def render_shard(
-    job: dict, shard: int, backgrounds: dict | None = None
+    job: dict,
+    shard: int,
+    backgrounds: dict | None = None,
+    on_progress: Callable[[int], None] | None = None,
 ) -> tuple[int, np.ndarray, dict, float]:
     """Render one shard of a job (in whatever process calls it).
 
@@ -287,6 +288,7 @@ def render_shard(
         shard: shard number.
         backgrounds: for differentially rendered jobs, ``{key: Background}``
             covering the shard's frames (see :func:`load_backgrounds`).
+        on_progress: called with 1 after each frame.
 
     Returns:
         ``(shard, stored T[frame, detector, row, col], shard metadata, seconds)``.
@@ -343,8 +345,8 @@ def render_shard(
         if background is not None:
             record["background"] = background.key
         frames.append(dict(record, state=family.frame_state(i)))
-        if _WORKER["progress"] is not None:
-            _WORKER["progress"].put(1)
+        if on_progress is not None:
+            on_progress(1)
         if delay:
             time.sleep(delay)
     stored, scales = ds.encode_transport(np.stack(images), r["dtype"])
@@ -594,15 +596,22 @@ def _describe_family(request: RenderRequest):
     return family, description, rebuild
 
 
-def plan_render(request: RenderRequest) -> dict:
+def plan_render(request: RenderRequest, *, use_cache: bool = True, ship: bool = False) -> dict:
     """The manifest of a new render: configuration, fidelity decisions, empty shards.
 
-    Runs the fidelity measurements of ``request.fidelity == AUTO`` (a few small
-    renders). Pure planning: writes nothing.
+    The fidelity plan comes from :mod:`mincam_render.plan_cache` when one is kept
+    for the request's description, camera, targets and frame count; otherwise it is
+    measured (a few small renders of the planning episode) and kept in the user's
+    cache. Writes nothing else.
+
+    Args:
+        request: what to render.
+        use_cache: look up and keep plans; False always measures (and keeps nothing).
+        ship: measure the plan and write it among the shipped plans
+            (``scenes/plans/``, :mod:`mincam_render.plan_cache`).
     """
     from . import backend
     from .differential import background_parts
-    from .fidelity import decide_fidelity
 
     backend.use_variant()
     family, description, rebuild = _describe_family(request)
@@ -613,11 +622,9 @@ def plan_render(request: RenderRequest) -> dict:
         base_camera = dataclasses.replace(
             base_camera, mask_resolution=(request.mask_res, request.mask_res)
         )
-    settings, decisions = decide_fidelity(family, base_camera, request)
-    # measured figures are reported to 6 significant digits: last-bit differences
-    # of floating-point sums between two planning runs must not change the bytes
-    # of otherwise identical manifests
-    decisions = _rounded(decisions)
+    settings, decisions = _fidelity_plan(
+        request, family.name, identity, base_camera, use_cache and not ship, ship
+    )
     camera = base_camera
     num_shards = -(-request.num_frames // request.shard_frames)
     job = {
@@ -687,6 +694,42 @@ def plan_render(request: RenderRequest) -> dict:
     }
 
 
+def _fidelity_plan(
+    request: RenderRequest, family_name: str, identity: dict, camera, use_cache: bool, ship: bool
+) -> tuple[dict, dict]:
+    """``(settings, decisions)`` of a request: kept, or measured on the planning episode."""
+    from . import backend, plan_cache
+    from .fidelity import decide_fidelity
+
+    info = backend.describe()
+    versions = package_versions()
+    renderer = {"variant": info["variant"], **{k: versions[k] for k in ("mitsuba", "drjit")}}
+    fields = plan_cache.plan_fields(identity, family_name, renderer)
+    found = plan_cache.find_plan(fields) if use_cache else None
+    if found is not None:
+        plan, where = found
+        log.info("fidelity plan %s (%s)", plan_cache.plan_key(fields)[:12], where)
+        return plan["settings"], plan["decisions"]
+    t0 = time.perf_counter()
+    plan_request = dataclasses.replace(request, seed=plan_cache.PLAN_SEED)
+    family, _, _ = _describe_family(plan_request)
+    settings, decisions = decide_fidelity(family, camera, plan_request)
+    decisions["planning_episode"] = {"seed": plan_cache.PLAN_SEED, "frames": request.num_frames}
+    # measured figures are reported to 6 significant digits: last-bit differences
+    # of floating-point sums between two planning runs must not change the bytes
+    # of otherwise identical manifests; the JSON round trip makes a fresh plan
+    # equal to a kept one
+    plan = json.loads(json.dumps({"settings": settings, "decisions": _rounded(decisions)}))
+    seconds = time.perf_counter() - t0
+    log.info("fidelity planned in %.1f s", seconds)
+    if use_cache or ship:
+        try:
+            plan_cache.store_plan(fields, plan, seconds, plan_cache.SHIPPED_DIR if ship else None)
+        except OSError as err:
+            log.warning("could not keep the fidelity plan in %s: %s", plan_cache.cache_dir(), err)
+    return plan["settings"], plan["decisions"]
+
+
 def _identity_diff(old: dict, new: dict, prefix: str = "") -> list[str]:
     diffs = []
     for key in sorted(set(old) | set(new)):
@@ -709,7 +752,7 @@ def _rounded(obj: Any, digits: int = 6) -> Any:
     return obj
 
 
-def _open_or_plan(request: RenderRequest, out: Path) -> dict:
+def _open_or_plan(request: RenderRequest, out: Path, use_plan_cache: bool) -> dict:
     """Reuse the manifest of ``out`` if it is the same request; plan a new one if empty."""
     manifest_path = out / ds.MANIFEST_NAME
     if out.exists() and not out.is_dir():
@@ -743,9 +786,11 @@ def _open_or_plan(request: RenderRequest, out: Path) -> dict:
         raise ds.DatasetError(
             f"{out} is not empty and holds no {ds.MANIFEST_NAME}; refusing to render into it"
         )
-    manifest = plan_render(request)
+    t0 = time.perf_counter()
+    manifest = plan_render(request, use_cache=use_plan_cache)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
     ds.write_manifest(out, manifest)
+    _append_log(out, {"event": "planned", "seconds": time.perf_counter() - t0, "time": time.time()})
     return manifest
 
 
@@ -770,6 +815,7 @@ def render_dataset(
     ray_address: str | None = None,
     progress: bool = False,
     shards_per_worker: int = DEFAULT_SHARDS_PER_WORKER,
+    use_plan_cache: bool = True,
 ) -> RenderSummary:
     """Render (or finish) the dataset of ``request`` into directory ``out``.
 
@@ -782,6 +828,9 @@ def render_dataset(
             ``ray`` extra. ``workers`` is then ignored.
         progress: show a tqdm progress bar (frames/s, ETA) on stderr.
         shards_per_worker: shards a worker process renders before it is replaced.
+        use_plan_cache: reuse a kept fidelity plan of the same description, camera,
+            targets and frame count (:mod:`mincam_render.plan_cache`), and keep a
+            new one; False measures the plan again.
 
     Returns:
         A :class:`RenderSummary`.
@@ -797,7 +846,7 @@ def render_dataset(
         raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
     out = Path(out)
     t_start = time.perf_counter()
-    manifest = _open_or_plan(request, out)
+    manifest = _open_or_plan(request, out, use_plan_cache)
     for tmp in ds.remove_stale_temporaries(out):
         log.info("removed %s, left by a killed render", tmp)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
@@ -891,8 +940,9 @@ def render_dataset(
         elif ray_address is not None:
             _run_ray(ray_address, job, todo, finish, shards_per_worker, backgrounds_of)
         elif workers == 0:
+            on_frame = None if bar is None else bar.update
             for i in todo:
-                finish(render_shard(job, i, backgrounds_of(i)), False)
+                finish(render_shard(job, i, backgrounds_of(i), on_frame), on_frame is not None)
         else:
             _run_processes(job, todo, finish, workers, shards_per_worker, bar, backgrounds_of)
     finally:
@@ -929,7 +979,11 @@ def _shard_backgrounds(out: Path, manifest: dict, progress: bool) -> Callable[[i
         return lambda shard: None
     family = _load_family(job)
     keys = background_keys(family, job)
+    t0 = time.perf_counter()
     ensure_backgrounds(out, manifest, family, keys, progress=progress)
+    _append_log(
+        out, {"event": "backgrounds", "seconds": time.perf_counter() - t0, "time": time.time()}
+    )
     loaded = load_backgrounds(out, manifest, keys)
     size = job["shard_frames"]
 
@@ -948,55 +1002,26 @@ def _run_processes(
     bar,
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
-    import multiprocessing as mp
-    from concurrent.futures.process import BrokenProcessPool
+    from .worker_pool import PoolError, run_tasks
 
-    ctx = mp.get_context("spawn")
-    progress_q = ctx.Queue() if bar is not None else None
-    stop = threading.Event()
-
-    def drain() -> None:
-        while not stop.is_set():
-            try:
-                n = progress_q.get(timeout=0.2)
-            except queue_mod.Empty:
-                continue
-            except (EOFError, OSError):
-                return
-            bar.update(n)
-
-    drainer = None
-    if progress_q is not None:
-        drainer = threading.Thread(target=drain, daemon=True)
-        drainer.start()
     workers = min(workers, len(todo))  # and the cores go to the workers that run
-    threads = _threads_per_worker(workers)
-    executor = ProcessPoolExecutor(
-        max_workers=workers,
-        mp_context=ctx,
-        initializer=_worker_init,
-        initargs=(threads, progress_q, os.getpid()),
-        max_tasks_per_child=shards_per_worker,
-    )
     try:
-        pending = {executor.submit(render_shard, job, i, backgrounds_of(i)): i for i in todo}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                shard = pending.pop(fut)
-                try:
-                    result = fut.result()
-                except BrokenProcessPool as err:
-                    raise RenderError(
-                        f"a render worker died while rendering shard {shard} ({err}); "
-                        "finished shards are kept: run the same command again to resume"
-                    ) from None
-                finish(result, True)
-    finally:
-        executor.shutdown(wait=True, cancel_futures=True)
-        stop.set()
-        if drainer is not None:
-            drainer.join(timeout=2)
+        run_tasks(
+            render_shard,
+            todo,
+            lambda shard: (job, shard, backgrounds_of(shard)),
+            lambda shard, result: finish(result, True),
+            workers=workers,
+            tasks_per_worker=shards_per_worker,
+            initializer=_worker_init,
+            initargs=(_threads_per_worker(workers), os.getpid()),
+            on_progress=None if bar is None else lambda shard, n: bar.update(n),
+        )
+    except PoolError as err:
+        raise RenderError(
+            f"{err}: shard {', '.join(map(str, err.tasks))} did not finish; finished shards "
+            "are kept: run the same command again to resume"
+        ) from None
 
 
 def _run_ray(

@@ -4,13 +4,13 @@
 #
 # Usage: scripts/setup.sh [--dev]
 #   --dev   also install the test and lint tools (pytest, hypothesis, ruff) and the
-#           traffic extra (Eclipse SUMO), so the traffic tests run
+#           traffic (Eclipse SUMO) and ray extras, so the traffic and Ray tests run
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$here"
 extras=""
-if [[ "${1:-}" == "--dev" ]]; then extras="[dev,traffic]"; fi
+if [[ "${1:-}" == "--dev" ]]; then extras="[dev,traffic,ray]"; fi
 
 log() { echo "[setup] $*" >&2; }
 die() { echo "[setup] ERROR: $*" >&2; exit 1; }

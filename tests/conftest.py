@@ -8,6 +8,14 @@ import pytest
 from mincam_render import backend
 
 
+@pytest.fixture(autouse=True)
+def isolated_plan_cache(tmp_path_factory, monkeypatch):
+    """Fidelity plans of one test session go to a temporary cache, not the user's."""
+    from mincam_render.plan_cache import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "plan-cache"))
+
+
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)

@@ -361,7 +361,6 @@ def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
         assert settings["background"] is None
 
 
-@pytest.mark.slow
 def test_ray_renders_differential_datasets_byte_identically(differential_dataset, tmp_path):
     pytest.importorskip("ray")
     from mincam_render.render_job import render_dataset

@@ -5,6 +5,7 @@ from __future__ import annotations
 import difflib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -262,10 +263,83 @@ def test_shared_render_replicates_the_centre_render(tmp_path, variant):
     assert d.manifest["fidelity"]["shared_render"]["source"] == "flag"
 
 
-@pytest.mark.slow
-def test_ray_local_cluster_matches_local_workers(tmp_path, tiny_request, variant):
+@pytest.fixture(scope="module")
+def many_shards(tmp_path_factory):
+    """A dataset of 13 one-frame shards rendered in this process: the reference."""
+    request = RenderRequest(  # what the command line below asks for
+        family="patches",
+        num_frames=13,
+        seed=2,
+        overrides={"camera": {"detectors": 2}},
+        mask_res=8,
+        shard_frames=1,
+        spp=1,
+    )
+    out = tmp_path_factory.mktemp("many") / "ds"
+    render_dataset(request, out, workers=0)
+    return request, out
+
+
+def test_more_shards_than_workers_times_shards_per_worker_finish(tmp_path, many_shards, variant):
+    # 13 shards > 2 workers x 4 shards: the pool must replace its workers (gh-115634 hung here)
+    request, reference = many_shards
+    p = _cli(
+        [
+            *["render", "patches", "--frames", "13", "--shard-frames", "1", "--spp", "1"],
+            *["--detectors", "2", "--mask-res", "8", "--seed", "2", "--workers", "2"],
+            *["--no-progress", "--out", str(tmp_path / "ds")],
+        ]
+    )
+    try:
+        _, err = p.communicate(timeout=240)
+    finally:
+        p.kill()
+    assert p.returncode == 0, err
+    assert _files(tmp_path / "ds") == _files(reference)
+    pids = [e["pid"] for e in _log(tmp_path / "ds") if e["event"] == "shard"]
+    assert len(pids) == 13
+
+
+def _worker_pids(pid: int) -> list[int]:
+    """Render worker processes among the children of ``pid`` (not the resource tracker)."""
+    children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
+    return [
+        int(c)
+        for c in children
+        if b"resource_tracker" not in Path(f"/proc/{c}/cmdline").read_bytes()
+    ]
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="needs Linux /proc")
+def test_a_killed_worker_stops_the_render_naming_its_shard(tmp_path, many_shards, variant):
+    _, reference = many_shards
+    args = [
+        *["render", "patches", "--frames", "13", "--shard-frames", "1", "--spp", "1"],
+        *["--detectors", "2", "--mask-res", "8", "--seed", "2", "--no-progress"],
+        *["--out", str(tmp_path / "ds")],
+    ]
+    p = _cli([*args, "--workers", "1"], env={FRAME_DELAY_ENV: "0.5"})
+    deadline = time.monotonic() + 120
+    while not list((tmp_path / "ds" / ds.SHARD_DIR).glob("shard-*.json")):
+        assert p.poll() is None and time.monotonic() < deadline, p.communicate()
+        time.sleep(0.05)
+    (worker,) = _worker_pids(p.pid)
+    os.kill(worker, signal.SIGKILL)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode != 0
+    line = err.strip().splitlines()[-1]
+    assert re.search(r"exit code -9\) while running task \d+: shard \d+ did not finish", line)
+    assert "run the same command again to resume" in line
+    p = _cli([*args, "--workers", "2"])  # and it does
+    _, err = p.communicate(timeout=240)
+    assert p.returncode == 0, err
+    assert _files(tmp_path / "ds") == _files(reference)
+
+
+def test_ray_local_mode_renders_many_shards_like_local_workers(tmp_path, many_shards, variant):
+    # Ray runs 2 CPUs x max_calls 4 per worker process: 13 tasks recycle its workers too
     pytest.importorskip("ray")
-    a = render_dataset(tiny_request, tmp_path / "local", workers=0)
-    b = render_dataset(tiny_request, tmp_path / "ray", ray_address="local")
-    assert b.shards_rendered == [0, 1, 2]
-    assert _files(a.path) == _files(b.path)
+    request, reference = many_shards
+    summary = render_dataset(request, tmp_path / "ray", ray_address="local")
+    assert summary.shards_rendered == list(range(13))
+    assert _files(summary.path) == _files(reference)

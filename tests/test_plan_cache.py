@@ -1,0 +1,121 @@
+"""Fidelity plans: measured once per description on the planning episode, kept, verified."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+
+import pytest
+
+from mincam_render import dataset as ds
+from mincam_render import plan_cache
+from mincam_render.generators.registry import load_family
+from mincam_render.render_job import (
+    RenderRequest,
+    _describe_family,
+    package_versions,
+    plan_render,
+    render_dataset,
+)
+
+AUTO = RenderRequest(
+    family="patches",
+    num_frames=16,
+    seed=3,
+    overrides={"camera": {"detectors": 2, "mask_resolution": 8}},
+    shard_frames=8,
+)
+
+
+@pytest.fixture
+def own_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv(plan_cache.CACHE_ENV, str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def test_episodes_of_one_description_share_the_plan_a_fresh_measurement_gives(
+    tmp_path, own_cache, variant
+):
+    first = render_dataset(AUTO, tmp_path / "a", workers=0)
+    assert len(list(own_cache.glob("*.json"))) == 1
+    other_seed = dataclasses.replace(AUTO, seed=11, shard_frames=4)
+    second = render_dataset(other_seed, tmp_path / "b", workers=0)
+    a, b = ds.read_manifest(first.path), ds.read_manifest(second.path)
+    assert a["fidelity"] == b["fidelity"] and a["job"]["render"] == b["job"]["render"]
+    assert a["fidelity"]["planning_episode"] == {"seed": plan_cache.PLAN_SEED, "frames": 16}
+    # the kept plan is exactly the plan measured afresh for the other seed
+    fresh = plan_render(other_seed, use_cache=False)
+    assert fresh["fidelity"] == b["fidelity"]
+    assert fresh["job"]["render"] == b["job"]["render"]
+    assert len(list(own_cache.glob("*.json"))) == 1  # nothing more was kept
+
+
+def test_other_frame_counts_and_targets_are_planned_apart(variant):
+    _, description, _ = _describe_family(AUTO)
+    family_name = "patches"
+    renderer = {"variant": variant, "mitsuba": "3.9.1", "drjit": "1.5.0"}
+
+    def key(request):
+        return plan_cache.plan_key(
+            plan_cache.plan_fields(request.identity(description), family_name, renderer)
+        )
+
+    assert key(AUTO) == key(dataclasses.replace(AUTO, seed=9, splits=(0.5, 0.25, 0.25)))
+    assert key(AUTO) != key(dataclasses.replace(AUTO, num_frames=17))
+    assert key(AUTO) != key(dataclasses.replace(AUTO, target_error=0.02))
+    assert key(AUTO) != key(dataclasses.replace(AUTO, spp=4))
+
+
+def test_a_damaged_kept_plan_is_ignored_and_measured_again(tmp_path, own_cache, variant, caplog):
+    render_dataset(AUTO, tmp_path / "a", workers=0)
+    (path,) = own_cache.glob("*.json")
+    good = json.loads(path.read_text())
+    path.write_text(path.read_text()[:-40])  # truncated
+    with caplog.at_level(logging.WARNING):
+        again = render_dataset(AUTO, tmp_path / "b", workers=0)
+    assert "ignoring the plan" in caplog.text and path.name in caplog.text
+    assert ds.read_manifest(again.path)["fidelity"] == good["decisions"]
+    assert json.loads(path.read_text())["decisions"] == good["decisions"]  # written anew
+
+
+def test_a_plan_whose_fields_were_edited_is_refused(tmp_path, own_cache, variant, caplog):
+    render_dataset(AUTO, tmp_path / "a", workers=0)
+    (path,) = own_cache.glob("*.json")
+    body = json.loads(path.read_text())
+    body["fields"]["target_error"] = 0.5
+    path.write_text(json.dumps(body))
+    with caplog.at_level(logging.WARNING):
+        render_dataset(AUTO, tmp_path / "b", workers=0)
+    assert "do not hash to its name" in caplog.text
+
+
+@pytest.mark.parametrize(
+    "path", sorted(plan_cache.SHIPPED_DIR.glob("*.json")), ids=lambda p: p.stem[:12]
+)
+def test_shipped_plans_match_the_shipped_descriptions_and_this_renderer(path, variant):
+    body = json.loads(path.read_text())
+    fields = body["fields"]
+    assert plan_cache.plan_key(fields) == path.stem
+    assert fields["planner_version"] == plan_cache.PLANNER_VERSION, "re-ship: scripts/ship_plans.py"
+    family = load_family(fields["family_name"], seed=0, num_frames=fields["num_frames"])
+    request = RenderRequest(family=fields["family_name"], num_frames=fields["num_frames"])
+    _, description, _ = _describe_family(request)
+    assert fields["description"] == description, "scenes/*.toml changed: re-ship the plan"
+    assert family.name == fields["family_name"]
+    versions = package_versions()
+    assert fields["renderer"] == {
+        "variant": variant,
+        "mitsuba": versions["mitsuba"],
+        "drjit": versions["drjit"],
+    }
+
+
+def test_a_shipped_plan_is_used_before_the_cache(tmp_path, own_cache, monkeypatch, variant):
+    monkeypatch.setattr(plan_cache, "SHIPPED_DIR", tmp_path / "shipped")
+    shipped = plan_render(AUTO, ship=True)
+    assert len(list((tmp_path / "shipped").glob("*.json"))) == 1
+    assert not own_cache.exists()  # shipping measures afresh and keeps nothing else
+    summary = render_dataset(dataclasses.replace(AUTO, seed=8), tmp_path / "ds", workers=0)
+    assert ds.read_manifest(summary.path)["fidelity"] == shipped["fidelity"]
+    assert not own_cache.exists()  # found among the shipped plans

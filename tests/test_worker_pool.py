@@ -1,0 +1,91 @@
+"""Worker processes: recycling without deadlock, death and stalls named, errors raised again."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from mincam_render.worker_pool import WorkerDied, WorkerStalled, run_tasks
+
+
+def _pid_of_task(task: int, *, on_progress) -> tuple[int, int]:
+    on_progress(1)
+    return task, os.getpid()
+
+
+def _die_at_3(task: int, *, on_progress) -> int:
+    if task == 3:
+        os._exit(7)
+    return task
+
+
+def _hang_at_2(task: int, *, on_progress) -> int:
+    if task == 2:
+        time.sleep(60)
+    return task
+
+
+def _raise_at_1(task: int, *, on_progress) -> int:
+    if task == 1:
+        raise KeyError(f"task {task} has no data")
+    return task
+
+
+def _run(fn, tasks, **kwargs) -> dict[int, object]:
+    results: dict[int, object] = {}
+    # fork: a spawned worker imports torch and Dr.Jit (2.4 s each); these tasks are
+    # plain Python, and the render tests cover spawned workers
+    run_tasks(
+        fn,
+        tasks,
+        lambda t: (t,),
+        results.__setitem__,
+        **{"workers": 2, "tasks_per_worker": 2, "context": "fork", **kwargs},
+    )
+    return results
+
+
+def test_more_tasks_than_workers_times_tasks_per_worker_all_finish_in_recycled_workers():
+    # 2 workers x 2 tasks each = 4 < 11: CPython 3.11's ProcessPoolExecutor hangs here
+    progress: list[tuple[int, int]] = []
+    results = _run(_pid_of_task, range(11), on_progress=lambda t, n: progress.append((t, n)))
+    assert sorted(results) == list(range(11))
+    assert all(task == key for key, (task, _) in results.items())
+    pids = [pid for _, pid in results.values()]
+    assert max(pids.count(p) for p in set(pids)) <= 2  # no worker ran more than its quota
+    assert len(set(pids)) >= 6  # so at least ceil(11 / 2) processes were started
+    assert sorted(progress) == [(t, 1) for t in range(11)]
+
+
+def test_a_worker_that_dies_is_named_with_its_task_and_exit_code():
+    with pytest.raises(WorkerDied, match=r"exit code 7\) while running task 3") as info:
+        _run(_die_at_3, range(6))
+    assert info.value.tasks == [3]
+
+
+def test_a_stalled_run_stops_at_the_floor_instead_of_waiting_forever():
+    t0 = time.monotonic()
+    with pytest.raises(WorkerStalled, match=r"while running tasks \[2\]") as info:
+        _run(_hang_at_2, range(3), workers=1, stall_floor_s=3.0)
+    assert info.value.tasks == [2]
+    assert time.monotonic() - t0 < 30  # the task alone would sleep 60 s
+
+
+def test_a_task_exception_is_raised_again_in_the_parent():
+    with pytest.raises(KeyError, match="task 1 has no data"):
+        _run(_raise_at_1, range(4))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"workers": 0}, r"workers = 0: allowed an integer >= 1"),
+        ({"tasks_per_worker": 1.5}, r"tasks_per_worker = 1.5: allowed an integer >= 1"),
+        ({"stall_floor_s": 0.0}, r"stall_floor_s = 0.0 s: allowed numbers > 0"),
+    ],
+)
+def test_bad_arguments_are_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        _run(_pid_of_task, range(2), **kwargs)
