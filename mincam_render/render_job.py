@@ -1038,6 +1038,8 @@ def _run_ray(
         raise RenderError(
             "--ray needs the optional dependency ray: pip install 'mincam_render[ray]'"
         ) from None
+    from .worker_pool import POLL_S, StallWatch, WorkerStalled
+
     pkg_dir = str(Path(__file__).resolve().parent)
     init_kwargs: dict[str, Any] = {
         "ignore_reinit_error": True,
@@ -1058,14 +1060,27 @@ def _run_ray(
         # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
         task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
         job_ref = ray.put(job)
-        pending = [task.remote(job_ref, i, 1, backgrounds_of(i)) for i in todo]
+        shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i)): i for i in todo}
+        pending = list(shard_of)
         log.info("Ray: %d shard tasks on %d CPUs", len(pending), cpus)
+        # tasks wait for a CPU, so the time between two results stands for a task's
+        watch, last_s = StallWatch(), time.monotonic()
         while pending:
-            done, pending = ray.wait(pending, num_returns=1)
+            done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
+            if not done:
+                try:
+                    watch.check(sorted(shard_of[r] for r in pending))
+                except WorkerStalled as err:
+                    for ref in pending:
+                        ray.cancel(ref, force=True)
+                    raise RenderError(f"Ray: {err}; run the same command again to resume") from None
+                continue
             try:
                 result = ray.get(done[0])
             except Exception as err:
                 raise RenderError(f"a Ray render task failed: {err}") from None
+            watch.report(time.monotonic() - last_s)
+            last_s = time.monotonic()
             finish(result, False)
     finally:
         if started:

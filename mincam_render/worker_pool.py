@@ -68,14 +68,43 @@ class _Worker:
 
 
 @dataclass
-class _Watch:
-    """When the workers last reported, and the slowest task so far (seconds)."""
+class StallWatch:
+    """Stops a run in which no worker reported for too long (see the module docstring).
 
+    Args:
+        factor: the bound is ``factor`` x the slowest task so far, > 0 ...
+        floor_s: ... and at least this many seconds, > 0.
+    """
+
+    factor: float = DEFAULT_STALL_FACTOR
+    floor_s: float = DEFAULT_STALL_FLOOR_S
     last_report_s: float = field(default_factory=time.monotonic)
     slowest_task_s: float = 0.0
 
-    def bound_s(self, factor: float, floor_s: float) -> float:
-        return max(floor_s, factor * self.slowest_task_s)
+    def __post_init__(self) -> None:
+        if not self.factor > 0 or not self.floor_s > 0:
+            raise ValueError(
+                f"stall_factor = {self.factor!r}, stall_floor_s = {self.floor_s!r} s: "
+                "allowed numbers > 0"
+            )
+
+    def report(self, task_s: float | None = None) -> None:
+        """A worker reported now (a task's progress, or its end after ``task_s`` seconds)."""
+        self.last_report_s = time.monotonic()
+        if task_s is not None:
+            self.slowest_task_s = max(self.slowest_task_s, task_s)
+
+    def check(self, in_flight: list[Hashable]) -> None:
+        """Raise :class:`WorkerStalled` if tasks are in flight and the bound has passed."""
+        quiet_s = time.monotonic() - self.last_report_s
+        bound_s = max(self.floor_s, self.factor * self.slowest_task_s)
+        if in_flight and quiet_s > bound_s:
+            raise WorkerStalled(
+                f"no worker reported for {quiet_s:.3g} s (bound {bound_s:.3g} s: "
+                f"{self.factor:g} x the slowest task so far, at least {self.floor_s:g} s) "
+                f"while running tasks {in_flight}",
+                in_flight,
+            )
 
 
 def _worker_main(conn: Connection, fn, tasks_per_worker: int, initializer, initargs) -> None:
@@ -152,15 +181,10 @@ def run_tasks(
     for name, value in (("workers", workers), ("tasks_per_worker", tasks_per_worker)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name} = {value!r}: allowed an integer >= 1")
-    if not stall_factor > 0 or not stall_floor_s > 0:
-        raise ValueError(
-            f"stall_factor = {stall_factor!r}, stall_floor_s = {stall_floor_s!r} s: "
-            "allowed numbers > 0"
-        )
+    watch = StallWatch(stall_factor, stall_floor_s)
     ctx = mp.get_context(context)
     queued = deque(tasks)
     pool: list[_Worker] = []
-    watch = _Watch()
 
     def start() -> _Worker:
         parent, child = ctx.Pipe()
@@ -186,12 +210,12 @@ def run_tasks(
             for w in list(pool):
                 if not _read_messages(w, watch, on_result, on_progress):
                     _retire(w, pool)
-            _check_stall(pool, watch, stall_factor, stall_floor_s)
+            watch.check([w.task for w in pool if w.task is not None])
     finally:
         _shut_down(pool)
 
 
-def _read_messages(w: _Worker, watch: _Watch, on_result, on_progress) -> bool:
+def _read_messages(w: _Worker, watch: StallWatch, on_result, on_progress) -> bool:
     """Handle every message waiting on a worker's pipe; False once the worker has ended."""
     while True:
         try:
@@ -200,16 +224,15 @@ def _read_messages(w: _Worker, watch: _Watch, on_result, on_progress) -> bool:
             kind, key, payload = w.conn.recv()
         except (EOFError, OSError):
             return False  # the worker is gone; _retire decides whether that lost a task
-        now = time.monotonic()
-        watch.last_report_s = now
         if kind == "progress":
+            watch.report()
             if on_progress is not None:
                 on_progress(key, payload)
         elif kind == "error":
             w.task = None
             raise payload
         else:
-            watch.slowest_task_s = max(watch.slowest_task_s, now - w.started_s)
+            watch.report(time.monotonic() - w.started_s)
             w.task = None
             on_result(key, payload)
 
@@ -224,19 +247,6 @@ def _retire(w: _Worker, pool: list[_Worker]) -> None:
             f"worker process {w.process.pid} ended (exit code {w.process.exitcode}) "
             f"while running task {w.task!r}",
             [w.task],
-        )
-
-
-def _check_stall(pool: list[_Worker], watch: _Watch, factor: float, floor_s: float) -> None:
-    in_flight = [w.task for w in pool if w.task is not None]
-    quiet_s = time.monotonic() - watch.last_report_s
-    bound_s = watch.bound_s(factor, floor_s)
-    if in_flight and quiet_s > bound_s:
-        raise WorkerStalled(
-            f"no worker reported for {quiet_s:.0f} s (bound {bound_s:.0f} s: "
-            f"{factor:g} x the slowest task so far, at least {floor_s:g} s) "
-            f"while running tasks {in_flight}",
-            in_flight,
         )
 
 

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from mincam_render.worker_pool import WorkerDied, WorkerStalled, run_tasks
+from mincam_render.worker_pool import StallWatch, WorkerDied, WorkerStalled, run_tasks
 
 
 def _pid_of_task(task: int, *, on_progress) -> tuple[int, int]:
@@ -89,3 +89,17 @@ def test_a_task_exception_is_raised_again_in_the_parent():
 def test_bad_arguments_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         _run(_pid_of_task, range(2), **kwargs)
+
+
+def test_the_stall_bound_is_a_multiple_of_the_slowest_task_above_the_floor():
+    watch = StallWatch(factor=2.0, floor_s=0.05)
+    watch.report(task_s=0.15)  # bound: max(0.05, 2 x 0.15) = 0.3 s
+    time.sleep(0.1)
+    watch.check(["a"])  # 0.1 s quiet: within the bound
+    watch.check([])  # nothing in flight never stalls
+    time.sleep(0.25)
+    with pytest.raises(WorkerStalled, match=r"bound 0.3 s: 2 x the slowest task so far") as info:
+        watch.check(["a", "b"])
+    assert info.value.tasks == ["a", "b"]
+    watch.report()  # progress resets the clock
+    watch.check(["a"])
