@@ -622,6 +622,26 @@ class TransportDataset:
         """``T[frame, detector, row, col]`` float32 (W) of a split, loaded into memory."""
         return self.frames(*self._range(split))
 
+    def stored_transport(self, split: str | tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """Stored values ``T / scale`` of a split and their per-frame scales (the training view).
+
+        Returns:
+            ``(stored, scales)``: ``stored[frame, detector, row, col]`` in the file's
+            type (float16 or float32), memory-mapped (no copy) when the split lies
+            in one shard, else one concatenation of the stored values (half the
+            memory of :meth:`transport` for float16); ``scales`` float32 ``[N]``,
+            so that ``T = stored * scales[:, None, None, None]`` (W).
+        """
+        start, stop = self._range(split)
+        pieces = list(self._pieces(start, stop))
+        arrays = [self._array(shard)[lo:hi] for shard, lo, hi in pieces]
+        scales = [self._metadata(shard)["scales"][lo:hi] for shard, lo, hi in pieces]
+        if not arrays:
+            k, (r, c) = self.camera.num_detectors, self.camera.mask_resolution
+            return np.zeros((0, k, r, c), np.float32), np.zeros(0, np.float32)
+        stored = arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+        return stored, np.concatenate(scales).astype(np.float32)
+
     def labels(self, split: str | tuple[int, int]) -> dict[str, np.ndarray]:
         """``{label: float32 [N, size]}`` of a split."""
         start, stop = self._range(split)

@@ -11,13 +11,35 @@ The measurement of detector ``k`` for frame ``b`` is
 (paper eqs. 1-2 with the printable range of supplement B). ``T`` is the
 transport image in watts (see :mod:`mincam_render.transport`), ``M_t`` the
 unbounded logits that training optimises.
+
+Two implementations of the same product, :class:`MaskPlaneBackend`:
+
+* ``TORCH`` (default): plain torch, for ``T`` that is a torch tensor (every
+  dataset on disk, every batch of training). One batched matrix product with
+  the mask on the left, ``P^T[k] = M[k] T[k]^T`` over the layout ``(K, 1, N) x
+  (K, N, B)``; its backward is the same kind of product. Measured on 2 cores,
+  one thread, K = 8, 32x32 texels, batch 64 (forward + backward): 0.15 ms,
+  against 0.28 ms for ``(T * M).sum(-1)``, 0.6 ms for ``einsum`` or a matrix
+  -vector ``bmm`` with the mask on the right (torch's batched gemv path), and
+  2.1 ms through Dr.Jit (``dr.wrap`` round trip).
+* ``DRJIT``: the Dr.Jit op behind ``dr.wrap``, for ``T`` that lives in Dr.Jit
+  (on-the-fly rendering, differentiable geometry).
 """
 
 from __future__ import annotations
 
+import enum
+
 import drjit as dr
 import numpy as np
 import torch
+
+
+class MaskPlaneBackend(enum.Enum):
+    """Which implementation of the mask-plane product :func:`mask_power` uses."""
+
+    TORCH = "torch"
+    DRJIT = "drjit"
 
 
 def _sigmoid(x):
@@ -49,9 +71,28 @@ def _power_drjit(transport, logits, lo: float, hi: float):
 
 
 def transmittance(logits: torch.Tensor, transmittance_range: tuple[float, float]) -> torch.Tensor:
-    """Mask transmittance ``M`` (0-1) from logits, same shape; differentiable (torch)."""
+    """Mask transmittance ``M`` (0-1) from logits, same shape; differentiable (torch).
+
+    Uses ``torch.sigmoid``, whose float32 gradient vanishes for logits above ~17;
+    training keeps logits within ``models.MAX_LOGIT`` (8), where it does not.
+    :func:`mask_power` uses :func:`stable_transmittance` instead.
+    """
     lo, hi = transmittance_range
     return lo + (hi - lo) * torch.sigmoid(logits)
+
+
+def stable_transmittance(
+    logits: torch.Tensor, transmittance_range: tuple[float, float]
+) -> torch.Tensor:
+    """:func:`transmittance` with a finite, nonzero gradient for any logit (torch).
+
+    ``sigmoid(x) = 1 - sigmoid(-x)`` for ``x >= 0``: the gradient at x = 50 is
+    e^-50 ~ 2e-22 instead of float32's ``s (1 - s) = 0``, as on the Dr.Jit side.
+    """
+    lo, hi = transmittance_range
+    pos = logits >= 0
+    s = torch.where(pos, 1.0 - torch.sigmoid(-logits), torch.sigmoid(logits))
+    return lo + (hi - lo) * s
 
 
 def logits_for_transmittance(
@@ -69,23 +110,27 @@ def logits_for_transmittance(
     return torch.log(y) - torch.log1p(-y)
 
 
-def mask_power(
-    transport: torch.Tensor, logits: torch.Tensor, transmittance_range: tuple[float, float]
-) -> torch.Tensor:
-    """Power on each detector through its mask, differentiable in both inputs (torch).
+def power_through(transport: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """``P[b, k] = sum_vu T[b, k, v, u] M[k, v, u]`` in plain torch (no checks: the hot path).
 
     Args:
-        transport: ``T[batch, detector, row, col]`` in watts, float32 or float64.
-        logits: ``M_t[detector, row, col]``, unbounded, same dtype and device.
-        transmittance_range: ``(lo, hi)`` printable transmittance, 0 <= lo < hi <= 1.
+        transport: ``T[batch, detector, row, col]`` (W), any strides.
+        mask: ``M[detector, row, col]`` transmittance (0-1), same dtype.
 
     Returns:
-        ``P[batch, detector]`` in watts.
-
-    Raises:
-        ValueError: shapes, dtypes or devices do not match.
+        ``P[batch, detector]`` (W), differentiable in both inputs.
 
     """
+    b, k = transport.shape[:2]
+    # (K, 1, N) x (K, N, B): the mask on the left is torch's fast batched gemm;
+    # T stays in its (B, K, N) memory and is read through a permuted view
+    t_knb = transport.reshape(b, k, -1).permute(1, 2, 0)
+    return torch.bmm(mask.reshape(k, 1, -1), t_knb).reshape(k, b).t()
+
+
+def _check_mask_power_args(
+    transport: torch.Tensor, logits: torch.Tensor, transmittance_range: tuple[float, float]
+) -> tuple[float, float]:
     if transport.ndim != 4:
         raise ValueError(
             f"transport has shape {tuple(transport.shape)}: expected (batch, detector, row, col)"
@@ -105,6 +150,34 @@ def mask_power(
     lo, hi = (float(v) for v in transmittance_range)
     if not 0.0 <= lo < hi <= 1.0:
         raise ValueError(f"transmittance_range = {transmittance_range}: need 0 <= lo < hi <= 1")
+    return lo, hi
+
+
+def mask_power(
+    transport: torch.Tensor,
+    logits: torch.Tensor,
+    transmittance_range: tuple[float, float],
+    *,
+    backend: MaskPlaneBackend = MaskPlaneBackend.TORCH,
+) -> torch.Tensor:
+    """Power on each detector through its mask, differentiable in both inputs (torch).
+
+    Args:
+        transport: ``T[batch, detector, row, col]`` in watts, float32 or float64.
+        logits: ``M_t[detector, row, col]``, unbounded, same dtype and device.
+        transmittance_range: ``(lo, hi)`` printable transmittance, 0 <= lo < hi <= 1.
+        backend: plain torch (default) or the Dr.Jit op; equal to float rounding.
+
+    Returns:
+        ``P[batch, detector]`` in watts.
+
+    Raises:
+        ValueError: shapes, dtypes or devices do not match.
+
+    """
+    lo, hi = _check_mask_power_args(transport, logits, transmittance_range)
+    if MaskPlaneBackend(backend) is MaskPlaneBackend.TORCH:
+        return power_through(transport, stable_transmittance(logits, (lo, hi)))
     # dr.wrap converts plain tensors only: pass views, never an nn.Parameter itself
     transport = transport.contiguous().view(transport.shape)
     return _power_drjit(transport, logits.contiguous().view(logits.shape), lo, hi)

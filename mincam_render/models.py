@@ -5,8 +5,9 @@ watts per unit transmittance, see :mod:`mincam_render.transport`) to task
 outputs through the same :class:`Head` (paper Sec. 5: two hidden layers of 128
 units, leaky ReLU with slope 0.1).
 
-* :class:`MincamCamera` -- ``K`` mask logits -> :func:`~mincam_render.maskplane.mask_power`
-  (Dr.Jit op) -> :func:`~mincam_render.sensor.detector_voltage` (paper eqs. 3-5) -> head.
+* :class:`MincamCamera` -- ``K`` mask logits -> the mask plane (plain torch, or the
+  Dr.Jit op of :func:`~mincam_render.maskplane.mask_power`) ->
+  :func:`~mincam_render.sensor.detector_voltage` (paper eqs. 3-5) -> head.
   Pixel ``j`` of the camera reads detector ``detectors[j]`` of the data, so a
   camera may use a subset of the rendered detectors (pruning) or reuse one
   detector's transport for several masks (more pixels than were rendered;
@@ -32,6 +33,12 @@ instead be learned as a class ``0 .. n-1`` by cross-entropy (:class:`CountLoss`;
 the paper's toy task, Sec. 5); its prediction is then the expected count under
 the softmax (the posterior mean, which minimises the squared error the task is
 scored by).
+
+Temporal samples (windows of ``history`` frames) can be given as the frames they
+use, ``T[frame, detector, row, col]``, and ``windows[batch, time]`` indices into
+them: every frame's mask-plane product is computed once however many windows
+share it (consecutive traffic windows share 29 of 30), then each window gets
+its own gain and noise, exactly as if its frames had been stacked.
 """
 
 from __future__ import annotations
@@ -46,7 +53,13 @@ from torch.nn import functional as F
 
 from .camera import FreeformCamera
 from .generators.base import LabelKind, LabelSpec
-from .maskplane import logits_for_transmittance, mask_power, transmittance
+from .maskplane import (
+    MaskPlaneBackend,
+    logits_for_transmittance,
+    mask_power,
+    power_through,
+    transmittance,
+)
 from .sensor import detector_voltage
 
 #: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
@@ -265,24 +278,82 @@ class CameraModel(nn.Module):
         self,
         transport: torch.Tensor,
         *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
-        """Pixel outputs ``[batch, time, pixel]`` of ``T[batch, (time,) detector, row, col]``."""
+        """Pixel outputs ``[batch, time, pixel]``.
+
+        Args:
+            transport: ``T[batch, (time,) detector, row, col]`` (W), or with
+                ``windows`` the frames ``T[frame, detector, row, col]`` they index.
+            windows: ``[batch, time]`` long indices into ``transport``'s frames.
+            frame_scales: ``[frame]`` factor from ``transport`` to watts (the
+                stored values of a float16 dataset; see
+                :func:`mincam_render.dataset.encode_transport`): applied to the
+                power, which is linear in the transport, not to every texel.
+            gain: ``[batch]`` global gain per sample (augmentation).
+            noise: add sensor noise.
+            generator: random generator of the noise.
+
+        """
         raise NotImplementedError
 
     def forward(
         self,
         transport: torch.Tensor,
         *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
     ) -> dict[str, torch.Tensor]:
-        """Raw head outputs ``{name: [batch, size]}``."""
-        v = self.measure(transport, gain=gain, noise=noise, generator=generator)
+        """Raw head outputs ``{name: [batch, size]}`` (arguments as :meth:`measure`)."""
+        v = self.measure(
+            transport,
+            windows=windows,
+            frame_scales=frame_scales,
+            gain=gain,
+            noise=noise,
+            generator=generator,
+        )
         return self.head(temporal_features(v))
+
+
+def _per_window(
+    frames: torch.Tensor, windows: torch.Tensor | None, frame_scales: torch.Tensor | None
+) -> torch.Tensor:
+    """``x[frame, ...]`` (times ``frame_scales``) -> ``x[batch, time, ...]`` via ``windows``."""
+    if frame_scales is not None:
+        frames = frames * frame_scales.reshape(-1, *(1,) * (frames.ndim - 1))
+    if windows is None:
+        return frames[:, None]
+    b, h = windows.shape
+    return frames.index_select(0, windows.reshape(-1)).reshape(b, h, *frames.shape[1:])
+
+
+def _frames_of(transport: torch.Tensor, windows: torch.Tensor | None) -> torch.Tensor:
+    """The frames ``T[frame, detector, row, col]`` to measure (5-D batches flattened)."""
+    if windows is not None:
+        if transport.ndim != 4:
+            raise ValueError(
+                f"with windows, transport has shape {tuple(transport.shape)}: expected "
+                "(frame, detector, row, col)"
+            )
+        return transport
+    t = _as_5d(transport)
+    return t.reshape(-1, *t.shape[2:])
+
+
+def _windows_for(transport: torch.Tensor, windows: torch.Tensor | None) -> torch.Tensor | None:
+    """Window indices for a 5-D batch ``T[batch, time, ...]`` flattened by :func:`_frames_of`."""
+    if windows is not None or transport.ndim == 4:
+        return windows
+    b, h = transport.shape[:2]
+    return torch.arange(b * h, device=transport.device).reshape(b, h)
 
 
 class MincamCamera(CameraModel):
@@ -296,6 +367,7 @@ class MincamCamera(CameraModel):
             feeds the head noiseless power scaled to volts (supplement A's ablation).
         history: frames per sample (1 = static task; 30 for traffic).
         init_seed: seed of the U(0.08, 0.12) mask initialisation.
+        mask_plane: plain torch (default; for torch transport) or the Dr.Jit op.
 
     """
 
@@ -308,13 +380,17 @@ class MincamCamera(CameraModel):
         sensor_model: bool = True,
         history: int = 1,
         init_seed: int = 0,
+        mask_plane: MaskPlaneBackend = MaskPlaneBackend.TORCH,
     ) -> None:
         super().__init__()
         self.camera = camera
+        self.mask_plane = MaskPlaneBackend(mask_plane)
         dets = tuple(range(camera.num_detectors)) if detectors is None else tuple(detectors)
         if not dets:
             raise ValueError("detectors is empty: a minimalist camera needs at least one pixel")
         self.register_buffer("detectors", torch.tensor(dets, dtype=torch.long))
+        # every rendered detector once, in order: no gather of the transport needed
+        self._identity_detectors = dets == tuple(range(camera.num_detectors))
         self.sensor_model = bool(sensor_model)
         self.history = int(history)
         rows, cols = camera.mask_resolution
@@ -344,25 +420,40 @@ class MincamCamera(CameraModel):
         """Clamp the logits in place to ``[-MAX_LOGIT, MAX_LOGIT]`` (NaN-free masks stay so)."""
         self.logits.clamp_(-MAX_LOGIT, MAX_LOGIT)
 
+    def power(self, frames: torch.Tensor) -> torch.Tensor:
+        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks."""
+        if not self._identity_detectors:
+            frames = frames.index_select(1, self.detectors)
+        if self.mask_plane is MaskPlaneBackend.DRJIT:
+            return mask_power(
+                frames, self.logits, self.camera.transmittance_range, backend=self.mask_plane
+            )
+        if frames.shape[1:] != self.logits.shape:
+            raise ValueError(
+                f"transport frames have (detector, row, col) = {tuple(frames.shape[1:])}; "
+                f"the masks are {tuple(self.logits.shape)}"
+            )
+        return power_through(frames, self.transmittance())
+
     def measure(
         self,
         transport: torch.Tensor,
         *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
-        """Pixel outputs ``[batch, time, pixel]`` (V) of ``T[batch, (time,) detector, row, col]``.
+        """Pixel outputs ``[batch, time, pixel]`` (V); arguments as :meth:`CameraModel.measure`.
 
         Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
         """
-        t = _as_5d(transport)
-        b, h = t.shape[:2]
-        t = t.index_select(2, self.detectors).reshape(b * h, self.num_pixels, *t.shape[3:])
-        power = mask_power(t, self.logits, self.camera.transmittance_range)
-        power = power.reshape(b, h, self.num_pixels)
+        frames = _frames_of(transport, windows)
+        windows = _windows_for(transport, windows)
+        power = _per_window(self.power(frames), windows, frame_scales)
         if gain is not None:
-            power = power * gain.reshape(b, 1, 1)
+            power = power * gain.reshape(-1, 1, 1)
         e = self.camera.electronics
         if not self.sensor_model:
             return power * (e.responsivity_a_per_w * e.gain_v_per_a)
@@ -436,16 +527,19 @@ class BaselineCamera(CameraModel):
         self,
         transport: torch.Tensor,
         *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
     ) -> torch.Tensor:
-        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1)."""
-        t = _as_5d(transport)
-        b, h = t.shape[:2]
-        pix = box_pixels(t.mean(dim=2), self.grid).reshape(b, h, self.num_pixels)
+        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base."""
+        frames = _frames_of(transport, windows)
+        windows = _windows_for(transport, windows)
+        pix = box_pixels(frames.mean(dim=1), self.grid).reshape(len(frames), self.num_pixels)
+        pix = _per_window(pix, windows, frame_scales)
         if gain is not None:
-            pix = pix * gain.reshape(b, 1, 1)
+            pix = pix * gain.reshape(-1, 1, 1)
         full = 2**BASELINE_BITS - 1
         dn = pix / self.exposure_w * full
         if noise:

@@ -11,13 +11,18 @@ Paper eqs. 3-5 plus photon shot noise (which the paper omits):
 
 with ``n_shot ~ N(0, G^2 q I / t)`` (Poisson photo-electrons over the
 integration time ``t``, Gaussian limit), ``n_r ~ N(0, sigma_r^2)``,
-``n_q ~ U(0, LSB)``. Noise is reparameterised (``value + sigma * eps``) so
-gradients flow through it. All tensors are torch; voltages in volts.
+``n_q ~ U(0, LSB)``. All tensors are torch; voltages in volts.
+
+Noise is reparameterised (``value + sigma * eps``) so gradients flow through it.
+Shot and read noise are independent Gaussians, so their sum is drawn as one,
+``sqrt(G q V / t + sigma_r^2) * eps`` with ``V = G I`` (the same distribution
+with one random draw and fewer ops than two). Quantisation is the paper's
+additive-uniform model of rounding (eq. 4): its gradient is the identity, which
+is the straight-through surrogate gradient of rounding to the LSB (an actual
+``floor`` would have zero gradient almost everywhere).
 """
 
 from __future__ import annotations
-
-import math
 
 import torch
 
@@ -25,15 +30,19 @@ from .camera import DetectorElectronics
 
 #: Elementary charge (C).
 ELEMENTARY_CHARGE_C = 1.602176634e-19
-#: Floor on the photocurrent inside the shot-noise square root (A): keeps the
-#: derivative of sqrt finite at zero light.
-_MIN_CURRENT_A = 1e-30
+#: Floor on the noise variance inside the square root (V^2): keeps the derivative
+#: of sqrt finite in the dark without read noise (sigma 1e-15 V, below any ADC),
+#: and is a normal float32.
+_MIN_VARIANCE_V2 = 1e-30
 
 
 def leaky_saturation(voltage_v: torch.Tensor, full_scale_v: float, slope: float) -> torch.Tensor:
-    """Paper eq. 5: identity up to ``full_scale_v``, slope ``slope`` above it (V)."""
-    over = voltage_v - full_scale_v
-    return torch.where(over > 0, full_scale_v + slope * over, voltage_v)
+    """Paper eq. 5: identity up to ``full_scale_v``, slope ``slope`` above it (V).
+
+    Written ``v - (1 - slope) relu(v - full_scale_v)``: three ops, and slope 1
+    (not ``slope``) exactly at full scale, as ``relu'(0) = 0``.
+    """
+    return torch.add(voltage_v, torch.relu(voltage_v - full_scale_v), alpha=slope - 1.0)
 
 
 def detector_voltage(
@@ -57,19 +66,17 @@ def detector_voltage(
 
     """
     e = electronics
-    current_a = e.responsivity_a_per_w * power_w + e.dark_current_a
-    voltage_v = e.gain_v_per_a * current_a
+    g = e.gain_v_per_a
+    # V = G (R P + I_dark), the constants folded in float64 once
+    voltage_v = torch.add(power_w * (g * e.responsivity_a_per_w), g * e.dark_current_a)
     if noise:
-        shape, kw = power_w.shape, {"dtype": power_w.dtype, "device": power_w.device}
-        # sqrt(q / t) is taken in float64 here: q * I itself underflows float32 for
-        # I < ~1e-20 A, and sqrt'(0) = inf then turned the gradient into inf/NaN.
-        shot_sigma_v = (
-            e.gain_v_per_a
-            * math.sqrt(ELEMENTARY_CHARGE_C / e.integration_time_s)
-            * torch.sqrt(torch.clamp(current_a, min=_MIN_CURRENT_A))
-        )
-        eps = torch.randn(shape, generator=generator, **kw)
-        read = torch.randn(shape, generator=generator, **kw)
-        quant = torch.rand(shape, generator=generator, **kw)
-        voltage_v = voltage_v + shot_sigma_v * eps + e.read_noise_v * read + e.lsb_v * quant
+        kw = {"dtype": power_w.dtype, "device": power_w.device, "generator": generator}
+        # shot variance G^2 q I / t = (G q / t) V, folded in float64: q I alone
+        # underflows float32 for I < ~1e-20 A
+        variance = torch.add(
+            voltage_v * (g * ELEMENTARY_CHARGE_C / e.integration_time_s), e.read_noise_v**2
+        ).clamp_min(_MIN_VARIANCE_V2)
+        eps = torch.randn(power_w.shape, **kw)
+        quant = torch.rand(power_w.shape, **kw)
+        voltage_v = torch.addcmul(voltage_v, torch.sqrt(variance), eps).add_(quant, alpha=e.lsb_v)
     return leaky_saturation(voltage_v, e.full_scale_v, e.saturation_slope)

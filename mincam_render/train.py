@@ -18,8 +18,17 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
 * Checkpoints after every evaluation (atomic ``checkpoint.pt``): a killed run
   started again with the same arguments resumes from it and reaches the same
   state as an uninterrupted run (random generator states are saved too).
-* Logs: TensorBoard event files (``events.out.tfevents.*``, written without a
-  TensorBoard dependency), ``history.jsonl``, and ``mask_evolution.png``.
+* Logs: TensorBoard event files through ``torch.utils.tensorboard`` (training
+  loss, validation loss and error against the step; each event's wall time is
+  the run's training time, so TensorBoard's "relative" axis shows loss against
+  training time across resumes), ``history.jsonl``, and ``mask_evolution.png``.
+
+The training step (:func:`train_step`) is plain torch when the transport is a
+torch tensor (every dataset on disk): one ``index_select`` of the batch's
+frames from the (memory-mapped, float16) stored transport with its per-frame
+scale applied in the same pass, the mask plane as one batched matrix product,
+the electronics as a handful of fused ops, fused Adam. Temporal samples measure
+every frame of the batch's union once (:meth:`TrainingData.sample`).
 
 Evaluation applies the paper's post-processing in time order over a split:
 counts are rounded (and clipped at 0), states thresholded at 0.5, then every
@@ -36,8 +45,8 @@ import logging
 import math
 import os
 import pickle
-import struct
 import time
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -65,13 +74,16 @@ class TrainingData:
     """One contiguous split: transport images, labels and what produced them.
 
     Args:
-        transport: ``T[frame, detector, row, col]`` float32 (W), numpy or memmap.
+        transport: ``T[frame, detector, row, col]`` (W), numpy or memmap, float32;
+            or with ``scales`` the stored values ``T / scale`` (float16 or float32,
+            as :func:`mincam_render.dataset.encode_transport` writes them).
         labels: ``{name: [frame, size]}`` float32, physical units.
         label_specs: the task's labels.
         camera: the camera the transport was rendered for.
         fps: frame rate (1/s), for the temporal median filter.
         history: frames per sample (1 = static; 30 for traffic).
         source: provenance (dataset path, split, family, seed) for sidecars.
+        scales: ``[frame]`` factor from ``transport`` to watts; None: already watts.
 
     """
 
@@ -82,6 +94,7 @@ class TrainingData:
     fps: float
     history: int = 1
     source: dict[str, Any] = field(default_factory=dict)
+    scales: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.transport.ndim != 4:
@@ -101,6 +114,48 @@ class TrainingData:
             raise ValueError(f"fps = {self.fps!r} 1/s: need a positive frame rate")
         if not 1 <= self.history <= n:
             raise ValueError(f"history = {self.history}: need 1 <= history <= frames ({n})")
+        if self.scales is not None and np.shape(self.scales) != (n,):
+            raise ValueError(f"scales has shape {np.shape(self.scales)}; expected ({n},)")
+
+    def __getstate__(self) -> dict:
+        # torch views of a memory map are rebuilt where the data is unpickled
+        return {k: v for k, v in self.__dict__.items() if k != "_torch"}
+
+    def _tensors(self) -> tuple[torch.Tensor, torch.Tensor | None, dict[str, torch.Tensor]]:
+        """Torch views (no copy of float32/float16 arrays): stored frames, scales, labels."""
+        cached = self.__dict__.get("_torch")
+        if cached is None:
+            t = np.asarray(self.transport)
+            if t.dtype not in (np.float16, np.float32):
+                t = t.astype(np.float32)
+            with warnings.catch_warnings():  # read-only memory maps: never written to
+                warnings.filterwarnings("ignore", "The given NumPy array is not writable")
+                frames = torch.from_numpy(np.ascontiguousarray(t))
+            scales = None
+            if self.scales is not None:
+                scales = torch.from_numpy(np.asarray(self.scales, np.float32).copy())
+            labels = {
+                k: torch.from_numpy(np.ascontiguousarray(v, np.float32))
+                for k, v in self.labels.items()
+            }
+            cached = self.__dict__["_torch"] = (frames, scales, labels)
+        return cached
+
+    def frames_w(self, index: torch.Tensor) -> torch.Tensor:
+        """``T[i, detector, row, col]`` float32 (W) of frames ``index`` (long), torch.
+
+        One ``index_select`` of the stored frames; the per-frame scale (and the
+        float16 -> float32 conversion) is a single multiply into the output.
+        """
+        frames, scales, _ = self._tensors()
+        x = frames.index_select(0, index)
+        if scales is not None:
+            return torch.mul(x, scales.index_select(0, index).reshape(-1, 1, 1, 1))
+        return x if x.dtype == torch.float32 else x.float()
+
+    def frames_np(self, start: int, stop: int) -> np.ndarray:
+        """``T[frame, detector, row, col]`` float32 (W) of frames ``[start, stop)`` (numpy)."""
+        return self.frames_w(torch.arange(start, min(stop, len(self.transport)))).numpy()
 
     def __len__(self) -> int:
         """Number of samples (frames with a full history)."""
@@ -124,8 +179,10 @@ class TrainingData:
             needs = getattr(family, "needs_history", False)
         history = 30 if needs else 1
         labels = {k: np.asarray(v, np.float32) for k, v in ds.labels(split).items()}
+        stored, scales = ds.stored_transport(split)
         return cls(
-            transport=ds.transport(split),
+            transport=stored,
+            scales=scales,
             labels=labels,
             label_specs=tuple(ds.label_specs),
             camera=ds.camera,
@@ -186,6 +243,7 @@ class TrainingData:
             transport=self.transport[start:stop],
             labels={k: v[start:stop] for k, v in self.labels.items()},
             source=src,
+            scales=None if self.scales is None else self.scales[start:stop],
         )
 
     def split(self, fractions: Sequence[float] = (0.7, 0.1, 0.2)) -> tuple[TrainingData, ...]:
@@ -203,16 +261,71 @@ class TrainingData:
         return mean, std
 
     def batch(self, index: np.ndarray) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Samples ``index`` (numpy ints) -> ``(T[b, history, K, R, C], labels)`` (torch)."""
-        index = np.asarray(index, dtype=np.int64)
-        last = index + self.history - 1
-        frames = last[:, None] - np.arange(self.history - 1, -1, -1)[None, :]
-        t = np.asarray(self.transport[frames.reshape(-1)], dtype=np.float32)
-        t = torch.from_numpy(t.reshape(len(index), self.history, *self.transport.shape[1:]))
-        labels = {
-            k: torch.from_numpy(np.asarray(v[last], np.float32)) for k, v in self.labels.items()
+        """Samples ``index`` (numpy ints) -> ``(T[b, history, K, R, C], labels)`` (torch).
+
+        Every window's frames stacked (copies shared frames); training and
+        evaluation use :meth:`sample`, which does not.
+        """
+        index = torch.as_tensor(np.asarray(index, dtype=np.int64))
+        b = self.sample(index)
+        t = b.transport
+        if b.frame_scales is not None:
+            t = t * b.frame_scales.reshape(-1, 1, 1, 1)
+        if b.windows is None:
+            return t[:, None], b.labels
+        t = t.index_select(0, b.windows.reshape(-1))
+        return t.reshape(*b.windows.shape, *t.shape[1:]), b.labels
+
+    def sample(self, index: torch.Tensor) -> Batch:
+        """Samples ``index`` (torch long ``[b]``) as a :class:`Batch`, without per-sample Python.
+
+        Static data: the ``b`` frames (one gather). Temporal data: the sorted union
+        of the frames of all windows and ``windows[b, history]`` indices into it,
+        so every frame is gathered (and later measured) once per batch.
+        """
+        stored, scales, labels = self._tensors()
+        last = index + (self.history - 1)
+        y = {k: v.index_select(0, last) for k, v in labels.items()}
+        windows = None
+        if self.history > 1:
+            frames = index[:, None] + torch.arange(self.history)
+            index, windows = torch.unique(frames, sorted=True, return_inverse=True)
+        t = stored.index_select(0, index)
+        if t.dtype != torch.float32:
+            t = t.float()
+        s = None if scales is None else scales.index_select(0, index)
+        return Batch(t, windows, y, s)
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Training samples (torch).
+
+    Args:
+        transport: ``T[frame, detector, row, col]`` (W) of the frames that
+            ``windows`` index; with ``windows`` None, ``T[batch, (time,) K, R, C]``.
+        windows: ``[batch, history]`` long indices into ``transport``, or None.
+        labels: ``{name: [batch, size]}`` physical labels.
+        frame_scales: ``[frame]`` factor from ``transport`` to watts, or None.
+
+    """
+
+    transport: torch.Tensor
+    windows: torch.Tensor | None
+    labels: dict[str, torch.Tensor]
+    frame_scales: torch.Tensor | None = None
+
+    def inputs(self) -> dict[str, torch.Tensor | None]:
+        """Keyword arguments of a camera's ``forward`` / ``measure`` for this batch."""
+        return {
+            "transport": self.transport,
+            "windows": self.windows,
+            "frame_scales": self.frame_scales,
         }
-        return t, labels
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return len(self.transport) if self.windows is None else len(self.windows)
 
 
 # ---------------------------------------------------------------------------------------
@@ -402,7 +515,7 @@ def build_baseline(
     return BaselineCamera(
         grid,
         head,
-        exposure_w=BaselineCamera.exposure_from(data.transport, grid),
+        exposure_w=BaselineCamera.exposure_from(data.frames_np(0, 2048), grid),
         history=data.history,
     )
 
@@ -446,10 +559,10 @@ class DatasetBatches:
         self.data = data
         self.batch_size = batch_size
 
-    def next(self, generator: torch.Generator) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """One batch ``(T[b, history, K, R, C], labels)`` (torch)."""
-        idx = torch.randint(0, len(self.data), (self.batch_size,), generator=generator).numpy()
-        return self.data.batch(idx)
+    def next(self, generator: torch.Generator) -> Batch:
+        """One :class:`Batch` (torch): one random draw and one gather, no per-sample Python."""
+        idx = torch.randint(0, len(self.data), (self.batch_size,), generator=generator)
+        return self.data.sample(idx)
 
     def state(self) -> dict[str, Any]:
         """Resumable state (none: batches depend only on the generator)."""
@@ -487,8 +600,8 @@ class RenderedBatches:
         self.history = 30 if family.needs_history else 1
         self._scene = None
 
-    def next(self, generator: torch.Generator) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """Render one batch ``(T[b, history, K, R, C], labels)`` (torch)."""
+    def next(self, generator: torch.Generator) -> Batch:
+        """Render one :class:`Batch` (``T[b, history, K, R, C]``, torch)."""
         from .transport import render_transport
 
         if self._scene is None:
@@ -514,7 +627,7 @@ class RenderedBatches:
         self.next_frame += n_needed
         t = torch.from_numpy(np.stack(ts).astype(np.float32))
         t = t.reshape(self.batch_size, self.history, *t.shape[1:])
-        return t, {k: torch.from_numpy(np.stack(v)) for k, v in labs.items()}
+        return Batch(t, None, {k: torch.from_numpy(np.stack(v)) for k, v in labs.items()})
 
     def state(self) -> dict[str, Any]:
         """Resumable state: the next frame to render."""
@@ -523,139 +636,6 @@ class RenderedBatches:
     def load_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`state`."""
         self.next_frame = int(state.get("next_frame", self.next_frame))
-
-
-# ---------------------------------------------------------------------------------------
-# TensorBoard event files without TensorBoard
-# ---------------------------------------------------------------------------------------
-
-
-def _crc32c_table() -> list[int]:
-    table = []
-    for i in range(256):
-        c = i
-        for _ in range(8):
-            c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
-        table.append(c)
-    return table
-
-
-_CRC_TABLE = _crc32c_table()
-
-
-def _crc32c(data: bytes) -> int:
-    c = 0xFFFFFFFF
-    for b in data:
-        c = _CRC_TABLE[(c ^ b) & 0xFF] ^ (c >> 8)
-    return c ^ 0xFFFFFFFF
-
-
-def _masked_crc(data: bytes) -> int:
-    c = _crc32c(data)
-    return (((c >> 15) | (c << 17)) + 0xA282EAD8) & 0xFFFFFFFF
-
-
-def _varint(n: int) -> bytes:
-    out = bytearray()
-    while True:
-        b = n & 0x7F
-        n >>= 7
-        out.append(b | (0x80 if n else 0))
-        if not n:
-            return bytes(out)
-
-
-def _len_field(tag: int, payload: bytes) -> bytes:
-    return bytes([tag]) + _varint(len(payload)) + payload
-
-
-class EventWriter:
-    """Scalar logs in TensorBoard's event-file format (TFRecord of ``Event`` protos).
-
-    Encodes the two protobuf messages it needs by hand, so ``tensorboard --logdir``
-    reads our runs without the package being a dependency.
-    """
-
-    def __init__(self, log_dir: str | os.PathLike) -> None:
-        self.log_dir = Path(log_dir)
-        self.log_dir.mkdir(parents=True, exist_ok=True)
-        name = f"events.out.tfevents.{time.time():.6f}.mincam_render.{os.getpid()}"
-        self._f = open(self.log_dir / name, "ab")  # noqa: SIM115 (closed in close())
-        self._write_event(_len_field(0x1A, b"brain.Event:2"), step=0)
-
-    def _write_event(self, body: bytes, *, step: int) -> None:
-        event = b"\x09" + struct.pack("<d", time.time()) + b"\x10" + _varint(int(step)) + body
-        header = struct.pack("<Q", len(event))
-        self._f.write(
-            header
-            + struct.pack("<I", _masked_crc(header))
-            + event
-            + struct.pack("<I", _masked_crc(event))
-        )
-        self._f.flush()
-
-    def scalar(self, tag: str, value: float, step: int) -> None:
-        """Log one scalar."""
-        val = _len_field(0x0A, tag.encode()) + b"\x15" + struct.pack("<f", float(value))
-        self._write_event(_len_field(0x2A, _len_field(0x0A, val)), step=step)
-
-    def close(self) -> None:
-        """Close the file."""
-        self._f.close()
-
-
-def _read_varint(buf: bytes, i: int) -> tuple[int, int]:
-    n = shift = 0
-    while True:
-        b = buf[i]
-        n |= (b & 0x7F) << shift
-        shift += 7
-        i += 1
-        if not b & 0x80:
-            return n, i
-
-
-def _proto_fields(buf: bytes) -> list[tuple[int, Any]]:
-    """``(field number, value)`` of a protobuf message (varint, fixed64/32, bytes)."""
-    out, i = [], 0
-    while i < len(buf):
-        key, i = _read_varint(buf, i)
-        num, wire = key >> 3, key & 7
-        if wire == 0:
-            val, i = _read_varint(buf, i)
-        elif wire == 1:
-            val, i = buf[i : i + 8], i + 8
-        elif wire == 5:
-            val, i = buf[i : i + 4], i + 4
-        elif wire == 2:
-            n, i = _read_varint(buf, i)
-            val, i = buf[i : i + n], i + n
-        else:
-            raise ValueError(f"unsupported protobuf wire type {wire}")
-        out.append((num, val))
-    return out
-
-
-def read_events(path: str | os.PathLike) -> list[tuple[int, str, float]]:
-    """``(step, tag, value)`` of every scalar in an event file (checks the CRCs)."""
-    out = []
-    data = Path(path).read_bytes()
-    pos = 0
-    while pos < len(data):
-        (n,) = struct.unpack_from("<Q", data, pos)
-        if struct.unpack_from("<I", data, pos + 8)[0] != _masked_crc(data[pos : pos + 8]):
-            raise ValueError(f"{path}: corrupt record length at byte {pos}")
-        ev = data[pos + 12 : pos + 12 + n]
-        if struct.unpack_from("<I", data, pos + 12 + n)[0] != _masked_crc(ev):
-            raise ValueError(f"{path}: corrupt record at byte {pos}")
-        pos += 16 + n
-        fields = _proto_fields(ev)
-        step = next((v for k, v in fields if k == 2), 0)
-        for _, summary in (f for f in fields if f[0] == 5):
-            for _, value in (f for f in _proto_fields(summary) if f[0] == 1):
-                vf = dict(_proto_fields(value))
-                out.append((step, vf[1].decode(), struct.unpack("<f", vf[2])[0]))
-    return out
 
 
 # ---------------------------------------------------------------------------------------
@@ -711,12 +691,15 @@ def predict(
     model: Model,
     data: TrainingData,
     *,
-    batch_size: int = 256,
+    batch_size: int = 1024,
     noise: bool = True,
     seed: int = 1234,
     limit: int | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], float]:
-    """Predictions, labels (``{name: [n, size]}``) and mean loss over a split, in time order."""
+    """Predictions, labels (``{name: [n, size]}``) and mean loss over a split, in time order.
+
+    Batches of consecutive samples: a temporal batch measures each frame once.
+    """
     was_training = model.training
     model.eval()
     g = torch.Generator().manual_seed(seed)
@@ -725,10 +708,11 @@ def predict(
     labs: dict[str, list] = {s.name: [] for s in data.label_specs}
     loss_sum = 0.0
     for a in range(0, len(idx), batch_size):
-        t, y = data.batch(idx[a : a + batch_size])
-        out = model(t, noise=noise, generator=g)
+        batch = data.sample(torch.from_numpy(idx[a : a + batch_size]))
+        y = batch.labels
+        out = model(**batch.inputs(), noise=noise, generator=g)
         loss, _ = task_loss(model.head, out, y)
-        loss_sum += float(loss) * len(t)
+        loss_sum += float(loss) * len(batch)
         for k, v in model.head.predict(out).items():
             preds[k].append(v.numpy())
             labs[k].append(y[k].numpy())
@@ -748,8 +732,19 @@ def evaluate(
     ``error`` is the first label's ``rmse`` or ``1 - accuracy``.
     """
     pred, lab, loss = predict(model, data, noise=noise, seed=seed)
+    return metrics(pred, lab, loss, data)
+
+
+def metrics(
+    pred: Mapping[str, np.ndarray],
+    lab: Mapping[str, np.ndarray],
+    loss: float,
+    data: TrainingData,
+) -> dict[str, Any]:
+    """:func:`evaluate`'s metrics of :func:`predict`'s output (time-ordered samples of ``data``)."""
     post = postprocess(pred, data.label_specs, data.fps)
-    res: dict[str, Any] = {"loss": loss, "samples": len(data), "labels": {}}
+    n = len(next(iter(lab.values())))
+    res: dict[str, Any] = {"loss": loss, "samples": n, "labels": {}}
     for s in data.label_specs:
         y = lab[s.name].astype(np.float64)
         if s.kind is LabelKind.BINARY:
@@ -797,7 +792,41 @@ def _optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
     groups = [{"params": [p for p in model.head.parameters() if p.requires_grad], "lr": lr}]
     if isinstance(model, MincamCamera) and model.logits.requires_grad:
         groups.append({"params": [model.logits], "lr": config.mask_lr})
-    return torch.optim.Adam(groups)
+    try:
+        # one kernel for all parameters: 0.08 ms per step against 0.22 ms (8 px head)
+        return torch.optim.Adam(groups, fused=True)
+    except (RuntimeError, ValueError):  # a device or dtype without the fused kernel
+        return torch.optim.Adam(groups)
+
+
+def train_step(
+    model: Model,
+    source: DatasetBatches | RenderedBatches,
+    opt: torch.optim.Optimizer,
+    generator: torch.Generator,
+    gain_range: tuple[float, float],
+) -> torch.Tensor:
+    """One optimisation step of :func:`train_model` (Adam on the task loss); the loss, detached.
+
+    A batch, a random global gain per sample (augmentation), the camera with
+    sensor noise, the loss, backward, the optimiser, and the projection of the
+    mask logits (a saturated mask must be able to move back).
+    """
+    batch = source.next(generator)
+    gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
+    out = model(**batch.inputs(), gain=gain, noise=True, generator=generator)
+    loss, _ = task_loss(model.head, out, batch.labels)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    if isinstance(model, MincamCamera):
+        model.project_logits_()
+    return loss.detach()
+
+
+#: Steps between training-loss events (their mean): a TensorBoard event per step
+#: would cost more than a tenth of a step of a small camera.
+LOG_EVERY = 10
 
 
 def _atomic_save(obj: Any, path: Path) -> None:
@@ -890,9 +919,12 @@ def train_model(
         log.info("resumed %s at step %d (best val loss %.4g)", ckpt_path, step, best_loss)
     elif _snapshot(model) is not None:
         snaps.append((0, _snapshot(model)))
-    writer = EventWriter(out) if out is not None else None
+    writer = None
     if out is not None:
+        from torch.utils.tensorboard import SummaryWriter
+
         out.mkdir(parents=True, exist_ok=True)
+        writer = SummaryWriter(str(out))
 
     def save_checkpoint() -> None:
         if ckpt_path is None:
@@ -931,27 +963,26 @@ def train_model(
     )
     model.train()
     t_start = time.perf_counter() - elapsed
-    g0, g1 = config.gain_range
+    wall_start = time.time() - elapsed  # event wall times: training time, across resumes
+    loss_sum, loss_n = torch.zeros(()), 0
     threads = torch.get_num_threads()
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
     try:
         while not done:
-            t, y = source.next(gen)
-            gain = g0 + (g1 - g0) * torch.rand(len(t), generator=gen)
-            outputs = model(t, gain=gain, noise=True, generator=gen)
-            loss, _ = task_loss(model.head, outputs, y)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            if isinstance(model, MincamCamera):
-                model.project_logits_()  # a saturated mask must be able to move back
+            loss = train_step(model, source, opt, gen, config.gain_range)
             step += 1
             bar.update(1)
             if writer is not None:
-                writer.scalar("loss/train", loss.item(), step)
+                loss_sum += loss
+                loss_n += 1
+                if step % LOG_EVERY == 0:
+                    wall = wall_start + time.perf_counter() - t_start
+                    writer.add_scalar("loss/train", float(loss_sum) / loss_n, step, walltime=wall)
+                    loss_sum.zero_()
+                    loss_n = 0
             if step % config.eval_every == 0 or step >= config.max_steps:
-                _, _, val_loss = predict(model, val, limit=config.max_eval_samples)
+                pred, lab, val_loss = predict(model, val, limit=config.max_eval_samples)
                 elapsed = time.perf_counter() - t_start
                 rec = {
                     "step": step,
@@ -964,7 +995,11 @@ def train_model(
                 if snap is not None:
                     snaps.append((step, snap))
                 if writer is not None:
-                    writer.scalar("loss/val", val_loss, step)
+                    val_metrics = metrics(pred, lab, val_loss, val)
+                    wall = wall_start + elapsed
+                    writer.add_scalar("loss/val", val_loss, step, walltime=wall)
+                    writer.add_scalar("error/val", val_metrics["error"], step, walltime=wall)
+                    writer.flush()
                     with (out / "history.jsonl").open("a") as fh:
                         fh.write(json.dumps(rec) + "\n")
                 if val_loss < best_loss:
@@ -1050,14 +1085,14 @@ def _val_loss_without(model: MincamCamera, data: TrainingData, pixel: int, limit
     k = model.num_pixels
     cols = torch.arange(pixel, model.head.in_features, k)
     total = 0.0
-    for a in range(0, len(idx), 256):
-        t, y = data.batch(idx[a : a + 256])
-        from .models import temporal_features
+    from .models import temporal_features
 
-        x = temporal_features(model.measure(t, noise=True, generator=g))
+    for a in range(0, len(idx), 1024):
+        b = data.sample(torch.from_numpy(idx[a : a + 1024]))
+        x = temporal_features(model.measure(**b.inputs(), noise=True, generator=g))
         x[:, cols] = model.head.input_norm.running_mean[cols]
-        loss, _ = task_loss(model.head, model.head(x), y)
-        total += float(loss) * len(t)
+        loss, _ = task_loss(model.head, model.head(x), b.labels)
+        total += float(loss) * len(b)
     return total / max(1, len(idx))
 
 
