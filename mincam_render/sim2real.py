@@ -656,7 +656,7 @@ def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
     import torch
     from torch import nn
 
-    from .models import temporal_features
+    from .models import _per_window, temporal_features
     from .train import build_head
 
     class MeasurementHead(nn.Module):
@@ -664,8 +664,19 @@ def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
             super().__init__()
             self.head = build_head(data, num_inputs, seed=seed)
 
-        def forward(self, t, *, gain=None, noise=True, generator=None):
-            v = t.reshape(t.shape[0], -1, t.shape[-3]) if t.ndim == 5 else t[:, None, :, 0, 0]
+        def forward(
+            self,
+            transport,
+            *,
+            windows=None,
+            frame_scales=None,
+            gain=None,
+            noise=True,
+            generator=None,
+        ):
+            # the arguments of CameraModel.forward; frames [frame, P, 1, 1] -> [b, time, P, 1, 1]
+            t = _per_window(transport, windows, frame_scales) if transport.ndim == 4 else transport
+            v = t.reshape(t.shape[0], -1, t.shape[-3])
             if gain is not None:
                 v = v * gain.reshape(-1, 1, 1)
             if noise and read_noise_v > 0:
