@@ -1,0 +1,184 @@
+"""Reading declarative scene descriptions (TOML) into validated, frozen dataclasses.
+
+A description class is a frozen, keyword-only dataclass whose fields carry
+metadata ``{"unit": "m", "range": (lo, hi), "doc": "..."}``. :func:`parse` maps a
+TOML table onto it, recursing into nested dataclasses and tuples of them, and
+rejects unknown keys, wrong types and out-of-range values with a
+:class:`ConfigError` naming the file, the field path and the reason.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+class ConfigError(ValueError):
+    """A scene description is malformed; the message names file, field and reason."""
+
+
+def spec(
+    default: Any = dataclasses.MISSING,
+    *,
+    unit: str = "",
+    range: tuple | None = None,  # noqa: A002
+    doc: str = "",
+    default_factory: Any = dataclasses.MISSING,
+) -> Any:
+    """A dataclass field with unit, allowed range and documentation metadata."""
+    md = {"unit": unit, "range": range, "doc": doc}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=md)
+    return dataclasses.field(default=default, metadata=md)
+
+
+def _fail(source: str, path: str, value: Any, reason: str) -> ConfigError:
+    return ConfigError(f"{source}: {path} = {value!r}: {reason}")
+
+
+def _check_range(source, path, value, md):
+    rng = md.get("range")
+    unit = md.get("unit", "")
+    if rng is not None and isinstance(value, int | float) and not isinstance(value, bool):
+        lo, hi = rng
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise _fail(source, path, value, f"allowed range [{lo}, {hi}] {unit}".rstrip())
+
+
+def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _convert(source, path, a, value, md)
+            except ConfigError as err:
+                errors.append(str(err))
+        raise errors[-1] if len(errors) == 1 else _fail(source, path, value, "no allowed type fits")
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise _fail(source, path, value, f"expected a table of {tp.__name__} fields")
+        return parse(tp, value, source=source, path=path)
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise _fail(source, path, value, "expected an array")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(
+                _convert(source, f"{path}[{i}]", args[0], v, md) for i, v in enumerate(value)
+            )
+        if len(value) != len(args):
+            raise _fail(source, path, value, f"expected an array of {len(args)} values")
+        return tuple(
+            _convert(source, f"{path}[{i}]", a, v, md)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise _fail(source, path, value, f"expected a number{_unit(md)}")
+        if not math.isfinite(float(value)):
+            raise _fail(source, path, value, "expected a finite number")
+        _check_range(source, path, float(value), md)
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise _fail(source, path, value, "expected an integer")
+        _check_range(source, path, value, md)
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise _fail(source, path, value, "expected true or false")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise _fail(source, path, value, "expected a string")
+        return value
+    if isinstance(tp, type) and issubclass(tp, __import__("enum").Enum):
+        try:
+            return tp(value)
+        except ValueError:
+            allowed = ", ".join(repr(m.value) for m in tp)
+            raise _fail(source, path, value, f"allowed values: {allowed}") from None
+    raise _fail(source, path, value, f"unsupported field type {tp!r}")
+
+
+def _unit(md: dict) -> str:
+    return f" in {md['unit']}" if md.get("unit") else ""
+
+
+def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") -> T:
+    """Build ``cls`` from a TOML table, validating keys, types and ranges.
+
+    Raises:
+        ConfigError: unknown key, missing required key, wrong type or range, or
+            a ``ValueError`` raised by the class's own ``__post_init__``.
+    """
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    prefix = f"{path}." if path else ""
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        raise ConfigError(
+            f"{source}: unknown key '{prefix}{unknown[0]}' in {cls.__name__}; allowed: "
+            f"{', '.join(sorted(fields))}"
+        )
+    kwargs = {}
+    for name, f in fields.items():
+        if name not in table:
+            if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+                raise ConfigError(f"{source}: missing required key {prefix}{name}")
+            continue
+        kwargs[name] = _convert(
+            source, f"{prefix}{name}", hints[name], table[name], dict(f.metadata)
+        )
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except ValueError as err:
+        raise ConfigError(f"{source}: {prefix.rstrip('.') or cls.__name__}: {err}") from None
+
+
+def load_toml(cls: type[T], path: str | os.PathLike, overrides: dict | None = None) -> T:
+    """Read a TOML file into ``cls``; ``overrides`` (nested dict) replace file values."""
+    path = Path(path)
+    try:
+        table = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: scene description not found") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{path}: not valid TOML: {err}") from None
+    if overrides:
+        table = merge(table, overrides)
+    return parse(cls, table, source=str(path))
+
+
+def merge(base: dict, over: dict) -> dict:
+    """Recursively overlay ``over`` on ``base`` (new dict)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def to_dict(obj: Any) -> Any:
+    """JSON-ready dict of a description (enums as values, tuples as lists)."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple | list):
+        return [to_dict(v) for v in obj]
+    if isinstance(obj, __import__("enum").Enum):
+        return obj.value
+    return obj

@@ -1,0 +1,45 @@
+"""Photometric <-> radiometric conversions for scene descriptions.
+
+Scenes are rendered in radiometric units of the detector's band: watts of
+visible light (about 400-700 nm). Descriptions may give lamps in lumens and
+illuminance in lux; these conversions use a luminous efficacy of *visible-band*
+radiation for white light, so that "hundreds of lux indoors" and "tens of
+thousands of lux outdoors" land at realistic detector signals.
+"""
+
+from __future__ import annotations
+
+import math
+
+#: Luminous efficacy of white light's visible-band radiant power (lm per W of
+#: 400-700 nm radiation). Daylight and white LEDs are both ~250-320 lm/W_vis;
+#: we use one value so lumens and lux convert consistently.
+WHITE_LIGHT_EFFICACY_LM_PER_W = 300.0
+#: Solar constant (W/m^2), and the fraction of it in the 400-700 nm band.
+SOLAR_CONSTANT_W_M2 = 1361.0
+VISIBLE_FRACTION_OF_SUNLIGHT = 0.43
+
+
+def lumens_to_watts(lumens: float) -> float:
+    """Visible-band radiant power (W) of a white source of ``lumens`` (lm)."""
+    return lumens / WHITE_LIGHT_EFFICACY_LM_PER_W
+
+
+def lux_to_irradiance(lux: float) -> float:
+    """Visible-band irradiance (W/m^2) of white light of illuminance ``lux`` (lx)."""
+    return lux / WHITE_LIGHT_EFFICACY_LM_PER_W
+
+
+def irradiance_to_lux(irradiance_w_m2: float) -> float:
+    """Illuminance (lx) of white light of visible-band irradiance (W/m^2)."""
+    return irradiance_w_m2 * WHITE_LIGHT_EFFICACY_LM_PER_W
+
+
+def lambertian_radiance(power_w: float, area_m2: float) -> float:
+    r"""Radiance (W m^-2 sr^-1) of a one-sided Lambertian emitter of ``power_w`` on ``area_m2``.
+
+    .. math:: L = \Phi / (\pi A)
+    """
+    if area_m2 <= 0:
+        raise ValueError(f"area_m2 = {area_m2!r} must be > 0")
+    return power_w / (math.pi * area_m2)

@@ -1,0 +1,115 @@
+"""Fidelity plans kept on disk, so a description is planned once, not once per render.
+
+A plan (the settings and measured decisions of :func:`mincam_render.render.fidelity.decide_fidelity`)
+depends on the scene description, the camera, the fidelity targets, the number of
+frames (backgrounds are amortized over them) and the renderer, not on the episode:
+every plan is measured on the *planning episode* (the description's sequence at
+seed :data:`PLAN_SEED`), so all episodes of a study (train, validation and test
+seeds) share one plan, and a cached plan is exactly the plan that would be measured.
+
+Plans are looked up by the sha256 of :func:`plan_fields`, first among the plans
+shipped with the repository (``scenes/plans/``, written by ``mincam-render plan
+--ship``), then in the user's cache directory (``$MINCAM_RENDER_PLAN_CACHE``, else
+the platform's user cache directory, via ``platformdirs``). A file that does not
+parse or whose fields do not hash to its name is ignored with a warning (and
+planned again). Bump :data:`PLANNER_VERSION` when the planner changes what it
+decides: older plans then stop matching.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from mincam_render.scenes.registry import SCENES_DIR
+
+log = logging.getLogger(__name__)
+
+#: Seed of the planning episode (whatever the dataset's seed).
+PLAN_SEED = 0
+#: Version of the planner's decisions; part of every plan's key.
+PLANNER_VERSION = 1
+#: Plans shipped with the repository.
+SHIPPED_DIR = SCENES_DIR / "plans"
+#: Environment variable naming the user's plan cache directory.
+CACHE_ENV = "MINCAM_RENDER_PLAN_CACHE"
+#: Request fields that do not change a plan (the episode and its storage layout).
+EPISODE_FIELDS = ("family", "seed", "overrides", "shard_frames", "splits")
+
+
+def cache_dir() -> Path:
+    """The user's plan cache directory (not created here)."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("mincam_render")) / "plans"
+
+
+def plan_fields(identity: dict, family_name: str, renderer: dict[str, str]) -> dict[str, Any]:
+    """What a plan depends on: the request identity less the episode, and the renderer.
+
+    Args:
+        identity: :meth:`~mincam_render.data.render_job.RenderRequest.identity` (it
+            holds the resolved description, so a file path and a family name
+            with the same content give the same fields).
+        family_name: the scene family's registered name.
+        renderer: ``{"variant", "mitsuba", "drjit"}`` versions.
+    """
+    fields = {k: v for k, v in identity.items() if k not in EPISODE_FIELDS}
+    fields.update(family_name=family_name, renderer=renderer, planner_version=PLANNER_VERSION)
+    return json.loads(json.dumps(fields, sort_keys=True))
+
+
+def plan_key(fields: dict[str, Any]) -> str:
+    """sha256 (hex) of the canonical JSON of ``fields``."""
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
+
+
+def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
+    """``(plan, "shipped" | "cache")`` of ``fields``, or None when none is kept."""
+    key = plan_key(fields)
+    for where, folder in (("shipped", SHIPPED_DIR), ("cache", cache_dir())):
+        path = folder / f"{key}.json"
+        if not path.is_file():
+            continue
+        try:
+            plan = json.loads(path.read_text())
+            if plan_key(plan["fields"]) != key:
+                raise ValueError("its fields do not hash to its name")
+            return {"settings": plan["settings"], "decisions": plan["decisions"]}, where
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            log.warning("ignoring the plan %s (%s); planning again", path, err)
+    return None
+
+
+def store_plan(
+    fields: dict[str, Any], plan: dict, seconds: float, folder: Path | None = None
+) -> Path:
+    """Write a plan atomically into ``folder`` (default: the user's cache); returns its path.
+
+    Args:
+        fields: :func:`plan_fields` of the plan.
+        plan: ``{"settings", "decisions"}``, JSON-ready.
+        seconds: wall time the planning took (kept for reports).
+        folder: where to write; ``SHIPPED_DIR`` to ship it with the repository.
+    """
+    folder = cache_dir() if folder is None else Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{plan_key(fields)}.json"
+    body = {"fields": fields, **plan, "planning_seconds": round(seconds, 1)}
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".plan-", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(body, f, indent=1, sort_keys=True)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

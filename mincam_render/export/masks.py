@@ -1,0 +1,312 @@
+"""Masks ready to print: 16-bit PNG, OpenEXR, a true-size print sheet and a JSON sidecar.
+
+:func:`export_masks` writes into one directory (``masks/<task>/`` by convention):
+
+* ``mask_KK.png`` -- 16-bit grayscale transmittance, 0..65535 = 0..1, row 0 at
+  the top: the mask as seen **from the detector looking out at the scene**
+  (``T[detector, row, col]``'s convention; see the README's coordinate frame).
+  Printed on a transparency and viewed from the scene side it appears mirrored
+  left-right.
+* ``masks.exr`` -- the exact float32 transmittance, one channel per mask.
+* ``print_sheet.svg`` (and ``print_sheet.pdf``) -- every mask at true physical
+  size (``camera.mask_size_m``), laid out as on the board, with cut marks,
+  labels and a 10-mm scale bar; transmittance clipped to the printable range.
+  Gray level = transmittance (white = clear): a printer's own calibration
+  curve (gray level -> film transmittance) must be applied by the user.
+* ``masks.json`` -- camera geometry in SI units, units, the printable range,
+  and the dataset/run that produced the masks.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from mincam_render.optics.camera import MM, FreeformCamera
+
+#: Sheet margin around the board layout (mm) and offset/length of cut marks (mm).
+SHEET_MARGIN_MM = 12.0
+CUT_MARK_OFFSET_MM = 0.8
+CUT_MARK_LENGTH_MM = 1.6
+LABEL_FONT_MM = 1.8
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    from mincam_render.data.dataset import atomic_write_bytes
+
+    atomic_write_bytes(path, data)
+
+
+def _png16(m: np.ndarray) -> bytes:
+    """16-bit grayscale PNG bytes of transmittance ``m[row, col]`` in [0, 1]."""
+    arr = np.rint(np.clip(m, 0.0, 1.0) * 65535.0).astype(np.uint16)
+    buf = io.BytesIO()
+    Image.fromarray(arr).save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _png8(m: np.ndarray) -> bytes:
+    arr = np.rint(np.clip(m, 0.0, 1.0) * 255.0).astype(np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(arr, mode="L").save(buf, format="PNG")
+    return buf.getvalue()
+
+
+#: Narrowest sheet (mm): room for the title line above a small camera's masks.
+MIN_SHEET_WIDTH_MM = 150.0
+
+
+def sheet_layout(camera: FreeformCamera) -> tuple[float, float, np.ndarray]:
+    """Sheet ``(width_mm, height_mm, corners_mm[K, 2])`` (top-left of each mask, y down)."""
+    side = camera.mask_size_m / MM
+    xy = np.asarray(camera.layout.positions_m) / MM  # board (x right, y up), as seen from behind
+    left = xy[:, 0] - side / 2
+    top = -xy[:, 1] - side / 2
+    x0, y0 = left.min(), top.min()
+    # wide enough for the title line (about 1.9 mm per character at LABEL_FONT_MM)
+    width = max((left.max() - x0) + side + 2 * SHEET_MARGIN_MM, MIN_SHEET_WIDTH_MM)
+    height = (top.max() - y0) + side + 2 * SHEET_MARGIN_MM
+    corners = np.stack([left - x0 + SHEET_MARGIN_MM, top - y0 + SHEET_MARGIN_MM], axis=1)
+    return float(width), float(height), corners
+
+
+def print_sheet_svg(masks: np.ndarray, camera: FreeformCamera, *, title: str = "") -> str:
+    """SVG text of the print sheet, sized in millimetres (``width="...mm"``).
+
+    Args:
+        masks: ``M[pixel, row, col]`` transmittance, already clipped to the printable range.
+        camera: geometry (mask size and board layout).
+        title: a line printed at the top.
+
+    """
+    w, h, corners = sheet_layout(camera)
+    side = camera.mask_size_m / MM
+    lo, hi = camera.transmittance_range
+    parts = [
+        '<?xml version="1.0" encoding="UTF-8"?>',
+        f'<svg xmlns="http://www.w3.org/2000/svg" xmlns:xlink="http://www.w3.org/1999/xlink" '
+        f'width="{w:.3f}mm" height="{h:.3f}mm" viewBox="0 0 {w:.3f} {h:.3f}">',
+        f'<rect x="0" y="0" width="{w:.3f}" height="{h:.3f}" fill="white"/>',
+        f'<text x="{SHEET_MARGIN_MM / 2:.2f}" y="{SHEET_MARGIN_MM / 2:.2f}" '
+        f'font-family="sans-serif" font-size="{LABEL_FONT_MM}">{title} | '
+        f"print at 100% | masks {side:g} mm | transmittance {lo:g}-{hi:g} | "
+        "seen from the detector side</text>",
+    ]
+    o, ln = CUT_MARK_OFFSET_MM, CUT_MARK_LENGTH_MM
+    for k, (x, y) in enumerate(corners):
+        data = base64.b64encode(_png8(masks[k])).decode()
+        parts.append(
+            f'<image x="{x:.3f}" y="{y:.3f}" width="{side:.3f}" height="{side:.3f}" '
+            f'preserveAspectRatio="none" style="image-rendering:pixelated" '
+            f'xlink:href="data:image/png;base64,{data}"/>'
+        )
+        for cx, sx in ((x, -1), (x + side, 1)):
+            for cy, sy in ((y, -1), (y + side, 1)):
+                # L-shaped crop marks just outside each corner: the cut lines extended
+                parts.append(
+                    f'<path d="M {cx + sx * o:.3f} {cy:.3f} h {sx * ln:.3f} '
+                    f'M {cx:.3f} {cy + sy * o:.3f} v {sy * ln:.3f}" '
+                    'stroke="black" stroke-width="0.1" fill="none"/>'
+                )
+        parts.append(
+            f'<text x="{x + side / 2:.3f}" y="{y + side + o + LABEL_FONT_MM:.3f}" '
+            f'text-anchor="middle" font-family="sans-serif" font-size="{LABEL_FONT_MM}">'
+            f"pixel {k}</text>"
+        )
+    bar_y = h - SHEET_MARGIN_MM / 2
+    parts.append(
+        f'<path d="M {SHEET_MARGIN_MM:.3f} {bar_y:.3f} h 10" stroke="black" stroke-width="0.3"/>'
+        f'<text x="{SHEET_MARGIN_MM + 11:.3f}" y="{bar_y + 0.6:.3f}" font-family="sans-serif" '
+        f'font-size="{LABEL_FONT_MM}">10 mm</text>'
+    )
+    parts.append("</svg>")
+    return "\n".join(parts) + "\n"
+
+
+def print_sheet_pdf(
+    masks: np.ndarray, camera: FreeformCamera, path: str | os.PathLike, *, title: str = ""
+) -> Path:
+    """The same sheet as a PDF at true size (matplotlib; 1 data unit = 1 mm)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    w, h, corners = sheet_layout(camera)
+    side = camera.mask_size_m / MM
+    fig = plt.figure(figsize=(w / 25.4, h / 25.4))
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.axis("off")
+    pt_per_mm = 72 / 25.4
+    o, ln = CUT_MARK_OFFSET_MM, CUT_MARK_LENGTH_MM
+    for k, (x, y) in enumerate(corners):
+        ax.imshow(
+            masks[k],
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            interpolation="nearest",
+            extent=(x, x + side, y + side, y),
+        )
+        for cx, sx in ((x, -1), (x + side, 1)):
+            for cy, sy in ((y, -1), (y + side, 1)):
+                ax.plot([cx + sx * o, cx + sx * (o + ln)], [cy, cy], "k-", lw=0.1 * pt_per_mm)
+                ax.plot([cx, cx], [cy + sy * o, cy + sy * (o + ln)], "k-", lw=0.1 * pt_per_mm)
+        ax.text(
+            x + side / 2,
+            y + side + o + LABEL_FONT_MM,
+            f"pixel {k}",
+            ha="center",
+            fontsize=LABEL_FONT_MM * pt_per_mm,
+        )
+    lo, hi = camera.transmittance_range
+    ax.text(
+        SHEET_MARGIN_MM / 2,
+        SHEET_MARGIN_MM / 2,
+        f"{title} | print at 100% | masks {side:g} mm | transmittance {lo:g}-{hi:g} | "
+        "seen from the detector side",
+        fontsize=LABEL_FONT_MM * pt_per_mm,
+    )
+    ax.plot(
+        [SHEET_MARGIN_MM, SHEET_MARGIN_MM + 10],
+        [h - SHEET_MARGIN_MM / 2] * 2,
+        "k-",
+        lw=0.3 * pt_per_mm,
+    )
+    ax.set_xlim(0, w)
+    ax.set_ylim(h, 0)
+    ax.set_aspect("auto")
+    path = Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="pdf")
+    plt.close(fig)
+    _atomic_write(path, buf.getvalue())
+    return path
+
+
+def export_masks(
+    transmittance: np.ndarray,
+    camera: FreeformCamera,
+    out_dir: str | os.PathLike,
+    *,
+    task: str = "",
+    provenance: Mapping[str, Any] | None = None,
+    pdf: bool = True,
+) -> dict[str, Path]:
+    """Write the printable masks of a camera into ``out_dir`` (created).
+
+    Args:
+        transmittance: ``M[pixel, row, col]`` (numpy, 0-1); values outside the
+            camera's printable range are clipped to it (and counted in the sidecar).
+        camera: geometry and printable range; mask ``k`` goes to board position
+            ``k`` (with more masks than positions, a 2-row grid is used).
+        out_dir: output directory.
+        task: task name for labels.
+        provenance: dataset/run information for the sidecar (JSON-ready).
+        pdf: also write ``print_sheet.pdf``.
+
+    Returns:
+        ``{"png": [...], "exr", "svg", "pdf", "json"}`` paths.
+
+    Raises:
+        ValueError: wrong shape or non-finite values.
+
+    """
+    import OpenEXR
+
+    m = np.asarray(transmittance, dtype=np.float64)
+    if m.ndim != 3:
+        raise ValueError(f"transmittance has shape {m.shape}: expected (pixel, row, col)")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("transmittance contains NaN or inf")
+    layout_cam = camera
+    if m.shape[0] != camera.num_detectors:
+        from dataclasses import replace
+
+        from mincam_render.optics.camera import DetectorLayout
+
+        if m.shape[0] < camera.num_detectors:
+            layout = DetectorLayout(positions_m=camera.layout.positions_m[: m.shape[0]])
+        else:
+            # more pixels than rendered detectors (pixels reusing a detector's transport):
+            # lay them out on a 2-row grid with the mask size + 4 mm pitch
+            k = m.shape[0]
+            rows = 1 if k < 4 else 2
+            grid = DetectorLayout.grid(
+                rows=rows, cols=-(-k // rows), pitch_m=camera.mask_size_m + 4 * MM
+            )
+            layout = DetectorLayout(positions_m=grid.positions_m[:k])
+        layout_cam = replace(camera, layout=layout)
+    lo, hi = camera.transmittance_range
+    clipped = np.clip(m, lo, hi)
+    n_clipped = int(np.count_nonzero(clipped != m))
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    # Every file is written atomically and masks.json, which marks a finished
+    # export, last; a stale one goes first, so a killed export never looks complete.
+    (out / "masks.json").unlink(missing_ok=True)
+    paths: dict[str, Any] = {"png": []}
+    for k in range(m.shape[0]):
+        p = out / f"mask_{k:02d}.png"
+        _atomic_write(p, _png16(clipped[k]))
+        paths["png"].append(p)
+    channels = {
+        f"mask{k:04d}": np.ascontiguousarray(m[k].astype(np.float32)) for k in range(m.shape[0])
+    }
+    header = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        "mincam_units": "transmittance (0-1), unclipped",
+    }
+    paths["exr"] = out / "masks.exr"
+    tmp_exr = out / f".masks.exr.{os.getpid()}.tmp.exr"
+    try:
+        OpenEXR.File(header, channels).write(str(tmp_exr))
+        _atomic_write(paths["exr"], tmp_exr.read_bytes())
+    finally:
+        tmp_exr.unlink(missing_ok=True)
+    title = f"mincam_render masks: {task}" if task else "mincam_render masks"
+    paths["svg"] = out / "print_sheet.svg"
+    _atomic_write(paths["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
+    if pdf:
+        paths["pdf"] = print_sheet_pdf(clipped, layout_cam, out / "print_sheet.pdf", title=title)
+    w, h, corners = sheet_layout(layout_cam)
+    sidecar = {
+        "task": task,
+        "masks": m.shape[0],
+        "mask_resolution": list(m.shape[1:]),
+        "units": {
+            "lengths": "m",
+            "transmittance": "0-1 (fraction of light passed)",
+            "png": "uint16, 0..65535 = transmittance 0..1",
+            "sheet": "mm, origin top-left",
+        },
+        "orientation": "row 0 = up side of the view, col 0 = left, seen from the detector "
+        "looking out (mirror left-right when viewed from the scene side)",
+        "printable_transmittance_range": [lo, hi],
+        "texels_clipped_to_printable_range": n_clipped,
+        "transmittance_min_max": [float(m.min()), float(m.max())],
+        "sheet_size_mm": [w, h],
+        "mask_corners_on_sheet_mm": corners.tolist(),
+        "camera": layout_cam.to_dict(),
+        "provenance": dict(provenance or {}),
+        "files": {
+            "png": [p.name for p in paths["png"]],
+            "exr": "masks.exr",
+            "svg": "print_sheet.svg",
+            "pdf": "print_sheet.pdf" if pdf else None,
+        },
+    }
+    paths["json"] = out / "masks.json"
+    _atomic_write(paths["json"], json.dumps(sidecar, indent=2, default=str).encode())
+    return paths

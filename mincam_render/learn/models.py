@@ -1,0 +1,549 @@
+r"""Trainable cameras: a minimalist camera of freeform pixels and a box-pixel baseline.
+
+Both cameras map transport images ``T[batch, time, detector, row, col]`` (torch,
+watts per unit transmittance, see :mod:`mincam_render.render.transport`) to task
+outputs through the same :class:`Head` (paper Sec. 5: two hidden layers of 128
+units, leaky ReLU with slope 0.1).
+
+* :class:`MincamCamera` -- ``K`` mask logits -> the mask plane (plain torch, or the
+  Dr.Jit op of :func:`~mincam_render.optics.maskplane.mask_power`) ->
+  :func:`~mincam_render.optics.sensor.detector_voltage` (paper eqs. 3-5) -> head.
+  Pixel ``j`` of the camera reads detector ``detectors[j]`` of the data, so a
+  camera may use a subset of the rendered detectors (pruning) or reuse one
+  detector's transport for several masks (more pixels than were rendered;
+  this ignores the parallax between the reused and the real position, which is
+  sub-texel for the 20 mm pitch at scene depths beyond ~1 m).
+* :class:`BaselineCamera` -- a traditional camera of ``R x C`` square pixels
+  that box-integrate the light: the transport images averaged over the
+  rendered detectors (approximating one central camera, the paper's auxiliary
+  camera in the middle of the board) and box-summed into ``R x C`` pixels,
+  then an 8-bit camera's read-out: a fixed exposure (set once from the
+  training data so that the 99.5th percentile of pixel power maps to 255 DN),
+  Gaussian read noise (1 DN), additive uniform quantisation noise of one DN
+  (the usual differentiable model of rounding) and clipping to [0, 255].
+
+Targets of COUNT and REGRESSION labels are standardised with the training
+set's mean and standard deviation (buffers of the head) so that one learning
+rate suits every task; :meth:`Head.predict` returns physical values.
+
+Losses per :class:`~mincam_render.scenes.base.LabelKind`: mean squared
+error for COUNT and REGRESSION (in standardised units), binary cross-entropy
+with logits per element for BINARY; the total is their sum. A COUNT label may
+instead be learned as a class ``0 .. n-1`` by cross-entropy (:class:`CountLoss`;
+the paper's toy task, Sec. 5); its prediction is then the expected count under
+the softmax (the posterior mean, which minimises the squared error the task is
+scored by).
+
+Temporal samples (windows of ``history`` frames) can be given as the frames they
+use, ``T[frame, detector, row, col]``, and ``windows[batch, time]`` indices into
+them: every frame's mask-plane product is computed once however many windows
+share it (consecutive traffic windows share 29 of 30), then each window gets
+its own gain and noise, exactly as if its frames had been stacked.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.optics.camera import FreeformCamera
+from mincam_render.optics.maskplane import (
+    MaskPlaneBackend,
+    logits_for_transmittance,
+    mask_power,
+    power_through,
+    transmittance,
+)
+from mincam_render.optics.sensor import detector_voltage
+
+#: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
+INIT_TRANSMITTANCE = (0.08, 0.12)
+#: Head width and activation slope (paper Sec. 5).
+HIDDEN_UNITS = 128
+LEAKY_SLOPE = 0.1
+#: Training keeps mask logits in [-MAX_LOGIT, MAX_LOGIT]. At |logit| = 8 the
+#: transmittance is (hi - lo) * sigmoid(-8) ~ 2e-4 from its printable limit (below
+#: what a printer resolves) while sigmoid'(8) ~ 3e-4 keeps the mask gradient above
+#: Adam's epsilon; at |logit| = 50 it is ~1e-22 and a saturated mask never moves again.
+MAX_LOGIT = 8.0
+#: 8-bit baseline camera read-out (not from the paper: a typical machine-vision
+#: sensor at unit gain has ~1 DN of read noise).
+BASELINE_BITS = 8
+BASELINE_READ_NOISE_DN = 1.0
+#: Percentile of training pixel power that the baseline's fixed exposure maps to full scale.
+BASELINE_EXPOSURE_PERCENTILE = 99.5
+
+
+class CountLoss(enum.Enum):
+    """How a COUNT label is learned.
+
+    * ``MSE``: regression of the standardised count (paper, supplement C: people count).
+    * ``CROSS_ENTROPY``: classification into counts ``0 .. n-1`` (paper Sec. 5: patches);
+      predicts the expected count under the softmax.
+    """
+
+    MSE = "mse"
+    CROSS_ENTROPY = "cross_entropy"
+
+
+def _as_5d(transport: torch.Tensor) -> torch.Tensor:
+    """``T[batch, detector, row, col]`` -> ``T[batch, 1, detector, row, col]``; 5-D unchanged."""
+    if transport.ndim == 4:
+        return transport[:, None]
+    if transport.ndim != 5:
+        raise ValueError(
+            f"transport has shape {tuple(transport.shape)}: expected (batch, detector, row, col) "
+            "or (batch, time, detector, row, col)"
+        )
+    return transport
+
+
+def temporal_features(features: torch.Tensor) -> torch.Tensor:
+    """Flatten ``x[batch, time, feature]`` for the head; forward differences when time > 1.
+
+    The paper (supplement, traffic) feeds the head a 1-s stack of measurements
+    after forward differencing in time: ``x[t+1] - x[t]``.
+    """
+    if features.shape[1] > 1:
+        features = features[:, 1:] - features[:, :-1]
+    return features.reshape(features.shape[0], -1)
+
+
+class Head(nn.Module):
+    """Inference network: input standardisation, 2 x 128 leaky-ReLU layers, one output per label.
+
+    Args:
+        in_features: number of inputs (pixels x time steps).
+        label_specs: the task's labels; one output group of ``spec.size`` each.
+        target_mean: ``{name: [size]}`` training-set mean of COUNT/REGRESSION labels.
+        target_std: ``{name: [size]}`` training-set standard deviation (> 0).
+        count_classes: ``{name: n}`` COUNT labels learned by cross-entropy over the
+            counts ``0 .. n-1`` (n >= 2; ``n`` logits per element); the other
+            COUNT labels are regressed (MSE). See :class:`CountLoss`.
+        hidden: hidden width.
+
+    Raises:
+        ValueError: no labels, no inputs, or ``count_classes`` naming a label that
+            is not a COUNT label or giving fewer than 2 classes.
+
+    """
+
+    def __init__(
+        self,
+        in_features: int,
+        label_specs: Sequence[LabelSpec],
+        *,
+        target_mean: Mapping[str, np.ndarray] | None = None,
+        target_std: Mapping[str, np.ndarray] | None = None,
+        count_classes: Mapping[str, int] | None = None,
+        hidden: int = HIDDEN_UNITS,
+    ) -> None:
+        super().__init__()
+        if in_features < 1:
+            raise ValueError(f"in_features = {in_features}: need at least 1 input")
+        self.label_specs = tuple(label_specs)
+        if not self.label_specs:
+            raise ValueError("label_specs is empty: a head needs at least one label")
+        kinds = {s.name: s.kind for s in self.label_specs}
+        self.count_classes: dict[str, int] = {}
+        for name, n in (count_classes or {}).items():
+            if kinds.get(name) is not LabelKind.COUNT:
+                raise ValueError(
+                    f"count_classes names {name!r}, which is not a COUNT label of this head "
+                    f"(COUNT labels: {sorted(k for k, v in kinds.items() if v is LabelKind.COUNT)})"
+                )
+            if isinstance(n, bool) or int(n) != n or n < 2:
+                raise ValueError(f"count_classes[{name!r}] = {n!r}: allowed an integer >= 2")
+            self.count_classes[name] = int(n)
+        # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
+        # brightness or the scene's light level; it rescales, so SNR is untouched.
+        self.input_norm = nn.BatchNorm1d(in_features, affine=False)
+        self.body = nn.Sequential(
+            nn.Linear(in_features, hidden),
+            nn.LeakyReLU(LEAKY_SLOPE),
+            nn.Linear(hidden, hidden),
+            nn.LeakyReLU(LEAKY_SLOPE),
+        )
+        self.out = nn.Linear(hidden, sum(self.output_width(s) for s in self.label_specs))
+        for s in self.label_specs:
+            mean = np.zeros(s.size, np.float32)
+            std = np.ones(s.size, np.float32)
+            if s.kind is not LabelKind.BINARY:
+                if target_mean is not None and s.name in target_mean:
+                    mean = np.asarray(target_mean[s.name], np.float32).reshape(s.size)
+                if target_std is not None and s.name in target_std:
+                    std = np.maximum(np.asarray(target_std[s.name], np.float32), 1e-6)
+                    std = std.reshape(s.size)
+            self.register_buffer(f"mean_{s.name}", torch.from_numpy(mean))
+            self.register_buffer(f"std_{s.name}", torch.from_numpy(std))
+
+    @property
+    def in_features(self) -> int:
+        """Number of inputs."""
+        return self.body[0].in_features
+
+    def count_loss(self, name: str) -> CountLoss:
+        """How label ``name`` is learned if it is a COUNT label."""
+        return CountLoss.CROSS_ENTROPY if name in self.count_classes else CountLoss.MSE
+
+    def output_width(self, spec: LabelSpec) -> int:
+        """Raw outputs of one label: ``size``, or ``size * classes`` for a classified count."""
+        return spec.size * self.count_classes.get(spec.name, 1)
+
+    def forward(self, x: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Raw outputs ``{name: [batch, width]}``: standardised values or logits.
+
+        BINARY labels give one logit per element; a classified count gives class
+        logits ``[batch, size * classes]`` (element-major, see :meth:`class_logits`).
+        """
+        y = self.out(self.body(self.input_norm(x)))
+        return dict(
+            zip(
+                [s.name for s in self.label_specs],
+                torch.split(y, [self.output_width(s) for s in self.label_specs], dim=1),
+                strict=True,
+            )
+        )
+
+    def class_logits(self, name: str, outputs: torch.Tensor) -> torch.Tensor:
+        """Raw outputs of a classified count -> logits ``[batch, size, classes]``."""
+        return outputs.reshape(outputs.shape[0], -1, self.count_classes[name])
+
+    def standardise(self, name: str, value: torch.Tensor) -> torch.Tensor:
+        """Physical label -> the head's output units (identity for BINARY)."""
+        return (value - getattr(self, f"mean_{name}")) / getattr(self, f"std_{name}")
+
+    def predict(self, outputs: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Raw outputs -> physical predictions: values (COUNT, REGRESSION), P(state=1) (BINARY)."""
+        pred = {}
+        for s in self.label_specs:
+            y = outputs[s.name]
+            if s.kind is LabelKind.BINARY:
+                pred[s.name] = torch.sigmoid(y)
+            elif s.name in self.count_classes:
+                p = torch.softmax(self.class_logits(s.name, y), dim=-1)
+                counts = torch.arange(p.shape[-1], dtype=p.dtype, device=p.device)
+                pred[s.name] = p @ counts  # expected count, [batch, size]
+            else:
+                pred[s.name] = y * getattr(self, f"std_{s.name}") + getattr(self, f"mean_{s.name}")
+        return pred
+
+
+def task_loss(
+    head: Head, outputs: Mapping[str, torch.Tensor], labels: Mapping[str, torch.Tensor]
+) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Sum over labels of MSE (COUNT, REGRESSION; standardised) or BCE with logits (BINARY).
+
+    A COUNT label in ``head.count_classes`` uses the cross-entropy of its class
+    logits against the count (rounded, clipped to the classes), mean over elements.
+
+    Args:
+        head: supplies the label specs and the target standardisation.
+        outputs: ``{name: [batch, size]}`` raw head outputs.
+        labels: ``{name: [batch, size]}`` physical labels (0/1 for BINARY).
+
+    Returns:
+        ``(total, {name: loss})``, scalars.
+
+    """
+    parts = {}
+    for s in head.label_specs:
+        if s.name not in labels:
+            raise KeyError(f"labels lack {s.name!r}; have {sorted(labels)}")
+        y = labels[s.name].to(outputs[s.name].dtype)
+        if s.kind is LabelKind.BINARY:
+            parts[s.name] = F.binary_cross_entropy_with_logits(outputs[s.name], y)
+        elif s.name in head.count_classes:
+            logits = head.class_logits(s.name, outputs[s.name])
+            n = logits.shape[-1]
+            target = torch.clamp(torch.round(y), 0, n - 1).long()
+            parts[s.name] = F.cross_entropy(logits.reshape(-1, n), target.reshape(-1))
+        else:
+            parts[s.name] = F.mse_loss(outputs[s.name], head.standardise(s.name, y))
+    return torch.stack(list(parts.values())).sum(), parts
+
+
+class CameraModel(nn.Module):
+    """A camera feeding a :class:`Head`: subclasses define ``measure`` (pixel outputs)."""
+
+    head: Head
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel outputs ``[batch, time, pixel]``.
+
+        Args:
+            transport: ``T[batch, (time,) detector, row, col]`` (W), or with
+                ``windows`` the frames ``T[frame, detector, row, col]`` they index.
+            windows: ``[batch, time]`` long indices into ``transport``'s frames.
+            frame_scales: ``[frame]`` factor from ``transport`` to watts (the
+                stored values of a float16 dataset; see
+                :func:`mincam_render.render.precision.encode_transport`): applied to the
+                power, which is linear in the transport, not to every texel.
+            gain: ``[batch]`` global gain per sample (augmentation).
+            noise: add sensor noise.
+            generator: random generator of the noise.
+
+        """
+        raise NotImplementedError
+
+    def forward(
+        self,
+        transport: torch.Tensor,
+        *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> dict[str, torch.Tensor]:
+        """Raw head outputs ``{name: [batch, size]}`` (arguments as :meth:`measure`)."""
+        v = self.measure(
+            transport,
+            windows=windows,
+            frame_scales=frame_scales,
+            gain=gain,
+            noise=noise,
+            generator=generator,
+        )
+        return self.head(temporal_features(v))
+
+
+def _per_window(
+    frames: torch.Tensor, windows: torch.Tensor | None, frame_scales: torch.Tensor | None
+) -> torch.Tensor:
+    """``x[frame, ...]`` (times ``frame_scales``) -> ``x[batch, time, ...]`` via ``windows``."""
+    if frame_scales is not None:
+        frames = frames * frame_scales.reshape(-1, *(1,) * (frames.ndim - 1))
+    if windows is None:
+        return frames[:, None]
+    b, h = windows.shape
+    return frames.index_select(0, windows.reshape(-1)).reshape(b, h, *frames.shape[1:])
+
+
+def _frames_of(transport: torch.Tensor, windows: torch.Tensor | None) -> torch.Tensor:
+    """The frames ``T[frame, detector, row, col]`` to measure (5-D batches flattened)."""
+    if windows is not None:
+        if transport.ndim != 4:
+            raise ValueError(
+                f"with windows, transport has shape {tuple(transport.shape)}: expected "
+                "(frame, detector, row, col)"
+            )
+        return transport
+    t = _as_5d(transport)
+    return t.reshape(-1, *t.shape[2:])
+
+
+def _windows_for(transport: torch.Tensor, windows: torch.Tensor | None) -> torch.Tensor | None:
+    """Window indices for a 5-D batch ``T[batch, time, ...]`` flattened by :func:`_frames_of`."""
+    if windows is not None or transport.ndim == 4:
+        return windows
+    b, h = transport.shape[:2]
+    return torch.arange(b * h, device=transport.device).reshape(b, h)
+
+
+class MincamCamera(CameraModel):
+    """A minimalist camera: trainable masks, the detector model, and a head.
+
+    Args:
+        camera: geometry, electronics and printable transmittance range.
+        head: inference network with ``len(detectors) * max(history - 1, 1)`` inputs.
+        detectors: data detector read by each pixel (default: all of ``camera``).
+        sensor_model: apply :func:`detector_voltage` (noise, saturation); False
+            feeds the head noiseless power scaled to volts (supplement A's ablation).
+        history: frames per sample (1 = static task; 30 for traffic).
+        init_seed: seed of the U(0.08, 0.12) mask initialisation.
+        mask_plane: plain torch (default; for torch transport) or the Dr.Jit op.
+
+    """
+
+    def __init__(
+        self,
+        camera: FreeformCamera,
+        head: Head,
+        *,
+        detectors: Sequence[int] | None = None,
+        sensor_model: bool = True,
+        history: int = 1,
+        init_seed: int = 0,
+        mask_plane: MaskPlaneBackend = MaskPlaneBackend.TORCH,
+    ) -> None:
+        super().__init__()
+        self.camera = camera
+        self.mask_plane = MaskPlaneBackend(mask_plane)
+        dets = tuple(range(camera.num_detectors)) if detectors is None else tuple(detectors)
+        if not dets:
+            raise ValueError("detectors is empty: a minimalist camera needs at least one pixel")
+        self.register_buffer("detectors", torch.tensor(dets, dtype=torch.long))
+        # every rendered detector once, in order: no gather of the transport needed
+        self._identity_detectors = dets == tuple(range(camera.num_detectors))
+        self.sensor_model = bool(sensor_model)
+        self.history = int(history)
+        rows, cols = camera.mask_resolution
+        g = torch.Generator().manual_seed(int(init_seed))
+        lo, hi = INIT_TRANSMITTANCE
+        m0 = lo + (hi - lo) * torch.rand((len(dets), rows, cols), generator=g)
+        self.logits = nn.Parameter(logits_for_transmittance(m0, camera.transmittance_range))
+        expected = len(dets) * max(self.history - 1, 1)
+        if head.in_features != expected:
+            raise ValueError(
+                f"head has {head.in_features} inputs; this camera gives {expected} "
+                f"({len(dets)} pixels x {max(self.history - 1, 1)} time steps)"
+            )
+        self.head = head
+
+    @property
+    def num_pixels(self) -> int:
+        """Number of freeform pixels ``K``."""
+        return int(self.detectors.numel())
+
+    def transmittance(self) -> torch.Tensor:
+        """``M[pixel, row, col]`` in the printable range (torch, differentiable)."""
+        return transmittance(self.logits, self.camera.transmittance_range)
+
+    @torch.no_grad()
+    def project_logits_(self) -> None:
+        """Clamp the logits in place to ``[-MAX_LOGIT, MAX_LOGIT]`` (NaN-free masks stay so)."""
+        self.logits.clamp_(-MAX_LOGIT, MAX_LOGIT)
+
+    def power(self, frames: torch.Tensor) -> torch.Tensor:
+        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks."""
+        if not self._identity_detectors:
+            frames = frames.index_select(1, self.detectors)
+        if self.mask_plane is MaskPlaneBackend.DRJIT:
+            return mask_power(
+                frames, self.logits, self.camera.transmittance_range, backend=self.mask_plane
+            )
+        if frames.shape[1:] != self.logits.shape:
+            raise ValueError(
+                f"transport frames have (detector, row, col) = {tuple(frames.shape[1:])}; "
+                f"the masks are {tuple(self.logits.shape)}"
+            )
+        return power_through(frames, self.transmittance())
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel outputs ``[batch, time, pixel]`` (V); arguments as :meth:`CameraModel.measure`.
+
+        Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
+        """
+        frames = _frames_of(transport, windows)
+        windows = _windows_for(transport, windows)
+        power = _per_window(self.power(frames), windows, frame_scales)
+        if gain is not None:
+            power = power * gain.reshape(-1, 1, 1)
+        e = self.camera.electronics
+        if not self.sensor_model:
+            return power * (e.responsivity_a_per_w * e.gain_v_per_a)
+        return detector_voltage(power, e, noise=noise, generator=generator)
+
+
+def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """Box-sum ``image[..., row, col]`` into ``grid = (R, C)`` pixels (sums power; torch).
+
+    Rows/columns that do not divide evenly use adaptive pooling (overlapping
+    boxes at the seams) scaled by the mean box area, so totals hold only
+    approximately; even divisions are exact box sums.
+    """
+    rows, cols = image.shape[-2:]
+    r, c = grid
+    if not (1 <= r <= rows and 1 <= c <= cols):
+        raise ValueError(f"baseline grid {r}x{c} must lie within the transport's {rows}x{cols}")
+    lead = image.shape[:-2]
+    flat = image.reshape(-1, 1, rows, cols)
+    pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
+    return pooled.reshape(*lead, r, c)
+
+
+class BaselineCamera(CameraModel):
+    """A traditional ``R x C`` camera (box pixels, 8-bit read-out) feeding a :class:`Head`.
+
+    Args:
+        grid: ``(R, C)`` pixels.
+        head: inference network with ``R * C * max(history - 1, 1)`` inputs.
+        exposure_w: pixel power mapped to 255 DN (W), see :meth:`exposure_from`.
+        history: frames per sample.
+        read_noise_dn: Gaussian read noise (DN).
+
+    """
+
+    def __init__(
+        self,
+        grid: tuple[int, int],
+        head: Head,
+        *,
+        exposure_w: float,
+        history: int = 1,
+        read_noise_dn: float = BASELINE_READ_NOISE_DN,
+    ) -> None:
+        super().__init__()
+        self.grid = (int(grid[0]), int(grid[1]))
+        if not exposure_w > 0:
+            raise ValueError(f"exposure_w = {exposure_w!r} W: need a positive pixel power")
+        self.register_buffer("exposure_w", torch.tensor(float(exposure_w)))
+        self.history = int(history)
+        self.read_noise_dn = float(read_noise_dn)
+        expected = self.num_pixels * max(self.history - 1, 1)
+        if head.in_features != expected:
+            raise ValueError(f"head has {head.in_features} inputs; this camera gives {expected}")
+        self.head = head
+
+    @property
+    def num_pixels(self) -> int:
+        """``R * C``."""
+        return self.grid[0] * self.grid[1]
+
+    @staticmethod
+    def exposure_from(transport: np.ndarray, grid: tuple[int, int]) -> float:
+        """Fixed exposure (W at 255 DN) from training transport ``[N, K, R, C]`` (numpy)."""
+        sample = np.asarray(transport[: min(len(transport), 2048)], np.float32)
+        pix = box_pixels(torch.from_numpy(sample).mean(dim=1), grid).numpy()
+        value = float(np.percentile(pix, BASELINE_EXPOSURE_PERCENTILE))
+        return value if value > 0 else 1.0
+
+    def measure(
+        self,
+        transport: torch.Tensor,
+        *,
+        windows: torch.Tensor | None = None,
+        frame_scales: torch.Tensor | None = None,
+        gain: torch.Tensor | None = None,
+        noise: bool = True,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base."""
+        frames = _frames_of(transport, windows)
+        windows = _windows_for(transport, windows)
+        pix = box_pixels(frames.mean(dim=1), self.grid).reshape(len(frames), self.num_pixels)
+        pix = _per_window(pix, windows, frame_scales)
+        if gain is not None:
+            pix = pix * gain.reshape(-1, 1, 1)
+        full = 2**BASELINE_BITS - 1
+        dn = pix / self.exposure_w * full
+        if noise:
+            kw = {"dtype": dn.dtype, "device": dn.device, "generator": generator}
+            dn = dn + self.read_noise_dn * torch.randn(dn.shape, **kw)
+            dn = dn + (torch.rand(dn.shape, **kw) - 0.5)
+        return torch.clamp(dn, 0.0, float(full)) / full
