@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mincam_render import backend, render_transport
-from mincam_render.generators import FAMILY_NAMES, load_family
+from mincam_render import render_transport
+from mincam_render.render import backend
+from mincam_render.scenes import FAMILY_NAMES, load_family
 
 
 def git_revision() -> str:

@@ -22,7 +22,7 @@ wall time. Prints a table and writes ``benchmarks/results/patches_paper.json``
 Transport images come from Mitsuba (``--transport mitsuba``, ~30 frames/s, 4 spp)
 or, for large training sets, from the linear operator of the patches scene
 (``--transport linear``: ``T = W L`` with ``W`` estimated once by
-:mod:`mincam_render.generators.patches_linear` with the same estimator at
+:mod:`mincam_render.scenes.patches_linear` with the same estimator at
 ``--operator-spp`` samples per texel; ~3000 frames/s). Both give every camera
 the same ``T[frame, detector, 32, 32]`` (float32, W): the mincam reads it through
 its masks, the baselines box-filter its detector mean. ``--workers N`` trains the
@@ -57,10 +57,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mincam_render import train as tr
-from mincam_render.generators import load_family
-from mincam_render.generators import patches_linear as pl
-from mincam_render.models import CountLoss
+from mincam_render.learn import train as tr
+from mincam_render.learn.models import CountLoss
+from mincam_render.scenes import load_family
+from mincam_render.scenes import patches_linear as pl
 
 #: Frames per batch of the linear transport (images + one sparse product).
 _LINEAR_BATCH = 2048

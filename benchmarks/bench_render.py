@@ -14,7 +14,7 @@ write) and reports frames/s and detector-samples/s (median and spread). A plain
 ``mi.render`` of the same scene, updated to the same frames, with a perspective
 sensor of as many pixels as rendered texels and the same spp, sampler
 (stratified) and integrator (the sun-patch path tracer of
-:mod:`mincam_render.sun_patch` for a family with a window, with the sun
+:mod:`mincam_render.render.sun_patch` for a family with a window, with the sun
 sampled apart), is timed alongside: ``overhead = ours / plain - 1``. For differentially rendered
 frames the rays are those of ``X`` (one board-centre detector when the
 difference is shared). Both run in one process on every core. Then
@@ -23,7 +23,7 @@ render`` runs them by default, render a shard each at once:
 ``frames_per_s_workers`` (one worker's scene updates and kernel tracing, which
 run on one core, overlap with another's rendering).
 
-Differentially rendered families (:mod:`mincam_render.differential`) render their
+Differentially rendered families (:mod:`mincam_render.render.differential`) render their
 static backgrounds once per dataset: the plan is made for ``--dataset-frames``
 frames (e.g. 68000, the paper's workspace training set), the backgrounds of
 the timed frames are rendered and timed apart (converged renders and ``C``
@@ -55,22 +55,22 @@ from pathlib import Path
 import drjit as dr
 import mitsuba as mi
 
-from mincam_render import backend
-from mincam_render import mitsuba_scene as ms
-from mincam_render.differential import BackgroundSettings, difference_camera
-from mincam_render.generators.registry import FAMILY_NAMES
-from mincam_render.render_job import (
+from mincam_render.core.seeds import frame_seed
+from mincam_render.data.render_job import (
     RenderRequest,
     _load_family,
     _render_camera,
     background_keys,
-    frame_seed,
     plan_render,
     render_backgrounds,
     render_shard,
 )
-from mincam_render.sun_patch import sun_sampled_apart
-from mincam_render.transport import render_transport
+from mincam_render.render import backend
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.differential import BackgroundSettings, difference_camera
+from mincam_render.render.sun_patch import sun_sampled_apart
+from mincam_render.render.transport import render_transport
+from mincam_render.scenes.registry import FAMILY_NAMES
 
 
 def git_revision() -> str:
@@ -143,7 +143,7 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, wait
 
-    from mincam_render.render_job import _threads_per_worker, _worker_init
+    from mincam_render.data.render_job import _threads_per_worker, _worker_init
 
     shards = range(workers)
     walls = []

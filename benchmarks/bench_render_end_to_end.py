@@ -52,8 +52,8 @@ def machine() -> dict:
 
 
 def time_planning(item: str) -> dict:
-    from mincam_render import plan_cache
-    from mincam_render.render_job import RenderRequest, plan_render
+    from mincam_render.data import plan_cache
+    from mincam_render.data.render_job import RenderRequest, plan_render
 
     family, _, frames = item.partition(":")
     request = RenderRequest(family=family, num_frames=int(frames))
@@ -90,14 +90,14 @@ def run_end_to_end(family: str, frames: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "ds"
         env = dict(os.environ, PYTHONPATH=str(REPO), MINCAM_RENDER_PLAN_CACHE=str(Path(tmp) / "c"))
-        cmd = [sys.executable, "-m", "mincam_render.cli", "render", family]
+        cmd = [sys.executable, "-m", "mincam_render.cli.main", "render", family]
         cmd += ["--frames", str(frames), "--out", str(out), "--no-progress"]
         t0 = time.perf_counter()
         p = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
         wall_s = time.perf_counter() - t0
         if p.returncode != 0:
             raise SystemExit(f"render failed:\n{p.stderr[-3000:]}")
-        from mincam_render import dataset as ds
+        from mincam_render.data import dataset as ds
 
         problems = ds.open_dataset(out).verify()
         if problems:

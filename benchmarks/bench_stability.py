@@ -30,18 +30,18 @@ from mincam_render import (
     DetectorElectronics,
     DetectorLayout,
     FreeformCamera,
-    backend,
     detector_voltage,
     mask_power,
     parallel_rectangles_coupling,
     render_transport,
 )
-from mincam_render import mitsuba_scene as ms
-from mincam_render import train as tr
-from mincam_render.camera import MM
-from mincam_render.generators import load_family
-from mincam_render.generators.base import LabelKind, LabelSpec
-from mincam_render.photometry import lux_to_irradiance
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.photometry import lux_to_irradiance
+from mincam_render.learn import train as tr
+from mincam_render.optics.camera import MM
+from mincam_render.render import backend
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.scenes import load_family
 
 ONE = DetectorLayout(positions_m=((0.0, 0.0),))
 CASES: list[dict] = []
@@ -220,7 +220,7 @@ def precision() -> None:
     )
 
     # (d) float16 storage of moonlight transport: per-frame power-of-two scales
-    from mincam_render.dataset import decode_transport, encode_transport
+    from mincam_render.render.precision import decode_transport, encode_transport
 
     t = (1e-17 * (1 + rng.random((2, 1, 8, 8)))).astype(np.float32)
     naive = t.astype(np.float16).astype(np.float32)
@@ -233,7 +233,7 @@ def precision() -> None:
         err < 1e-3,
         naive_float16_max_rel_error=float(np.max(np.abs(naive / t - 1))),
         scaled_max_rel_error=err,
-        what_the_code_does="stored = T / 2^ceil(log2 max T) per frame (dataset.encode_transport)",
+        what_the_code_does="stored = T / 2^ceil(log2 max T) per frame (render.precision.encode_transport)",
     )
 
 
@@ -382,7 +382,7 @@ def temporal(families: list[str]) -> None:
                 case("family frame rate", {"family": name, "fps": fps}, ok)
             except ImportError as err:
                 case("family frame rate", {"family": name, "fps": fps}, True, skipped=str(err))
-    from mincam_render.generators.traffic import TrafficConfig, traffic_labels
+    from mincam_render.scenes.traffic import TrafficConfig, traffic_labels
 
     cam = TrafficConfig().camera.camera()
     pos, fwd, right = np.asarray(cam.position), cam.frame[2], cam.frame[0]
@@ -394,7 +394,7 @@ def temporal(families: list[str]) -> None:
     fam = load_family("lighting", seed=0, num_frames=2)
     scene = fam.build_scene()
     cam = replace(fam.config.camera, detectors=2, mask_resolution=8).camera()
-    from mincam_render.generators.indoor import IndoorState
+    from mincam_render.scenes.indoor import IndoorState
 
     n = len(fam.labels[0].element_names)
     fam.apply_state(scene, IndoorState(lights_on=(False,) * n))
@@ -411,7 +411,8 @@ def temporal(families: list[str]) -> None:
 
 
 def variance(families: list[str], quick: bool) -> None:
-    from mincam_render.render_job import RenderRequest, frame_seed, plan_render
+    from mincam_render.core.seeds import frame_seed
+    from mincam_render.data.render_job import RenderRequest, plan_render
 
     seeds = 4 if quick else 8
     for name in families:

@@ -27,8 +27,8 @@ import mitsuba as mi
 import numpy as np
 
 import mincam_render as mr
-from mincam_render import backend
-from mincam_render import mitsuba_scene as ms
+from mincam_render.render import backend
+from mincam_render.render import mitsuba_scene as ms
 
 
 def git_revision() -> str:

@@ -1,12 +1,17 @@
 """mincam_render: physically-based rendering for designing minimalist cameras."""
 
-from .backend import Backend, BackendUnavailableError, use_variant
-from .camera import DetectorElectronics, DetectorLayout, DirectionalResponse, FreeformCamera
-from .maskplane import logits_for_transmittance, mask_power, transmittance
-from .mitsuba_scene import SceneError, demo_scene, load_scene
-from .radiometry import parallel_rectangles_coupling
-from .sensor import detector_voltage, leaky_saturation
-from .transport import render_transport
+from mincam_render.optics.camera import (
+    DetectorElectronics,
+    DetectorLayout,
+    DirectionalResponse,
+    FreeformCamera,
+)
+from mincam_render.optics.maskplane import logits_for_transmittance, mask_power, transmittance
+from mincam_render.optics.radiometry import parallel_rectangles_coupling
+from mincam_render.optics.sensor import detector_voltage, leaky_saturation
+from mincam_render.render.backend import Backend, BackendUnavailableError, use_variant
+from mincam_render.render.mitsuba_scene import SceneError, demo_scene, load_scene
+from mincam_render.render.transport import render_transport
 
 __all__ = [
     "Backend",

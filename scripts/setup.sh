@@ -60,6 +60,6 @@ log "installing mincam_render$extras (pinned: mitsuba 3.9.1, drjit 1.5.0, torch 
 .venv/bin/python -m pip install -q --disable-pip-version-check -e ".$extras" \
     || die "pip could not install mincam_render$extras"
 .venv/bin/python -c "import mincam_render" || die "installation failed: 'import mincam_render' does not work in .venv"
-DRJIT_LIBLLVM_PATH="$llvm" .venv/bin/python -m mincam_render.backend \
+DRJIT_LIBLLVM_PATH="$llvm" .venv/bin/python -m mincam_render.render.backend \
     || die "Dr.Jit cannot use $llvm; install libllvm19 or set DRJIT_LIBLLVM_PATH"
 log "ready: .venv/bin/mincam-render --help"

@@ -17,7 +17,7 @@ import argparse
 import logging
 import time
 
-from mincam_render.render_job import RenderRequest, plan_render
+from mincam_render.data.render_job import RenderRequest, plan_render
 
 
 def main() -> None:

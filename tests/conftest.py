@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_render import backend
+from mincam_render.render import backend
 
 
 @pytest.fixture(autouse=True)
 def isolated_plan_cache(tmp_path_factory, monkeypatch):
     """Fidelity plans of one test session go to a temporary cache, not the user's."""
-    from mincam_render.plan_cache import CACHE_ENV
+    from mincam_render.data.plan_cache import CACHE_ENV
 
     monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "plan-cache"))
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mincam_render import DetectorElectronics, DetectorLayout, DirectionalResponse, FreeformCamera
-from mincam_render.camera import MM
+from mincam_render.optics.camera import MM
 
 
 def test_prototype_defaults_match_paper():

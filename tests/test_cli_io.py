@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mincam_render.cli import main
-from mincam_render.exr import read_transport_exr, write_transport_exr
+from mincam_render.cli.main import main
+from mincam_render.data.exr import read_transport_exr, write_transport_exr
 
 
 def test_exr_round_trip_is_exact(tmp_path, rng):
@@ -135,6 +135,6 @@ def test_cli_pipeline_renders_trains_exports_and_reports(variant, tmp_path):
     for name in sidecar["files"]["png"]:
         assert (out / "masks" / "patches" / name).is_file()
     # the dataset it trained on is a complete, checksummed render of the request
-    from mincam_render.dataset import open_dataset
+    from mincam_render.data.dataset import open_dataset
 
     assert open_dataset(out / "dataset").verify() == []

@@ -8,14 +8,15 @@ import json
 import numpy as np
 import pytest
 
-from mincam_render import dataset as ds
-from mincam_render.camera import (
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.data import dataset as ds
+from mincam_render.optics.camera import (
     DetectorElectronics,
     DetectorLayout,
     DirectionalResponse,
     FreeformCamera,
 )
-from mincam_render.generators.base import LabelKind, LabelSpec
+from mincam_render.render import precision
 
 TINY = {"camera": {"detectors": 2, "mask_resolution": 8}}
 
@@ -23,7 +24,7 @@ TINY = {"camera": {"detectors": 2, "mask_resolution": 8}}
 @pytest.fixture(scope="module")
 def tiny_dataset(tmp_path_factory, variant):
     """40 patches frames, 2 detectors, 8x8 masks, 4 spp, float32, per detector, shards of 8."""
-    from mincam_render.render_job import RenderRequest, render_dataset
+    from mincam_render.data.render_job import RenderRequest, render_dataset
 
     out = tmp_path_factory.mktemp("tiny") / "ds"
     request = RenderRequest(
@@ -41,9 +42,9 @@ def tiny_dataset(tmp_path_factory, variant):
 
 
 def test_round_trip_matches_direct_render(tiny_dataset):
-    from mincam_render.generators.registry import load_family
-    from mincam_render.render_job import frame_seed
-    from mincam_render.transport import render_transport
+    from mincam_render.core.seeds import frame_seed
+    from mincam_render.render.transport import render_transport
+    from mincam_render.scenes.registry import load_family
 
     d = ds.open_dataset(tiny_dataset)
     family = load_family("patches", seed=3, num_frames=40, overrides=TINY)
@@ -133,20 +134,20 @@ def test_float16_encoding_error_and_scales(rng):
     t = np.stack([rng.uniform(0, 1e-12, (2, 8, 8)), rng.uniform(0, 1e3, (2, 8, 8))]).astype(
         np.float32
     )
-    stored, scales = ds.encode_transport(t, "float16")
+    stored, scales = precision.encode_transport(t, "float16")
     assert stored.dtype == np.float16 and np.all(np.abs(stored) <= 1)
     assert np.all(np.log2(scales) == np.round(np.log2(scales)))
-    back = ds.decode_transport(stored, scales)
+    back = precision.decode_transport(stored, scales)
     # float16 rounding: relative 2^-11 per element for values near the frame's peak
-    err = ds.measurement_relative_error(back[:, None, 0], t[:, None, 0], (0.01, 0.67))
+    err = precision.measurement_relative_error(back[:, None, 0], t[:, None, 0], (0.01, 0.67))
     assert err["max"] < 2e-3
-    s32, sc32 = ds.encode_transport(t, "float32")
-    np.testing.assert_array_equal(ds.decode_transport(s32, sc32), t)
+    s32, sc32 = precision.encode_transport(t, "float32")
+    np.testing.assert_array_equal(precision.decode_transport(s32, sc32), t)
 
 
 def test_encode_rejects_non_finite():
     with pytest.raises(ValueError, match="NaN"):
-        ds.encode_transport(np.full((1, 1, 2, 2), np.nan, np.float32), "float16")
+        precision.encode_transport(np.full((1, 1, 2, 2), np.nan, np.float32), "float16")
 
 
 def test_camera_and_label_specs_round_trip_through_json():
@@ -212,7 +213,7 @@ def test_not_a_dataset(tmp_path):
 
 
 def test_export_exr_round_trip(tiny_dataset, tmp_path):
-    from mincam_render.exr import read_transport_exr
+    from mincam_render.data.exr import read_transport_exr
 
     d = ds.open_dataset(tiny_dataset)
     paths = d.export_exr(ds.parse_frame_list("3,10-11", d.num_frames), tmp_path)

@@ -7,15 +7,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from mincam_render import dataset as ds
-from mincam_render.differential import (
+from mincam_render.data import dataset as ds
+from mincam_render.render import precision
+from mincam_render.render.differential import (
     BackgroundSettings,
     background_seed,
     render_background,
     render_frame,
 )
-from mincam_render.generators import load_family
-from mincam_render.transport import render_transport
+from mincam_render.render.transport import render_transport
+from mincam_render.scenes import load_family
 
 #: nobody ever comes and the door stays shut: every frame equals its background
 EMPTY_ROOM = {"arrivals_per_min": 0.0, "burn_in_s": 0.0, "door": {"mean_propped_s": 0.0}}
@@ -112,18 +113,18 @@ def test_components_sum_to_the_background(variant):
     for i, key in enumerate(keys):
         fam.set_background_component(scene, key)
         total = total + render_transport(scene, cam, spp=512, seed=10 + i, max_depth=6)
-    from mincam_render.generators.indoor import IndoorState
+    from mincam_render.scenes.indoor import IndoorState
 
     all_on = (True,) * len(fam.rig.lights)
     fam.rig.apply(scene, IndoorState(lights_on=all_on, daylight_time_s=state.daylight_time_s))
     full = [render_transport(scene, cam, spp=512, seed=s, max_depth=6) for s in (1, 2)]
-    err = ds.measurement_relative_error(total[None], full[0][None], lo_hi)["rms"]
-    noise = ds.measurement_relative_error(full[1][None], full[0][None], lo_hi)["rms"]
+    err = precision.measurement_relative_error(total[None], full[0][None], lo_hi)["rms"]
+    noise = precision.measurement_relative_error(full[1][None], full[0][None], lo_hi)["rms"]
     assert err < 3 * noise
     # and each part matters: the daylight alone is far from the whole
     fam.set_background_component(scene, "daylight_s=0")
     day = render_transport(scene, cam, spp=512, seed=3, max_depth=6)
-    assert ds.measurement_relative_error(day[None], full[0][None], lo_hi)["rms"] > 10 * noise
+    assert precision.measurement_relative_error(day[None], full[0][None], lo_hi)["rms"] > 10 * noise
 
 
 def test_components_are_shared_between_backgrounds(variant):
@@ -159,8 +160,8 @@ def test_interpolated_background_tracks_the_drifting_daylight(variant):
         fam.set_background(scene, 0, 60.0, at=at)
         renders.append(render_transport(scene, cam, spp=256, seed=3, max_depth=6)[None])
     start, middle, end = renders
-    interpolated = ds.measurement_relative_error(0.5 * (start + end), middle, lo_hi)["rms"]
-    held = ds.measurement_relative_error(start, middle, lo_hi)["rms"]
+    interpolated = precision.measurement_relative_error(0.5 * (start + end), middle, lo_hi)["rms"]
+    held = precision.measurement_relative_error(start, middle, lo_hi)["rms"]
     assert held > 0.01  # 30 s of the time-lapsed day moves the light by per cents
     assert interpolated < 0.1 * held
 
@@ -168,7 +169,7 @@ def test_interpolated_background_tracks_the_drifting_daylight(variant):
 @pytest.mark.parametrize("shared", [False, True])
 def test_frame_is_background_plus_difference_per_detector_or_shared(variant, shared):
     """T_k = B_k + X - C, with X and C from the board centre for every k when shared."""
-    from mincam_render.differential import difference_camera
+    from mincam_render.render.differential import difference_camera
 
     fam = load_family("workspace", seed=0, num_frames=600)
     index = int(np.flatnonzero(fam.track.active.sum(axis=1) >= 2)[0])
@@ -224,19 +225,23 @@ def test_estimate_is_unbiased_and_less_noisy_than_plain(variant):
     ref = fam.render_transport(scene, cam, spp=big, seed=999, max_depth=depth)
     diffs, plains = np.stack(diffs), np.stack(plains)
     # one estimate's relative noise (the difference of two has sqrt(2) times more)
-    noise_diff = ds.measurement_relative_error(diffs[:3], diffs[3:], lo_hi)["rms"] / np.sqrt(2)
-    noise_plain = ds.measurement_relative_error(plains[:3], plains[3:], lo_hi)["rms"] / np.sqrt(2)
+    noise_diff = precision.measurement_relative_error(diffs[:3], diffs[3:], lo_hi)["rms"] / np.sqrt(
+        2
+    )
+    noise_plain = precision.measurement_relative_error(plains[:3], plains[3:], lo_hi)[
+        "rms"
+    ] / np.sqrt(2)
     assert noise_diff < 0.6 * noise_plain
     # the mean of 6 estimates shares one B; B and the reference each carry the
     # plain noise at 4096 spp: 3 sigma of that combination
-    err = ds.measurement_relative_error(diffs.mean(0)[None], ref[None], lo_hi)["rms"]
+    err = precision.measurement_relative_error(diffs.mean(0)[None], ref[None], lo_hi)["rms"]
     sigma = np.sqrt(noise_diff**2 / 6 + 2 * noise_plain**2 * spp / big)
     assert err < 3 * sigma
 
 
 @pytest.fixture(scope="module")
 def differential_dataset(tmp_path_factory, variant):
-    from mincam_render.render_job import RenderRequest, render_dataset
+    from mincam_render.data.render_job import RenderRequest, render_dataset
 
     out = tmp_path_factory.mktemp("diff") / "ds"
     request = RenderRequest(
@@ -301,7 +306,7 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
 def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_dataset, tmp_path):
     import shutil
 
-    from mincam_render.render_job import render_dataset
+    from mincam_render.data.render_job import render_dataset
 
     request, out = differential_dataset
     copy = tmp_path / "copy"
@@ -321,7 +326,7 @@ def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_
 
 
 def test_differential_is_refused_for_families_without_background(tmp_path, variant):
-    from mincam_render.render_job import RenderRequest, render_dataset
+    from mincam_render.data.render_job import RenderRequest, render_dataset
 
     request = RenderRequest(
         family="patches",
@@ -338,8 +343,8 @@ def test_differential_is_refused_for_families_without_background(tmp_path, varia
 
 
 def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
-    from mincam_render.fidelity import decide_fidelity
-    from mincam_render.render_job import RenderRequest
+    from mincam_render.data.render_job import RenderRequest
+    from mincam_render.render.fidelity import decide_fidelity
 
     overrides = {"fps": 2.0, "camera": {"mask_resolution": 8, "detectors": 2}}
     request = RenderRequest(family="workspace", num_frames=600, overrides=overrides)
@@ -363,7 +368,7 @@ def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
 
 def test_ray_renders_differential_datasets_byte_identically(differential_dataset, tmp_path):
     pytest.importorskip("ray")
-    from mincam_render.render_job import render_dataset
+    from mincam_render.data.render_job import render_dataset
 
     request, out = differential_dataset
     render_dataset(request, tmp_path / "ray", ray_address="local")
@@ -374,7 +379,7 @@ def test_ray_renders_differential_datasets_byte_identically(differential_dataset
 
 def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
     """x^2 + y^2 + biases^2 = target^2, and no other split of the noises costs less."""
-    from mincam_render.fidelity import PILOT_SPP, _split_noise_budget
+    from mincam_render.render.fidelity import PILOT_SPP, _split_noise_budget
 
     target, biases = 0.01, {"depth": 0.004, "interp": 0.003}
     diff, bg = (0.0075, 4.0, None), (0.0975, 0.15, None)

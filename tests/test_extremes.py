@@ -23,12 +23,12 @@ from mincam_render import (
     parallel_rectangles_coupling,
     render_transport,
 )
-from mincam_render import mitsuba_scene as ms
-from mincam_render import train as tr
-from mincam_render.camera import MM
-from mincam_render.generators.base import LabelKind, LabelSpec
-from mincam_render.models import MAX_LOGIT
-from mincam_render.photometry import lux_to_irradiance
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.photometry import lux_to_irradiance
+from mincam_render.learn import train as tr
+from mincam_render.learn.models import MAX_LOGIT
+from mincam_render.optics.camera import MM
+from mincam_render.render import mitsuba_scene as ms
 
 ONE = DetectorLayout(positions_m=((0.0, 0.0),))
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
@@ -236,7 +236,7 @@ def test_learning_rates_at_the_edge_of_divergence_stay_finite(variant, lr, mask_
 @pytest.mark.parametrize("fps", [1.0, 1000.0])
 @pytest.mark.parametrize("name", ["patches", "workspace", "lighting", "traffic"])
 def test_every_family_at_1_and_1000_fps(name, fps):
-    from mincam_render.generators import load_family
+    from mincam_render.scenes import load_family
 
     if name == "traffic":
         pytest.importorskip("libsumo", reason="needs the traffic extra")
@@ -258,7 +258,7 @@ def test_every_family_at_1_and_1000_fps(name, fps):
 
 @pytest.mark.parametrize(("kmh", "mph"), [(0.0, 0.0), (200.0, 124.27)])
 def test_vehicle_at_0_and_200_kmh_labels(kmh, mph):
-    from mincam_render.generators.traffic import TrafficConfig, traffic_labels
+    from mincam_render.scenes.traffic import TrafficConfig, traffic_labels
 
     cam = TrafficConfig().camera.camera()
     pos, fwd, right = np.asarray(cam.position), cam.frame[2], cam.frame[0]
@@ -274,8 +274,8 @@ def test_workspace_full_house_labels_and_transport(variant):
     """max_people people inside the room at once: count reads the maximum, transport finite."""
     from dataclasses import replace
 
-    from mincam_render.generators import load_family
-    from mincam_render.generators.indoor import Appearance, IndoorState, Pose
+    from mincam_render.scenes import load_family
+    from mincam_render.scenes.indoor import Appearance, IndoorState, Pose
 
     fam = load_family("workspace", seed=0, num_frames=2)
     n = fam.config.max_people
@@ -298,8 +298,8 @@ def test_workspace_full_house_labels_and_transport(variant):
 def test_lighting_all_lights_off_at_night_is_dark_not_nan(variant):
     from dataclasses import replace
 
-    from mincam_render.generators import load_family
-    from mincam_render.generators.indoor import IndoorState
+    from mincam_render.scenes import load_family
+    from mincam_render.scenes.indoor import IndoorState
 
     fam = load_family("lighting", seed=0, num_frames=2)
     scene = fam.build_scene()

@@ -7,11 +7,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mincam_render.config import ConfigError
-from mincam_render.generators.base import LabelKind
-from mincam_render.generators.indoor import IndoorState, lamp_surface_points, points_in_view
-from mincam_render.generators.lighting import LightingFamily, panel_points
-from mincam_render.generators.registry import load_family
+from mincam_render.core.config import ConfigError
+from mincam_render.core.labels import LabelKind
+from mincam_render.scenes.indoor import IndoorState, lamp_surface_points, points_in_view
+from mincam_render.scenes.lighting import LightingFamily, panel_points
+from mincam_render.scenes.registry import load_family
 
 pytestmark = pytest.mark.usefixtures("variant")
 
@@ -67,7 +67,7 @@ def test_view_check_sees_a_point_in_front(family):
 
 def test_no_emitter_is_directly_visible(family, scene, camera):
     """Depth 1 renders only emitters seen directly: with every light on it is black."""
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     family.apply_state(scene, IndoorState(lights_on=(True,) * 5))
     t = render_transport(scene, camera, spp=4, seed=0, max_depth=1)
@@ -77,7 +77,7 @@ def test_no_emitter_is_directly_visible(family, scene, camera):
 
 @pytest.mark.parametrize("light", range(5), ids=NAMES)
 def test_switching_a_light_on_brightens_its_side(family, scene, camera, light):
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     family.apply_state(scene, IndoorState(lights_on=_only(None)))
     dark = render_transport(scene, camera, spp=4, seed=0)
@@ -107,7 +107,7 @@ def test_labels_follow_the_switching_process(family, scene):
 
 
 def test_switching_statistics():
-    from mincam_render.generators.indoor import switching_process
+    from mincam_render.scenes.indoor import switching_process
 
     rng = np.random.default_rng(0)
     s = switching_process(rng, 300_000, 30.0, mean_on_s=30.0, mean_off_s=10.0)

@@ -12,7 +12,7 @@ from mincam_render import (
     mask_power,
     transmittance,
 )
-from mincam_render.sensor import ELEMENTARY_CHARGE_C
+from mincam_render.optics.sensor import ELEMENTARY_CHARGE_C
 
 RANGE = (0.01, 0.67)
 
@@ -230,7 +230,7 @@ def test_mask_power_accepts_an_nn_parameter():
 
 def test_torch_mask_plane_gradcheck_float64(rng):
     """The plain-torch product (bmm on a permuted view) against autograd's numerical Jacobian."""
-    from mincam_render.maskplane import power_through
+    from mincam_render.optics.maskplane import power_through
 
     t = torch.tensor(rng.uniform(0, 1, size=(5, 3, 2, 4)), requires_grad=True)
     m = torch.tensor(rng.uniform(0.01, 0.67, size=(3, 2, 4)), requires_grad=True)
@@ -243,7 +243,7 @@ def test_torch_mask_plane_gradcheck_float64(rng):
 
 @pytest.mark.parametrize("backend", ["torch", "drjit"])
 def test_both_mask_plane_backends_match_numpy(rng, backend):
-    from mincam_render.maskplane import MaskPlaneBackend
+    from mincam_render.optics.maskplane import MaskPlaneBackend
 
     t = rng.uniform(0, 1e-9, size=(7, 2, 3, 5))
     logits = rng.normal(0, 3, size=(2, 3, 5))

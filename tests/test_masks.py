@@ -10,8 +10,13 @@ import OpenEXR
 import pytest
 from PIL import Image
 
-from mincam_render.camera import MM, DetectorLayout, FreeformCamera
-from mincam_render.masks import MIN_SHEET_WIDTH_MM, SHEET_MARGIN_MM, export_masks, sheet_layout
+from mincam_render.export.masks import (
+    MIN_SHEET_WIDTH_MM,
+    SHEET_MARGIN_MM,
+    export_masks,
+    sheet_layout,
+)
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
 
 
 @pytest.fixture

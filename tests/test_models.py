@@ -6,10 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from mincam_render.camera import MM, DetectorLayout, FreeformCamera
-from mincam_render.generators.base import LabelKind, LabelSpec
-from mincam_render.maskplane import transmittance
-from mincam_render.models import (
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.learn.models import (
     INIT_TRANSMITTANCE,
     BaselineCamera,
     CountLoss,
@@ -19,6 +17,8 @@ from mincam_render.models import (
     task_loss,
     temporal_features,
 )
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.optics.maskplane import transmittance
 
 SPECS = (
     LabelSpec(name="count", kind=LabelKind.COUNT),
@@ -220,7 +220,7 @@ def test_torch_and_drjit_mask_planes_give_the_same_measurements_and_gradients(
     variant, rng, detectors
 ):
     """The plain-torch training path equals the Dr.Jit op: values and d/d(masks, head)."""
-    from mincam_render.maskplane import MaskPlaneBackend
+    from mincam_render.optics.maskplane import MaskPlaneBackend
 
     cam = _camera()
     model = MincamCamera(cam, Head(3, SPECS), detectors=detectors)

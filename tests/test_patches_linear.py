@@ -4,12 +4,12 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mincam_render import mitsuba_scene as ms
 from mincam_render import render_transport
-from mincam_render.dataset import measurement_relative_error
-from mincam_render.generators import load_family
-from mincam_render.generators.patches import PLANE_RADIANCE_PARAM
-from mincam_render.generators.patches_linear import (
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.precision import measurement_relative_error
+from mincam_render.scenes import load_family
+from mincam_render.scenes.patches import PLANE_RADIANCE_PARAM
+from mincam_render.scenes.patches_linear import (
     PlaneGeometry,
     PlaneTransport,
     build_plane_transport,

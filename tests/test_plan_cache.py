@@ -8,16 +8,16 @@ import logging
 
 import pytest
 
-from mincam_render import dataset as ds
-from mincam_render import plan_cache
-from mincam_render.generators.registry import load_family
-from mincam_render.render_job import (
+from mincam_render.data import dataset as ds
+from mincam_render.data import plan_cache
+from mincam_render.data.render_job import (
     RenderRequest,
     _describe_family,
     package_versions,
     plan_render,
     render_dataset,
 )
+from mincam_render.scenes.registry import load_family
 
 AUTO = RenderRequest(
     family="patches",

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from mincam_render import mitsuba_scene as ms
-from mincam_render.dataset import measurement_relative_error
-from mincam_render.transport import render_transport
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.precision import measurement_relative_error
+from mincam_render.render.transport import render_transport
 
 # a 2 x 1 m skylight 1.5 m above the origin, edges chosen so edge_u x edge_v = +z (out)
 CORNER = (0.5, -1.0, 1.5)
@@ -83,7 +83,7 @@ def test_eval_looks_up_the_map_in_world_directions(variant):
     """Row 0 is the zenith; a direction at a texel centre returns that texel's value."""
     import mitsuba as mi
 
-    from mincam_render.generators.sky import envmap_directions
+    from mincam_render.scenes.sky import envmap_directions
 
     h, w = 8, 16
     rng = np.random.default_rng(2)
@@ -109,7 +109,7 @@ def workspace_renders(variant):
     import drjit as dr
     import mitsuba as mi
 
-    from mincam_render.generators import indoor, load_family
+    from mincam_render.scenes import indoor, load_family
 
     family = load_family("workspace", seed=0, num_frames=60)
     cam = family.camera()
@@ -130,7 +130,7 @@ def workspace_renders(variant):
 
 def test_portal_agrees_with_envmap_and_is_less_noisy(workspace_renders):
     """Same light (within noise and the maps' lookups), several times less variance."""
-    from mincam_render.generators.indoor import SkySampling
+    from mincam_render.scenes.indoor import SkySampling
 
     cam, out = workspace_renders
     lo_hi = cam.transmittance_range

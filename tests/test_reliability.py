@@ -26,14 +26,14 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mincam_render import dataset as ds
-from mincam_render import train as tr
-from mincam_render.camera import MM, DetectorLayout, FreeformCamera
-from mincam_render.cli import main
-from mincam_render.config import ConfigError
-from mincam_render.generators import FAMILY_NAMES, load_family
-from mincam_render.generators.base import LabelKind, LabelSpec
-from mincam_render.render_job import RenderRequest, render_dataset
+from mincam_render.cli.main import main
+from mincam_render.core.config import ConfigError
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.data import dataset as ds
+from mincam_render.data.render_job import RenderRequest, render_dataset
+from mincam_render.learn import train as tr
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.scenes import FAMILY_NAMES, load_family
 
 REPO = Path(__file__).resolve().parents[1]
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
@@ -184,9 +184,9 @@ class _Reached(Exception):
 @pytest.fixture
 def stubbed_heavy_work(monkeypatch):
     """Replace rendering/training with stubs so fuzzing tests argument handling only."""
-    import mincam_render.preview as preview
-    import mincam_render.render_job as rj
-    import mincam_render.transport as transport
+    import mincam_render.analysis.preview as preview
+    import mincam_render.data.render_job as rj
+    import mincam_render.render.transport as transport
 
     def render_dataset_stub(request, out, **kw):
         # what the real one checks first: the family and its overrides
@@ -583,7 +583,7 @@ def test_real_full_disk_render_fails_clearly_and_keeps_what_fits(tiny_tmpfs, var
 def _cli(args, **kw):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     return subprocess.Popen(
-        [sys.executable, "-m", "mincam_render.cli", *args],
+        [sys.executable, "-m", "mincam_render.cli.main", *args],
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -676,7 +676,7 @@ def test_export_masks_killed_at_random_moments_never_looks_complete(finished_run
 
 def test_export_interrupted_mid_way_leaves_no_sidecar(finished_run, tmp_path, monkeypatch):
     """A kill between files (simulated): no masks.json, so the export does not look done."""
-    import mincam_render.masks as masks
+    import mincam_render.export.masks as masks
 
     out = tmp_path / "m"
     CliRunner().invoke(
@@ -706,7 +706,7 @@ def _rss_mb() -> float:
 def test_memory_is_flat_over_a_long_render(variant):
     from dataclasses import replace
 
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     fam = load_family("workspace", seed=0, num_frames=400)
     scene = fam.build_scene()

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mincam_render import dataset as ds
-from mincam_render.render_job import (
+from mincam_render.core.seeds import frame_seed
+from mincam_render.data import dataset as ds
+from mincam_render.data.render_job import (
     FRAME_DELAY_ENV,
     RenderRequest,
-    frame_seed,
     plan_render,
     render_dataset,
 )
@@ -49,7 +49,7 @@ def _cli(args, **kwargs):
     env = dict(os.environ, PYTHONPATH=str(REPO))
     env.update(kwargs.pop("env", {}))
     return subprocess.Popen(
-        [sys.executable, "-m", "mincam_render.cli", *args],
+        [sys.executable, "-m", "mincam_render.cli.main", *args],
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -176,7 +176,7 @@ def test_shard_finished_but_not_in_manifest_is_kept(tmp_path, tiny_request, vari
 def test_mismatched_configuration_is_refused(tmp_path, tiny_request, variant):
     from click.testing import CliRunner
 
-    from mincam_render.cli import main
+    from mincam_render.cli.main import main
 
     out = tmp_path / "ds"
     render_dataset(tiny_request, out, workers=0)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mincam_render.report import Report
+from mincam_render.analysis.report import Report
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_FLAGS = [
@@ -31,7 +31,7 @@ needs_chromium = pytest.mark.skipif(
 
 
 def _page(tmp_path: Path) -> Path:
-    from mincam_render.plots import plt
+    from mincam_render.analysis.plots import plt
 
     page = Report("Test report", banner="SURROGATE test page")
     page.heading("Numbers")
@@ -94,7 +94,7 @@ def test_headless_screenshot_is_not_blank(tmp_path):
 
 
 def test_fidelity_rows_tiny(variant, tmp_path):
-    from mincam_render.fidelity_bench import (
+    from mincam_render.analysis.fidelity_bench import (
         KNOBS,
         FidelityBenchConfig,
         bench_fidelity,

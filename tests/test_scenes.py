@@ -6,11 +6,11 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from mincam_render import mitsuba_scene as ms
 from mincam_render import render_transport
-from mincam_render.config import ConfigError, parse, spec
-from mincam_render.generators import load_family
-from mincam_render.generators.patches import PLANE_RADIANCE_PARAM, PatchesConfig
+from mincam_render.core.config import ConfigError, parse, spec
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.scenes import load_family
+from mincam_render.scenes.patches import PLANE_RADIANCE_PARAM, PatchesConfig
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -156,7 +156,7 @@ def test_set_frame_updates_in_place_and_more_patches_mean_more_light(variant):
 
 def test_per_vertex_albedo_reflects_like_a_uniform_one(variant):
     """A floor of per-vertex albedo 0.6 under a uniform sky reflects 0.6 L, like albedo 0.6."""
-    from mincam_render.camera import FreeformCamera
+    from mincam_render.optics.camera import FreeformCamera
 
     quad_v = np.array([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]], float)
     quad_f = np.array([[0, 1, 2], [0, 2, 3]])

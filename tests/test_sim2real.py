@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from mincam_render.sim2real import (
+from mincam_render.analysis.sim2real import (
     THRESHOLDS,
     Sim2RealError,
     SurrogatePerturbations,

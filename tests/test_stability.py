@@ -17,7 +17,7 @@ from mincam_render import (
     parallel_rectangles_coupling,
     render_transport,
 )
-from mincam_render import mitsuba_scene as ms
+from mincam_render.render import mitsuba_scene as ms
 
 ONE = DetectorLayout(positions_m=((0.0, 0.0),))
 
@@ -226,8 +226,8 @@ _toml_values = st.one_of(
 def test_fuzzed_scene_descriptions_fail_with_one_line_naming_file_and_field(
     tmp_path_factory, key, value
 ):
-    from mincam_render.config import ConfigError
-    from mincam_render.generators import load_family
+    from mincam_render.core.config import ConfigError
+    from mincam_render.scenes import load_family
 
     path = tmp_path_factory.mktemp("fuzz") / "scene.toml"
     path.write_text(f'family = "patches"\n{key} = {value}\n')

@@ -18,7 +18,7 @@ FLOOR_HALF_M = 3.0  # an oblique beam passing beside the ceiling misses it
 
 def _hole_scene(sun_travel):
     """A floor, a ceiling with a square hole centred above the origin, the sun through it."""
-    from mincam_render import mitsuba_scene as ms
+    from mincam_render.render import mitsuba_scene as ms
 
     def ceiling(x0, x1, y0, y1):
         centre = ((x0 + x1) / 2, (y0 + y1) / 2, H_M)
@@ -57,7 +57,7 @@ def _radiance_at(scene, integrator, point, n_rays: int, seed: int) -> tuple[floa
     import drjit as dr
     import mitsuba as mi
 
-    from mincam_render.sun_patch import sun_sampled_apart
+    from mincam_render.render.sun_patch import sun_sampled_apart
 
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(seed, n_rays)
@@ -81,7 +81,7 @@ def test_ceiling_lit_by_the_sun_patch_matches_the_view_factor(sun_travel, patch_
     ``L_P = rho_c / pi * rho_f E |t_z| F``. Nothing else reaches the ceiling's
     underside in three segments.
     """
-    from mincam_render.sun_patch import SunPatchPathIntegrator
+    from mincam_render.render.sun_patch import SunPatchPathIntegrator
 
     t = np.asarray(sun_travel, dtype=np.float64)
     t /= np.linalg.norm(t)
@@ -107,7 +107,7 @@ def test_patch_strategy_is_far_less_noisy_than_path_tracing_here():
     """The same closed-form scene: Mitsuba's path tracer finds the patch only by chance."""
     import mitsuba as mi
 
-    from mincam_render.sun_patch import SunPatchPathIntegrator
+    from mincam_render.render.sun_patch import SunPatchPathIntegrator
 
     scene = _hole_scene((0.0, 0.0, -1.0))
     point = (1.3, 0.4, H_M)
@@ -134,7 +134,7 @@ def test_patch_strategy_is_far_less_noisy_than_path_tracing_here():
 def workspace():
     from dataclasses import replace
 
-    from mincam_render.generators.registry import load_family
+    from mincam_render.scenes.registry import load_family
 
     family = load_family("workspace", seed=0, num_frames=2000)
     camera = replace(family.config.camera, detectors=1, mask_resolution=8).camera()
@@ -142,7 +142,7 @@ def workspace():
 
 
 def _total(scene, camera, sun_window, seeds, spp=2048, max_depth=6):
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     totals = [
         render_transport(
@@ -170,8 +170,8 @@ def test_workspace_background_agrees_with_mitsubas_path_tracer(workspace):
 def test_sun_sampled_apart_restores_the_weight_and_the_renders(workspace):
     import mitsuba as mi
 
-    from mincam_render.sun_patch import find_sun, sun_sampled_apart
-    from mincam_render.transport import render_transport
+    from mincam_render.render.sun_patch import find_sun, sun_sampled_apart
+    from mincam_render.render.transport import render_transport
 
     family, scene, camera = workspace
     family.set_background(scene, 0, 60.0)
@@ -198,7 +198,7 @@ def test_sun_sampled_apart_restores_the_weight_and_the_renders(workspace):
     ],
 )
 def test_bad_arguments_are_refused(kwargs, match):
-    from mincam_render.sun_patch import SunPatchPathIntegrator
+    from mincam_render.render.sun_patch import SunPatchPathIntegrator
 
     args = {
         "corner_m": (0.0, 0.0, 1.0),
@@ -212,8 +212,8 @@ def test_bad_arguments_are_refused(kwargs, match):
 
 
 def test_two_suns_are_refused():
-    from mincam_render import mitsuba_scene as ms
-    from mincam_render.sun_patch import find_sun
+    from mincam_render.render import mitsuba_scene as ms
+    from mincam_render.render.sun_patch import find_sun
 
     scene = ms.load_scene(
         ms.scene_dict(
@@ -232,8 +232,8 @@ def test_plugin_renders_like_the_class_through_mi_render(workspace):
     """The registered plugin (``mi.render``) gives the class's expectation: same mean image."""
     import mitsuba as mi
 
-    from mincam_render import mitsuba_scene as ms
-    from mincam_render.sun_patch import sun_sampled_apart
+    from mincam_render.render import mitsuba_scene as ms
+    from mincam_render.render.sun_patch import sun_sampled_apart
 
     family, scene, camera = workspace
     family.set_background(scene, 0, 60.0)

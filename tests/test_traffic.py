@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from mincam_render import DetectorLayout, FreeformCamera, render_transport
-from mincam_render.config import ConfigError, parse
-from mincam_render.generators import load_family, sky
-from mincam_render.generators.sumo import MissingTrafficExtraError
-from mincam_render.generators.traffic import (
+from mincam_render.core.config import ConfigError, parse
+from mincam_render.core.photometry import irradiance_to_lux
+from mincam_render.scenes import load_family, sky
+from mincam_render.scenes.sumo import MissingTrafficExtraError
+from mincam_render.scenes.traffic import (
     MPH_PER_M_S,
     PARKED_POINT_M,
     SUN_DIRECTION_PARAM,
@@ -27,7 +28,6 @@ from mincam_render.generators.traffic import (
     vehicle_vertices,
     vertex_param,
 )
-from mincam_render.photometry import irradiance_to_lux
 
 CAMERA = TrafficConfig().camera.camera()
 
@@ -127,7 +127,7 @@ def test_default_daylight_is_tens_of_thousands_of_lux():
 def test_shipped_description_documents_the_defaults():
     import tomllib
 
-    from mincam_render.generators import SCENES_DIR
+    from mincam_render.scenes import SCENES_DIR
 
     table = tomllib.loads((SCENES_DIR / "traffic.toml").read_text())
     assert table.pop("family") == "traffic"

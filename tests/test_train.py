@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from mincam_render import train as tr
-from mincam_render.camera import MM, DetectorLayout, FreeformCamera
-from mincam_render.generators.base import LabelKind, LabelSpec
-from mincam_render.models import CountLoss
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.learn import train as tr
+from mincam_render.learn.models import CountLoss
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
 
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
 
@@ -255,7 +255,7 @@ def test_train_run_writes_logs_and_metrics(variant, tmp_path):
 
 
 def test_rendered_patches_and_on_the_fly(variant):
-    from mincam_render.generators import load_family
+    from mincam_render.scenes import load_family
 
     fam = load_family(
         "patches",
@@ -278,7 +278,7 @@ def test_rendered_patches_and_on_the_fly(variant):
 @pytest.fixture(scope="module")
 def float16_dataset(tmp_path_factory, variant):
     """24 patches frames stored as float16 in shards of 16 (train 0-16 in one shard)."""
-    from mincam_render.render_job import RenderRequest, render_dataset
+    from mincam_render.data.render_job import RenderRequest, render_dataset
 
     out = tmp_path_factory.mktemp("f16") / "ds"
     request = RenderRequest(
@@ -297,7 +297,7 @@ def float16_dataset(tmp_path_factory, variant):
 
 @pytest.mark.parametrize("split", ["train", "test"])
 def test_training_data_reads_float16_shards_without_decoding_them(float16_dataset, split):
-    from mincam_render.dataset import open_dataset
+    from mincam_render.data.dataset import open_dataset
 
     ds = open_dataset(float16_dataset)
     data = tr.TrainingData.from_dataset(ds, split)
@@ -325,7 +325,7 @@ def test_training_data_reads_float16_shards_without_decoding_them(float16_datase
 
 
 def test_training_from_float16_dataset_learns(float16_dataset):
-    from mincam_render.dataset import open_dataset
+    from mincam_render.data.dataset import open_dataset
 
     ds = open_dataset(float16_dataset)
     train, val = (tr.TrainingData.from_dataset(ds, s) for s in ("train", "val"))

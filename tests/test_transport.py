@@ -14,9 +14,9 @@ from mincam_render import (
     parallel_rectangles_coupling,
     render_transport,
 )
-from mincam_render import mitsuba_scene as ms
-from mincam_render.exr import write_transport_exr
-from mincam_render.validation import render_through_mask_geometry
+from mincam_render.data.exr import write_transport_exr
+from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.validation import render_through_mask_geometry
 
 RADIANCE = 3.0  # W m^-2 sr^-1
 
@@ -310,7 +310,7 @@ def test_without_parallax_every_detector_sees_from_the_board_centre(variant):
 def test_sample_passes_sum_to_spp_in_full_grids_under_the_cap(spp, cap):
     import math
 
-    from mincam_render.transport import sample_passes
+    from mincam_render.render.transport import sample_passes
 
     passes = sample_passes(spp, cap)
     assert sum(passes) == spp

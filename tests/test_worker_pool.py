@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from mincam_render.worker_pool import StallWatch, WorkerDied, WorkerStalled, run_tasks
+from mincam_render.data.worker_pool import StallWatch, WorkerDied, WorkerStalled, run_tasks
 
 
 def _pid_of_task(task: int, *, on_progress) -> tuple[int, int]:

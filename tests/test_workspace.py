@@ -7,17 +7,17 @@ import math
 import numpy as np
 import pytest
 
-from mincam_render.config import ConfigError
-from mincam_render.generators.base import LabelKind
-from mincam_render.generators.indoor import (
+from mincam_render.core.config import ConfigError
+from mincam_render.core.labels import LabelKind
+from mincam_render.scenes.indoor import (
     Appearance,
     IndoorState,
     Pose,
     inside_room,
     zone_overlaps,
 )
-from mincam_render.generators.registry import load_family
-from mincam_render.generators.workspace import WorkspaceFamily
+from mincam_render.scenes.registry import load_family
+from mincam_render.scenes.workspace import WorkspaceFamily
 
 pytestmark = pytest.mark.usefixtures("variant")
 
@@ -144,7 +144,7 @@ def test_continuity_between_frames(family):
 
 
 def test_deterministic_for_a_seed(family, scene):
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     other = _family()
     np.testing.assert_array_equal(family.track.pose, other.track.pose)
@@ -163,7 +163,7 @@ def test_deterministic_for_a_seed(family, scene):
 
 
 def test_ceiling_light_brightens_transport(family, scene):
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     cam = _small_camera(family)
     dark = IndoorState(lights_on=(False, False), daylight_time_s=MIDNIGHT_S)
@@ -179,7 +179,7 @@ def test_desk_illuminance_is_indoor_level(family, scene):
     """Both banks on at night: a desk top gets 300-600 lux (office lighting)."""
     import mitsuba as mi
 
-    from mincam_render.photometry import irradiance_to_lux
+    from mincam_render.core.photometry import irradiance_to_lux
 
     family.apply_state(scene, IndoorState(lights_on=(True, True), daylight_time_s=MIDNIGHT_S))
     meter = mi.load_dict(
@@ -233,7 +233,7 @@ def test_applying_only_what_changed_renders_as_a_fresh_scene(family):
     unchanged) renders bit for bit like a fresh scene set to the last frame."""
     import dataclasses
 
-    from mincam_render.transport import render_transport
+    from mincam_render.render.transport import render_transport
 
     cam = dataclasses.replace(family.camera(), mask_resolution=(4, 4))
     busy = [i for i in range(NUM_FRAMES) if len(family.state(i).people) >= 2]
@@ -253,7 +253,7 @@ def test_applying_only_what_changed_renders_as_a_fresh_scene(family):
 def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
     import mitsuba as mi
 
-    from mincam_render.generators.indoor import PEOPLE_ALBEDO_PARAM, PEOPLE_VERTICES_PARAM
+    from mincam_render.scenes.indoor import PEOPLE_ALBEDO_PARAM, PEOPLE_VERTICES_PARAM
 
     scene = family.build_scene()
     state = IndoorState(people=((PERSON, Pose(2.0, 2.0)),), lights_on=family.state(0).lights_on)

@@ -244,7 +244,8 @@ def write_shard(
     Args:
         root: dataset directory.
         index: shard number.
-        stored: encoded ``T[frame, detector, row, col]`` (see :func:`~mincam_render.render.precision.encode_transport`).
+        stored: encoded ``T[frame, detector, row, col]`` (see
+            :func:`~mincam_render.render.precision.encode_transport`).
         metadata: JSON-ready shard metadata (frames, labels, scales).
 
     Returns:

@@ -1,11 +1,12 @@
 """Fidelity plans kept on disk, so a description is planned once, not once per render.
 
-A plan (the settings and measured decisions of :func:`mincam_render.render.fidelity.decide_fidelity`)
-depends on the scene description, the camera, the fidelity targets, the number of
-frames (backgrounds are amortized over them) and the renderer, not on the episode:
-every plan is measured on the *planning episode* (the description's sequence at
-seed :data:`PLAN_SEED`), so all episodes of a study (train, validation and test
-seeds) share one plan, and a cached plan is exactly the plan that would be measured.
+A plan (the settings and measured decisions of
+:func:`mincam_render.render.fidelity.decide_fidelity`) depends on the scene
+description, the camera, the fidelity targets, the number of frames (backgrounds
+are amortized over them) and the renderer, not on the episode: every plan is
+measured on the *planning episode* (the description's sequence at seed
+:data:`PLAN_SEED`), so all episodes of a study (train, validation and test seeds)
+share one plan, and a cached plan is exactly the plan that would be measured.
 
 Plans are looked up by the sha256 of :func:`plan_fields`, first among the plans
 shipped with the repository (``scenes/plans/``, written by ``mincam-render plan

@@ -567,7 +567,6 @@ def _background_noise(family, scene, camera, probes, interval, depth, lo_hi, req
     A whole background is piloted: its components, rendered apart and summed,
     are no noisier (their weights' squares sum to at most 1 per light).
     """
-
     renders = {0: [], 1: []}
     for i in probes:
         family.set_background(scene, i, interval)
@@ -590,7 +589,6 @@ def _interpolation_error(family, scene, camera, probes, interval, depth, lo_hi):
     one seed (common random numbers, so the figure is the interpolation's, not
     noise), at ``INTERPOLATION_SPP``.
     """
-
     spp = INTERPOLATION_SPP
     ends, middles = [], []
     for i in probes:

@@ -2,7 +2,7 @@
 
 Everything here is in SI units: metres, and radiance in W m^-2 sr^-1 in the
 detector's band (monochrome variants). Dicts are built by small functions so
-generators can compose them; :func:`load_scene` accepts what users bring.
+scene families can compose them; :func:`load_scene` accepts what users bring.
 """
 
 from __future__ import annotations
@@ -336,7 +336,7 @@ def portal_sky(radiance_w_m2_sr, corner_m, edge_u_m, edge_v_m) -> dict[str, Any]
 
 
 def sun_patch_integrator(corner_m, edge_u_m, edge_v_m, *, max_depth: int = -1) -> dict[str, Any]:
-    """The :mod:`mincam_render.render.sun_patch` path tracer as an integrator dict (for ``mi.render``).
+    """The :mod:`~mincam_render.render.sun_patch` path tracer as an integrator dict (``mi.render``).
 
     The window is the rectangle ``corner_m + a edge_u_m + b edge_v_m``, ``a, b``
     in [0, 1] (m, world), ``edge_u_m x edge_v_m`` pointing out of the room;
@@ -406,7 +406,7 @@ def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
 
     Mitsuba's bitmap rows start at the rectangle's local -y (bottom) edge, so the
     image is flipped vertically; columns already run left to right for a viewer
-    the rectangle faces (checked by ``tests/test_generators.py``).
+    the rectangle faces (checked by ``tests/test_scenes.py``).
     """
     import numpy as np
 

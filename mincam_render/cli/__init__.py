@@ -1,0 +1,1 @@
+"""Layer 8: the ``mincam-render`` command line."""

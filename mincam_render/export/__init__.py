@@ -1,0 +1,1 @@
+"""Layer 5: masks for printing (PNG, SVG, PDF, EXR) from trained logits."""

@@ -1,0 +1,63 @@
+"""The package's shape: layers import only downward, no import cycles, lint-clean code."""
+
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import grimp
+import networkx as nx
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _tool(name: str) -> str:
+    path = Path(sys.executable).parent / name
+    if not path.exists():
+        found = shutil.which(name)
+        if found is None:
+            pytest.fail(f"{name} is not installed: run bash scripts/setup.sh --dev")
+        return found
+    return str(path)
+
+
+def test_layer_contracts_of_pyproject_hold():
+    run = subprocess.run(
+        [_tool("lint-imports")], cwd=REPO, capture_output=True, text=True, check=False
+    )
+    assert run.returncode == 0, run.stdout[-3000:]
+    assert "0 broken" in run.stdout
+
+
+def test_no_module_imports_itself_through_others():
+    graph = grimp.build_graph("mincam_render")
+    edges = nx.DiGraph()
+    for module in graph.modules:
+        for imported in graph.find_modules_directly_imported_by(module):
+            # a package's __init__ re-exporting its modules is not a cycle of concepts
+            if not imported.startswith(module + "."):
+                edges.add_edge(module, imported)
+    cycles = list(nx.simple_cycles(edges))
+    assert cycles == [], f"import cycles: {cycles[:5]}"
+
+
+def test_layers_are_the_subpackages_of_the_package():
+    layers = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"][
+        "contracts"
+    ][0]["layers"]
+    packages = {p.parent.name for p in (REPO / "mincam_render").glob("*/__init__.py")}
+    assert set(layers) == packages, "every subpackage belongs to exactly one layer"
+    assert not [p.name for p in (REPO / "mincam_render").glob("*.py") if p.name != "__init__.py"]
+
+
+def test_ruff_finds_nothing():
+    run = subprocess.run(
+        [_tool("ruff"), "check", "mincam_render", "tests", "benchmarks", "scripts"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert run.returncode == 0, run.stdout[-3000:]
