@@ -31,7 +31,7 @@ sequence, at fixed seeds) and decides:
   backgrounds; the choice is checked against a plain reference whose predicted
   noise is ``REFERENCE_NOISE_SHARE`` of the target (subtracted in quadrature);
 - **storage float16** when the relative measurement error it adds (per-frame
-  power-of-two scaling, see :mod:`mincam_render.data.dataset`) stays below
+  power-of-two scaling, see :mod:`mincam_render.render.precision`) stays below
   ``dtype_error_bound`` for random printable masks, else float32;
 - **mask resolution**: kept at the camera's. A transport image at a coarser
   resolution gives *exact* measurements for masks of that resolution (its
