@@ -29,7 +29,7 @@ Usage (render the two datasets once, then run from a clean tree):
     mincam-render render traffic --frames 600 --fidelity full --spp 1 \
         --detectors 8 --mask-res 32 --dtype float16 --out /tmp/traffic16
     flock /tmp/mincam_bench.lock python benchmarks/bench_train_throughput.py \
-        --dataset /tmp/ws16 --temporal-dataset /tmp/traffic16 [--steps 40] [--repeats 5]
+        --dataset /tmp/ws16 --temporal-dataset /tmp/traffic16 [--steps 200] [--repeats 5]
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ def main() -> None:
     ap.add_argument("--dataset", type=Path, required=True, help="workspace, 8 px, 32x32")
     ap.add_argument("--temporal-dataset", type=Path, required=True, help="traffic, 8 px")
     ap.add_argument("--frames", type=int, default=512, help="random frames in memory")
-    ap.add_argument("--steps", type=int, default=40)
+    ap.add_argument("--steps", type=int, default=200, help="steps per timed repeat")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results")

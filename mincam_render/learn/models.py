@@ -330,20 +330,20 @@ def _per_window(
     if frame_scales is not None:
         frames = frames * frame_scales.reshape(-1, *(1,) * (frames.ndim - 1))
     if windows is None:
-        return frames[:, None]
+        return frames.unsqueeze(1)
     b, h = windows.shape
     return frames.index_select(0, windows.reshape(-1)).reshape(b, h, *frames.shape[1:])
 
 
 def _frames_of(transport: torch.Tensor, windows: torch.Tensor | None) -> torch.Tensor:
     """The frames ``T[frame, detector, row, col]`` to measure (5-D batches flattened)."""
-    if windows is not None:
-        if transport.ndim != 4:
-            raise ValueError(
-                f"with windows, transport has shape {tuple(transport.shape)}: expected "
-                "(frame, detector, row, col)"
-            )
+    if transport.ndim == 4:  # frames already (the hot path: no view, no reshape)
         return transport
+    if windows is not None:
+        raise ValueError(
+            f"with windows, transport has shape {tuple(transport.shape)}: expected "
+            "(frame, detector, row, col)"
+        )
     t = _as_5d(transport)
     return t.reshape(-1, *t.shape[2:])
 
@@ -415,10 +415,11 @@ class MincamCamera(CameraModel):
         """``M[pixel, row, col]`` in the printable range (torch, differentiable)."""
         return transmittance(self.logits, self.camera.transmittance_range)
 
-    @torch.no_grad()
     def project_logits_(self) -> None:
         """Clamp the logits in place to ``[-MAX_LOGIT, MAX_LOGIT]`` (NaN-free masks stay so)."""
-        self.logits.clamp_(-MAX_LOGIT, MAX_LOGIT)
+        # in place on a detached view: no grad-mode switch (a no_grad block costs
+        # about as much as the clamp itself at every step)
+        self.logits.detach().clamp_(-MAX_LOGIT, MAX_LOGIT)
 
     def power(self, frames: torch.Tensor) -> torch.Tensor:
         """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks."""
