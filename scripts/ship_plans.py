@@ -9,6 +9,8 @@ families). Re-run this after a change of ``scenes/*.toml``, of the planner
 Usage:
     .venv/bin/python scripts/ship_plans.py workspace:10000 lighting:3000
     (FAMILY:FRAMES, at the command line's default fidelity targets)
+    .venv/bin/python scripts/ship_plans.py --main-job
+    (the episodes of ``mincam-render pipeline`` at its defaults)
 """
 
 from __future__ import annotations
@@ -23,13 +25,24 @@ from mincam_render.data.render_job import RenderRequest, plan_render
 def main() -> None:
     """Plan each FAMILY:FRAMES afresh and write it into scenes/plans/."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("plans", nargs="+", metavar="FAMILY:FRAMES")
+    parser.add_argument("plans", nargs="*", metavar="FAMILY:FRAMES")
+    parser.add_argument("--main-job", action="store_true", help="the pipeline's default episodes")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    requests = {}
     for item in args.plans:
         family, _, frames = item.partition(":")
+        requests[item] = RenderRequest(family=family, num_frames=int(frames))
+    if args.main_job:
+        from mincam_render.analysis.comparison import ComparisonConfig, episode_requests
+
+        for name, request in episode_requests(ComparisonConfig()).items():
+            key = f"main job {request.family}:{request.num_frames}"
+            if name.endswith("-0"):  # one plan per episode length
+                requests.setdefault(key, request)
+    for item, request in requests.items():
         t0 = time.perf_counter()
-        plan_render(RenderRequest(family=family, num_frames=int(frames)), ship=True)
+        plan_render(request, ship=True)
         print(f"{item}: planned in {time.perf_counter() - t0:.0f} s")
 
 

@@ -99,42 +99,46 @@ def test_cli_preview_unknown_family(variant, tmp_path):
     assert not (tmp_path / "p").exists()
 
 
-def test_cli_pipeline_renders_trains_exports_and_reports(variant, tmp_path):
+def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(variant, tmp_path):
+    from mincam_render.data.dataset import open_dataset
+
     out = tmp_path / "main"
     args = [
-        "pipeline",
-        "--family",
-        "patches",
-        "--frames",
-        "80",
-        "--steps",
-        "30",
-        "--workers",
-        "0",
-        "--spp",
-        "2",
-        "--pixels",
-        "2",
-        "--baseline-grid",
-        "2x2",
-        "--out",
-        str(out),
-    ]
+        "pipeline", "--family", "patches", "--train-frames", "60", "--val-frames", "30",
+        "--test-frames", "30", "--test-episodes", "2", "--seeds", "2", "--steps", "30",
+        "--workers", "0", "--spp", "2", "--pixels", "2", "--baseline-grid", "2x2",
+        "--out", str(out),
+    ]  # fmt: skip
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
+    assert "verdict:" in res.output and "trivial" in res.output
     metrics = json.loads((out / "metrics.json").read_text())
-    assert set(metrics["runs"]) == {"mincam", "baseline"}
-    assert metrics["runs"]["mincam"]["model"]["pixels"] == 2
-    assert metrics["runs"]["baseline"]["model"]["grid"] == [2, 2]
-    assert metrics["train_samples"] + metrics["val_samples"] + metrics["test_samples"] == 80
-    for run in metrics["runs"].values():
-        assert np.isfinite(run["test"]["error"])
+    # independent episodes: one dataset each, each its own scene seed, all complete
+    eps = metrics["episodes"]
+    assert sorted(eps) == ["test-0", "test-1", "train-0", "val-0"]
+    assert len({e["dataset"] for e in eps.values()}) == 4
+    seeds = {open_dataset(out / "episodes" / k).manifest["request"]["seed"] for k in eps}
+    assert len(seeds) == 4
+    for k in eps:
+        assert open_dataset(out / "episodes" / k).verify() == []
+    designs = metrics["designs"]
+    assert designs["mincam"]["model"]["pixels"] == 2
+    assert designs["baseline"]["model"]["grid"] == [2, 2]
+    for d in designs.values():
+        lo, hi = d["error"]["ci95"]
+        assert lo <= d["error"]["mean"] <= hi and len(d["error_per_seed"]) == 2
+        assert np.mean(d["error_per_seed"]) == pytest.approx(d["error"]["mean"])
+        assert len(d["convergence"]) == 2 and isinstance(d["converged"], bool)
+    assert metrics["trivial"]["error"]["mean"] > 0
+    assert metrics["verdict"] in res.output
     assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     sidecar = json.loads((out / "masks" / "patches" / "masks.json").read_text())
     assert sidecar["masks"] == 2 and len(sidecar["files"]["png"]) == 2
-    for name in sidecar["files"]["png"]:
-        assert (out / "masks" / "patches" / name).is_file()
-    # the dataset it trained on is a complete, checksummed render of the request
-    from mincam_render.data.dataset import open_dataset
-
-    assert open_dataset(out / "dataset").verify() == []
+    assert sidecar["provenance"]["test_error_over_seeds"] == designs["mincam"]["error"]
+    # a second run finds every episode and run on disk and reports the same figures
+    again = CliRunner().invoke(main, args)
+    assert again.exit_code == 0, again.output
+    redone = json.loads((out / "metrics.json").read_text())["designs"]
+    for kind, d in designs.items():
+        for key in ("error", "error_per_seed", "convergence", "steps"):
+            assert redone[kind][key] == d[key]

@@ -15,10 +15,8 @@ from mincam_render.analysis.sim2real import (
     SurrogatePerturbations,
     analyze_sim2real,
     fit_gain_offset,
-    ks_statistic,
     load_recording,
     make_surrogate,
-    wasserstein_1,
     write_sim2real_report,
 )
 
@@ -129,15 +127,12 @@ def test_json_schema(electronics_only, tmp_path):
     assert np.asarray(data["series"]["real_v"]).shape == (n, len(data["pixels"]))
 
 
-def test_statistics_closed_forms(rng):
+def test_gain_offset_fit_closed_form(rng):
     x = rng.normal(size=500)
     fit = fit_gain_offset(x, 2.5 * x - 0.3)
     assert fit["gain"] == pytest.approx(2.5, rel=1e-9)
     assert fit["offset_v"] == pytest.approx(-0.3, abs=1e-9)
     assert fit["correlation"] == pytest.approx(1.0, rel=1e-9)
-    assert ks_statistic(x, x) == 0.0
-    assert ks_statistic(x, x + 100.0) == 1.0
-    assert wasserstein_1(x, x + 0.25) == pytest.approx(0.25, rel=1e-9)
 
 
 def _copy_with_meta(src, dst, **changes):

@@ -62,3 +62,45 @@ def plot_transport_grid(
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _design_name(model: dict) -> str:
+    grid = model.get("grid")
+    return f"{grid[0]}x{grid[1]} ({model['pixels']} px)" if grid else f"{model['pixels']} px"
+
+
+def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
+    """Save a PNG of test error against pixel count (log x) with 95 % intervals.
+
+    ``result`` is :func:`mincam_render.analysis.comparison.run_comparison`'s
+    output: one point per design (mean over seeds, bootstrap interval as error
+    bar, each seed as a faint dot) and the trivial predictor as a band.
+    """
+    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    lo, hi = result["trivial"]["error"]["ci95"]
+    ax.axhspan(lo, hi, color="0.85", label="trivial predictor (95 % CI)")
+    ax.axhline(result["trivial"]["error"]["mean"], color="0.5", lw=1, ls="--")
+    for (kind, d), colour in zip(result["designs"].items(), ("C0", "C1"), strict=False):
+        px = d["model"]["pixels"]
+        e = d["error"]
+        yerr = [[e["mean"] - e["ci95"][0]], [e["ci95"][1] - e["mean"]]]
+        ax.errorbar(
+            [px],
+            [e["mean"]],
+            yerr=yerr,
+            fmt="o",
+            color=colour,
+            capsize=4,
+            label=f"{kind} {_design_name(d['model'])}: {e['mean']:.3f}",
+        )
+        ax.plot([px] * len(d["error_per_seed"]), d["error_per_seed"], ".", color=colour, alpha=0.4)
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("pixels")
+    ax.set_ylabel(f"test {result['error_name']}")
+    ax.set_title(f"{result['task']}: {result['verdict']}", fontsize=8)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out

@@ -971,6 +971,16 @@ def export_exr_cmd(dataset, frame_list, out):
     click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
 
 
+def _frames_option(name: str, default: int, what: str):
+    return click.option(
+        f"--{name}",
+        type=click.IntRange(30),
+        default=default,
+        show_default=True,
+        help=f"Frames of {what} (at --fps).",
+    )
+
+
 @main.command("pipeline")
 @click.option(
     "--family",
@@ -983,16 +993,28 @@ def export_exr_cmd(dataset, frame_list, out):
     type=click.Path(file_okay=False, path_type=Path),
     default=Path("runs/main"),
     show_default=True,
-    help="Output directory (dataset, runs, figure, metrics, masks).",
+    help="Output directory (episodes, runs, figure, metrics, masks).",
+)
+@_frames_option("train-frames", 1200, "the training episode")
+@_frames_option("val-frames", 400, "the validation episode")
+@_frames_option("test-frames", 400, "each test episode")
+@click.option(
+    "--test-episodes",
+    type=click.IntRange(1, 100),
+    default=3,
+    show_default=True,
+    help="Independent test episodes (other scene seeds).",
 )
 @click.option(
-    "--frames",
-    type=click.IntRange(30),
-    default=900,
+    "--seeds",
+    type=click.IntRange(1, 100),
+    default=3,
     show_default=True,
-    help="Frames to render (at the family's frame rate; contiguous 70/15/15 splits).",
+    help="Training seeds per camera design.",
 )
-@click.option("--seed", type=click.IntRange(0), default=0, show_default=True, help="Random seed.")
+@click.option(
+    "--seed", type=click.IntRange(0), default=0, show_default=True, help="Root random seed."
+)
 @click.option(
     "--pixels",
     type=click.IntRange(1, 64),
@@ -1010,9 +1032,9 @@ def export_exr_cmd(dataset, frame_list, out):
 @click.option(
     "--steps",
     type=click.IntRange(1),
-    default=1500,
+    default=3000,
     show_default=True,
-    help="Training steps at most per camera (early stopping may end sooner).",
+    help="Training steps at most per run (early stopping on validation may end sooner).",
 )
 @click.option(
     "--workers",
@@ -1024,97 +1046,104 @@ def export_exr_cmd(dataset, frame_list, out):
 @click.option(
     "--spp",
     type=click.IntRange(1, 1 << 20),
-    default=16,
-    show_default=True,
-    help="Samples per texel (ignored with --auto-fidelity).",
+    default=None,
+    help="Render at a fixed quick fidelity (SPP samples per texel, every detector, "
+    "the scene's path depth) instead of the measured (auto) fidelity.",
 )
 @click.option(
     "--fps",
     type=click.FloatRange(0.1, 1000.0),
     default=2.0,
     show_default=True,
-    help="Frame rate of the rendered sequence (overrides the family's): at 2 fps, 900 "
-    "frames cover 7.5 minutes of activity.",
-)
-@click.option(
-    "--auto-fidelity",
-    is_flag=True,
-    help="Choose spp, path depth and shared rendering from measured errors against a "
-    "reference before rendering (slower; the manifest records the measurements).",
+    help="Frame rate of the episodes (overrides the family's): at 2 fps, 1,200 frames "
+    "cover 10 minutes of activity.",
 )
 def pipeline_cmd(
-    family, out, frames, seed, pixels, baseline_grid, steps, workers, spp, fps, auto_fidelity
+    family,
+    out,
+    train_frames,
+    val_frames,
+    test_frames,
+    test_episodes,
+    seeds,
+    seed,
+    pixels,
+    baseline_grid,
+    steps,
+    workers,
+    spp,
+    fps,
 ):
-    """The main job: render a dataset, train a minimalist camera and a baseline, export masks.
+    """The main job: a minimalist camera against a conventional one, with a verdict that holds.
 
-    Renders FRAMES frames of the family (resumable) into OUT/dataset, by
-    default at a fixed, quick fidelity (SPP samples per texel, every detector
-    rendered, the scene's path depth; the manifest records it), or with
-    --auto-fidelity at settings chosen from measured errors. Then trains a
-    PIXELS-pixel minimalist camera and a baseline
-    camera on the same data (same training budget), evaluates both on the
-    test split with the paper's post-processing, exports the printable masks
-    into OUT/masks/<family>/ and writes OUT/comparison.png and
+    Renders independent episodes of the family (other scene seeds) into
+    OUT/episodes: one to train on, one to stop early on, TEST_EPISODES to test
+    on, at the measured (auto) fidelity unless --spp is given. Trains a
+    PIXELS-pixel minimalist camera and a baseline camera with SEEDS training
+    seeds each (same recipe and budget), tests every run on every test
+    episode with the paper's post-processing, and prints each design's error
+    as mean over seeds with a 95 % bootstrap interval (over seeds and test
+    episodes), the trivial predictor's, whether every run converged, and a
+    verdict only where intervals separate. Keeps the best minimalist run's
+    printable masks in OUT/masks/<family>/, writes OUT/comparison.png and
     OUT/metrics.json. Killed runs resume where they stopped.
 
     \b
     Example:
       mincam-render pipeline --out runs/main
-      mincam-render pipeline --family patches --frames 3000 --pixels 4 --baseline-grid 2x2
+      mincam-render pipeline --family patches --pixels 4 --baseline-grid 2x2
     """
+    from mincam_render.analysis.comparison import ComparisonConfig, run_comparison
     from mincam_render.core.config import ConfigError
-    from mincam_render.data.dataset import open_dataset
-    from mincam_render.data.render_job import RenderError, RenderRequest, render_dataset
-    from mincam_render.learn.train import TrainConfig, TrainingData, run_pipeline
+    from mincam_render.data.render_job import RenderError
+    from mincam_render.learn.train import TrainConfig
     from mincam_render.render.mitsuba_scene import SceneError
 
-    rows, cols = baseline_grid
+    quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
+    t0 = time.perf_counter()
     try:
-        fixed = (
-            {}
-            if auto_fidelity
-            else {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
-        )
-        request = RenderRequest(
-            family=family, num_frames=frames, seed=seed, overrides={"fps": fps}, **fixed
-        )
-        config = TrainConfig(max_steps=steps, seed=seed)
-        out.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        click.echo(f"[1/3] rendering {frames} frames of {family} into {out / 'dataset'}")
-        render_dataset(request, out / "dataset", workers=workers, progress=True)
-        render_s = time.perf_counter() - t0
-        ds = open_dataset(out / "dataset")
-        splits = [TrainingData.from_dataset(ds, name) for name in ("train", "val", "test")]
-        click.echo(f"[2/3] training a {pixels}-pixel camera and a {rows}x{cols} baseline")
-        name = ds.family if isinstance(ds.family, str) else family
-        task = Path(name).stem
-        result = run_pipeline(
-            *splits,
-            out,
+        cfg = ComparisonConfig(
+            family=family,
+            seed=seed,
+            fps=fps,
+            train_frames=train_frames,
+            val_frames=val_frames,
+            test_frames=test_frames,
+            test_episodes=test_episodes,
+            seeds=seeds,
             pixels=pixels,
-            baseline_grid=(rows, cols),
-            config=config,
-            masks_dir=out / "masks",
-            task=task,
-        )
-    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
-        raise click.ClickException(str(err)) from None
-    click.echo("[3/3] results")
-    for kind, run in result["runs"].items():
-        t = run["test"]
-        others = ", ".join(
-            f"{k} acc {v['accuracy']:.3f}" if "accuracy" in v else f"{k} RMSE {v['rmse']:.3f}"
-            for k, v in t["labels"].items()
+            baseline_grid=baseline_grid,
+            train=TrainConfig(max_steps=steps),
+            fidelity=quick if spp is not None else {},
         )
         click.echo(
-            f"  {kind:8s} {run['model']['pixels']:>4} px: {others} "
-            f"(trained {run['train_wall_time_s']:.0f} s)"
+            f"[1/2] episodes of {family}: train {train_frames}, val {val_frames}, "
+            f"test {test_episodes} x {test_frames} frames"
         )
+        result = run_comparison(cfg, out, workers=workers, masks_dir=out / "masks")
+    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(f"[2/2] test {result['error_name']}, mean over {seeds} seeds [95 % CI]")
+    _echo_comparison(result)
     click.echo(
-        f"  render {render_s:.0f} s; figure {result['figure']}; masks in {out / 'masks' / task}; "
-        f"metrics {out / 'metrics.json'}"
+        f"  {time.perf_counter() - t0:.0f} s; figure {result['figure']}; masks in "
+        f"{out / 'masks' / result['task']}; metrics {out / 'metrics.json'}"
     )
+
+
+def _echo_comparison(result: dict) -> None:
+    for kind, d in result["designs"].items():
+        e = d["error"]
+        state = "converged" if d["converged"] else "budget-limited"
+        click.echo(
+            f"  {kind:8s} {d['model']['pixels']:>4} px: {e['mean']:.3f} "
+            f"[{e['ci95'][0]:.3f}, {e['ci95'][1]:.3f}]  ({state}; "
+            f"{sum(d['train_wall_time_s']):.0f} s training)"
+        )
+    t = result["trivial"]["error"]
+    click.echo(f"  trivial           {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
+    click.echo(f"  verdict: {result['verdict']}")
+    click.echo(f"  against the trivial predictor: {'; '.join(result['versus_trivial'].values())}")
 
 
 @main.group("bench")

@@ -1,6 +1,15 @@
-"""Random streams of a render: the seed of every frame from the dataset's seed."""
+"""Random streams: the seed of every frame from the dataset's seed, and named streams.
+
+:func:`stream_seed` derives independent seeds for a purpose (``"episode/test"``,
+``"train"``) and an index from one root seed with ``numpy.random.SeedSequence``
+spawn keys, so no two purposes share a stream and no prime offsets are needed.
+"""
 
 from __future__ import annotations
+
+import zlib
+
+import numpy as np
 
 
 def frame_seed(dataset_seed: int, index: int) -> int:
@@ -14,3 +23,17 @@ def frame_seed(dataset_seed: int, index: int) -> int:
         return z ^ (z >> 31)
 
     return mix(mix(dataset_seed) ^ index) & (2**63 - 1)
+
+
+def stream_seed(root_seed: int, purpose: str, index: int = 0) -> int:
+    """Seed in [0, 2^63) of stream ``(purpose, index)`` under ``root_seed``.
+
+    ``SeedSequence(root_seed, spawn_key=(crc32(purpose), index))``: streams of
+    different purposes or indices are independent; the same arguments always
+    give the same seed.
+    """
+    if root_seed < 0 or index < 0:
+        raise ValueError(f"root_seed = {root_seed}, index = {index}: allowed integers >= 0")
+    key = (zlib.crc32(purpose.encode()), int(index))
+    words = np.random.SeedSequence(int(root_seed), spawn_key=key).generate_state(2, np.uint64)
+    return int(words[0]) & (2**63 - 1)

@@ -1305,88 +1305,6 @@ def write_sweep(
     return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}
 
 
-def run_pipeline(
-    train: TrainingData,
-    val: TrainingData,
-    test: TrainingData,
-    out_dir: str | os.PathLike,
-    *,
-    pixels: int = 8,
-    baseline_grid: tuple[int, int] = (8, 8),
-    config: TrainConfig = TrainConfig(),
-    masks_dir: str | os.PathLike | None = None,
-    task: str | None = None,
-    progress: bool = True,
-) -> dict[str, Any]:
-    """Main job: train a ``pixels``-pixel camera and a baseline, export masks, write results.
-
-    Writes into ``out_dir``: ``mincam/`` and ``baseline/`` training runs,
-    ``metrics.json`` (test metrics of both, sizes, wall times), ``comparison.png``
-    (error vs pixel count, log x) and, unless ``masks_dir`` is None, the printable
-    masks into ``masks_dir/<task>/``.
-    """
-    from mincam_render.export.masks import export_masks
-
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    task = task or str(train.source.get("family", "task"))
-    runs = {
-        "mincam": train_run(
-            train, val, test, out / "mincam", pixels=pixels, config=config, progress=progress
-        ),
-        "baseline": train_run(
-            train,
-            val,
-            test,
-            out / "baseline",
-            baseline_grid=baseline_grid,
-            config=config,
-            progress=progress,
-        ),
-    }
-    rows = []
-    for name, m in runs.items():
-        rows.append(
-            {
-                "name": name,
-                **m["model"],
-                "error": m["test"]["error"],
-                "error_name": m["test"]["error_name"],
-                "steps": m["steps"],
-                "train_wall_time_s": m["train_wall_time_s"],
-            }
-        )
-    write_sweep(rows, out, title=task)
-    os.replace(out / "sweep.png", out / "comparison.png")
-    exported = None
-    if masks_dir is not None:
-        m, camera, run = run_masks(out / "mincam")
-        exported = export_masks(
-            m,
-            camera,
-            Path(masks_dir) / task,
-            task=task,
-            provenance={
-                "run": str(out / "mincam"),
-                "data": run["data"],
-                "test_metrics": runs["mincam"]["test"],
-                "detectors": run["model"]["detectors"],
-            },
-        )
-    result = {
-        "task": task,
-        "train_samples": len(train),
-        "val_samples": len(val),
-        "test_samples": len(test),
-        "config": asdict(config),
-        "runs": runs,
-        "figure": str(out / "comparison.png"),
-        "masks": {k: str(v) for k, v in (exported or {}).items()},
-    }
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str))
-    return result
-
-
 def train_run(
     train: TrainingData,
     val: TrainingData,
@@ -1398,6 +1316,7 @@ def train_run(
     sensor_model: bool = True,
     config: TrainConfig = TrainConfig(),
     on_the_fly: RenderedBatches | None = None,
+    episodes: Mapping[str, TrainingData] | None = None,
     resume: bool = True,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -1405,7 +1324,9 @@ def train_run(
 
     A minimalist camera of ``pixels`` pixels unless ``baseline_grid`` is given.
     ``on_the_fly`` replaces ``train`` as the source of training batches (``train``
-    still provides target statistics and the baseline exposure).
+    still provides target statistics and the baseline exposure). ``episodes``:
+    test episodes evaluated one by one (``metrics["episodes"][name]``), beside
+    ``test``; the metrics also hold the validation ``history``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -1465,6 +1386,8 @@ def train_run(
         "train_wall_time_s": res.wall_time_s,
         "train_samples": len(train),
         "test": evaluate(model, test) if test is not None else None,
+        "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
+        "history": res.history,
     }
     _write_json_atomic(out / "metrics.json", metrics)
     return metrics

@@ -1,0 +1,279 @@
+"""The main job: a minimalist camera against a conventional one, with a verdict that holds.
+
+1. Render independent scene episodes (:func:`episode_requests`): one training
+   episode, one validation episode and several test episodes, each its own
+   dataset with its own scene seed (other schedules of people, other door and
+   lamp events), derived from the root seed by
+   :func:`mincam_render.core.seeds.stream_seed`. All episodes of one length
+   share one fidelity plan (measured on the planning episode).
+2. Train the minimalist camera and the baseline with several training seeds
+   (same recipe and budget), early stopping on the validation episode.
+3. Test every run on every test episode with the paper's post-processing;
+   also the trivial predictor (the training mean of every label; the mode for
+   binary labels).
+4. Report each design's error as mean over seeds with a 95 % bootstrap interval
+   over seeds and test episodes (:mod:`mincam_render.analysis.statistics`), whether
+   each run converged, and a verdict only where intervals separate.
+5. Keep the masks of the best minimalist run (lowest validation loss) with a
+   sidecar holding the figures above; write ``metrics.json`` and ``comparison.png``.
+
+Everything resumes: finished episodes and runs are found on disk and kept.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mincam_render.analysis.statistics import (
+    EpisodeErrors,
+    Interval,
+    bootstrap_interval,
+    converged,
+    verdict,
+)
+from mincam_render.core.labels import LabelKind
+from mincam_render.core.seeds import stream_seed
+from mincam_render.data.render_job import RenderRequest
+from mincam_render.learn.train import TrainConfig, TrainingData, metrics
+
+#: Episode roles and the split each episode's dataset puts all its frames in.
+ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0.0, 1.0)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ComparisonConfig:
+    """What the main job renders and trains.
+
+    Args:
+        family: scene family name or description (.toml).
+        seed: root seed of every episode and training seed.
+        fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        train_frames: frames of the training episode.
+        val_frames: frames of the validation episode.
+        test_frames: frames of each test episode.
+        test_episodes: number of test episodes (>= 2 for an interval over episodes).
+        seeds: training seeds per design (>= 2 for an interval over seeds).
+        pixels: freeform pixels of the minimalist camera.
+        baseline_grid: ``(rows, cols)`` of the conventional camera.
+        train: the training recipe (its ``seed`` is replaced per training seed).
+        fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
+    """
+
+    family: str = "workspace"
+    seed: int = 0
+    fps: float = 2.0
+    train_frames: int = 1200
+    val_frames: int = 400
+    test_frames: int = 400
+    test_episodes: int = 3
+    seeds: int = 3
+    pixels: int = 8
+    baseline_grid: tuple[int, int] = (8, 8)
+    train: TrainConfig = TrainConfig()
+    fidelity: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
+            if getattr(self, name) < lo:
+                raise ValueError(f"{name} = {getattr(self, name)}: need at least {lo} frames")
+        for name in ("test_episodes", "seeds", "pixels"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
+
+
+def episode_requests(cfg: ComparisonConfig, workers: int = 2) -> dict[str, RenderRequest]:
+    """``{"train-0" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
+
+    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; shards
+    are sized so that every worker gets two (no lone last shard).
+    """
+    counts = {
+        "train": (1, cfg.train_frames),
+        "val": (1, cfg.val_frames),
+        "test": (cfg.test_episodes, cfg.test_frames),
+    }
+    requests = {}
+    for role, (episodes, frames) in counts.items():
+        for i in range(episodes):
+            requests[f"{role}-{i}"] = RenderRequest(
+                family=cfg.family,
+                num_frames=frames,
+                seed=stream_seed(cfg.seed, f"episode/{role}", i),
+                overrides={"fps": cfg.fps},
+                splits=ROLE_SPLITS[role],
+                shard_frames=-(-frames // (2 * max(1, workers))),
+                **dict(cfg.fidelity),
+            )
+    return requests
+
+
+def render_episodes(
+    cfg: ComparisonConfig, out: Path, *, workers: int = 2, progress: bool = True
+) -> dict[str, TrainingData]:
+    """Render (or resume) every episode into ``out/episodes/<name>``; their training views."""
+    from mincam_render.data.dataset import open_dataset
+    from mincam_render.data.render_job import render_dataset
+
+    data = {}
+    for name, request in episode_requests(cfg, workers).items():
+        path = out / "episodes" / name
+        render_dataset(request, path, workers=workers, progress=progress)
+        role = name.split("-")[0]
+        data[name] = TrainingData.from_dataset(open_dataset(path), role)
+    return data
+
+
+def _pooling(error_name: str) -> str:
+    return "rms" if error_name.endswith("RMSE") else "mean"
+
+
+def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
+    """Test metrics of the trivial predictor: every label's training mean (mode if binary)."""
+    n = len(test)
+    lab = {k: v[test.history - 1 :] for k, v in test.labels.items()}
+    pred = {}
+    for s in test.label_specs:
+        mean = train.labels[s.name].mean(axis=0)
+        if s.kind is LabelKind.BINARY:
+            mean = (mean >= 0.5).astype(np.float32)
+        pred[s.name] = np.broadcast_to(mean, (n, s.size)).astype(np.float32)
+    return metrics(pred, lab, float("nan"), test)
+
+
+def _design_runs(
+    kind: str,
+    cfg: ComparisonConfig,
+    data: Mapping[str, TrainingData],
+    out: Path,
+    progress: bool,
+) -> list[dict[str, Any]]:
+    """Train one design with every training seed; each run's metrics (with episodes)."""
+    from mincam_render.learn.train import train_run
+
+    tests = {k: v for k, v in data.items() if k.startswith("test-")}
+    design = {"pixels": cfg.pixels} if kind == "mincam" else {"baseline_grid": cfg.baseline_grid}
+    runs = []
+    for i in range(cfg.seeds):
+        config = dataclasses.replace(cfg.train, seed=stream_seed(cfg.seed, f"train/{kind}", i))
+        run = train_run(
+            data["train-0"],
+            data["val-0"],
+            None,
+            out / "runs" / f"{kind}-seed{i}",
+            config=config,
+            episodes=tests,
+            progress=progress,
+            **design,
+        )
+        runs.append(dict(run, run_dir=str(out / "runs" / f"{kind}-seed{i}"), seed_index=i))
+    return runs
+
+
+def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
+    """``EpisodeErrors`` of runs' (or the trivial predictor's) per-episode metrics."""
+    first = per_seed[0]
+    names = sorted(first)
+    return EpisodeErrors(
+        error=np.array([[m[e]["error"] for e in names] for m in per_seed]),
+        frames=np.array([first[e]["samples"] for e in names]),
+        pooling=_pooling(first[names[0]]["error_name"]),
+    )
+
+
+def _design_summary(runs: list[dict[str, Any]], interval: Interval) -> dict[str, Any]:
+    conv = [converged(r["history"]) for r in runs]
+    return {
+        "model": runs[0]["model"],
+        "error": interval.as_dict(),
+        "error_per_seed": [_episode_errors([r["episodes"]]).point() for r in runs],
+        "converged": all(c["converged"] for c in conv),
+        "convergence": conv,
+        "train_wall_time_s": [r["train_wall_time_s"] for r in runs],
+        "steps": [r["steps"] for r in runs],
+        "runs": [r["run_dir"] for r in runs],
+    }
+
+
+def _keep_masks(
+    runs: list[dict[str, Any]], summary: Mapping[str, Any], masks_dir: Path, task: str
+) -> dict[str, str]:
+    """Export the masks of the run with the lowest validation loss."""
+    from mincam_render.export.masks import export_masks
+    from mincam_render.learn.train import run_masks
+
+    best = min(runs, key=lambda r: r["best_val_loss"])
+    m, camera, run = run_masks(best["run_dir"])
+    exported = export_masks(
+        m,
+        camera,
+        masks_dir / task,
+        task=task,
+        provenance={
+            "run": best["run_dir"],
+            "chosen_by": "lowest validation loss of the training seeds",
+            "data": run["data"],
+            "config": run["config"],
+            "test_error_over_seeds": summary["error"],
+            "test_episodes": best["episodes"],
+            "detectors": run["model"]["detectors"],
+        },
+    )
+    return {k: str(v) for k, v in exported.items()}
+
+
+def run_comparison(
+    cfg: ComparisonConfig,
+    out_dir: str | os.PathLike,
+    *,
+    workers: int = 2,
+    masks_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Render, train, test and compare (module docstring); ``metrics.json`` contents.
+
+    Writes ``out_dir/episodes/``, ``out_dir/runs/``, ``out_dir/metrics.json``,
+    ``out_dir/comparison.png`` and, unless ``masks_dir`` is None, the best
+    minimalist camera's masks into ``masks_dir/<task>/``.
+    """
+    from mincam_render.analysis.plots import plot_comparison
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    data = render_episodes(cfg, out, workers=workers, progress=progress)
+    tests = {k: v for k, v in data.items() if k.startswith("test-")}
+    task = Path(str(data["train-0"].source.get("family") or cfg.family)).stem
+    runs = {kind: _design_runs(kind, cfg, data, out, progress) for kind in ("mincam", "baseline")}
+    trivial = {k: trivial_metrics(data["train-0"], d) for k, d in tests.items()}
+    intervals = {
+        kind: bootstrap_interval(_episode_errors([r["episodes"] for r in rs]), seed=cfg.seed)
+        for kind, rs in runs.items()
+    }
+    intervals["trivial"] = bootstrap_interval(_episode_errors([trivial]), seed=cfg.seed)
+    designs = {kind: _design_summary(rs, intervals[kind]) for kind, rs in runs.items()}
+    error_name = next(iter(trivial.values()))["error_name"]
+    result: dict[str, Any] = {
+        "task": task,
+        "error_name": error_name,
+        "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
+        "episodes": {k: {"samples": len(d), **d.source} for k, d in data.items()},
+        "designs": designs,
+        "trivial": {"error": intervals["trivial"].as_dict(), "episodes": trivial},
+        "verdict": verdict("mincam", intervals["mincam"], "baseline", intervals["baseline"]),
+        "versus_trivial": {
+            kind: verdict(kind, intervals[kind], "trivial", intervals["trivial"]) for kind in runs
+        },
+        "figure": str(out / "comparison.png"),
+    }
+    plot_comparison(result, out / "comparison.png")
+    if masks_dir is not None:
+        result["masks"] = _keep_masks(runs["mincam"], designs["mincam"], Path(masks_dir), task)
+    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    return result

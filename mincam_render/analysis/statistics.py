@@ -1,0 +1,156 @@
+"""Statistics of a comparison: pooled test error, bootstrap intervals, convergence, verdicts.
+
+A configuration (one camera design) is trained with several seeds and tested on
+several independent scene episodes. Its figure is the mean over seeds of the
+error pooled over the test episodes (RMSE pooled as the root of the mean
+squared error over all test frames; an error rate as the mean over all frames).
+Frames within an episode are correlated in time, so the unit of resampling is
+the episode, not the frame: :func:`bootstrap_interval` resamples test episodes
+and training seeds independently (``scipy.stats.bootstrap``, percentile
+method; with 3 episodes and 3 seeds the interval is coarse, and honest about it).
+
+"A beats B" holds only where the two 95 % intervals do not overlap
+(:func:`verdict`). A run counts as converged when the last doubling of its
+steps improved its best validation loss by less than 2 % (:func:`converged`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Confidence level of every interval.
+CONFIDENCE = 0.95
+#: Bootstrap resamples.
+RESAMPLES = 4000
+#: A run is converged when its last doubling of steps improved less than this.
+CONVERGED_IMPROVEMENT = 0.02
+
+
+@dataclass(frozen=True)
+class EpisodeErrors:
+    """Test errors of one configuration: ``error[seed, episode]`` and frames per episode.
+
+    Args:
+        error: ``[seeds, episodes]`` RMSE (``pooling="rms"``) or error rate
+            (``pooling="mean"``) of each seed on each test episode.
+        frames: ``[episodes]`` test frames of each episode (the pooling weights).
+        pooling: ``"rms"`` for RMSE, ``"mean"`` for error rates.
+    """
+
+    error: np.ndarray
+    frames: np.ndarray
+    pooling: str
+
+    def __post_init__(self) -> None:
+        err = np.asarray(self.error, np.float64)
+        n = np.asarray(self.frames, np.float64)
+        if err.ndim != 2 or err.shape[1] != n.shape[0] or err.size == 0:
+            raise ValueError(
+                f"error has shape {err.shape}, frames {n.shape}: expected (seeds, episodes) "
+                "and (episodes,), non-empty"
+            )
+        if not np.all(np.isfinite(err)) or np.any(n <= 0):
+            raise ValueError("errors must be finite and every episode must have frames")
+        if self.pooling not in ("rms", "mean"):
+            raise ValueError(f"pooling = {self.pooling!r}: allowed 'rms' or 'mean'")
+        object.__setattr__(self, "error", err)
+        object.__setattr__(self, "frames", n)
+
+    def pooled(self, seeds: np.ndarray, episodes: np.ndarray) -> float:
+        """Mean over ``seeds`` of the error pooled over ``episodes`` (index arrays)."""
+        e = self.error[np.ix_(seeds, episodes)]
+        w = self.frames[episodes] / self.frames[episodes].sum()
+        per_seed = np.sqrt((e**2) @ w) if self.pooling == "rms" else e @ w
+        return float(per_seed.mean())
+
+    def point(self) -> float:
+        """The configuration's figure: every seed, every episode."""
+        s, e = self.error.shape
+        return self.pooled(np.arange(s), np.arange(e))
+
+
+@dataclass(frozen=True)
+class Interval:
+    """A point estimate and its 95 % bootstrap interval."""
+
+    mean: float
+    low: float
+    high: float
+
+    def as_dict(self) -> dict[str, float | list[float]]:
+        """``{"mean": m, "ci95": [lo, hi]}`` for JSON."""
+        return {"mean": self.mean, "ci95": [self.low, self.high]}
+
+    def __str__(self) -> str:
+        return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"
+
+
+def bootstrap_interval(errors: EpisodeErrors, seed: int = 0) -> Interval:
+    """:meth:`EpisodeErrors.point` with its interval, resampling seeds and episodes."""
+    from scipy.stats import bootstrap
+
+    s, e = errors.error.shape
+    point = errors.point()
+    axes = [np.arange(s), np.arange(e)]
+    varied = [i for i, a in enumerate(axes) if len(a) >= 2]  # a lone seed is not resampled
+    if not varied:  # nothing to resample: a degenerate interval, said as such
+        return Interval(point, point, point)
+
+    def statistic(*resampled: np.ndarray) -> float:
+        idx = list(axes)
+        for i, r in zip(varied, resampled, strict=True):
+            idx[i] = r.astype(int)
+        return errors.pooled(idx[0], idx[1])
+
+    res = bootstrap(
+        tuple(axes[i] for i in varied),
+        statistic,
+        vectorized=False,
+        paired=False,
+        confidence_level=CONFIDENCE,
+        n_resamples=RESAMPLES,
+        method="percentile",
+        rng=np.random.default_rng(seed),
+    )
+    ci = res.confidence_interval
+    return Interval(point, float(ci.low), float(ci.high))
+
+
+def verdict(name_a: str, a: Interval, name_b: str, b: Interval) -> str:
+    """Which of two error intervals is lower, or that they overlap (lower error is better)."""
+    if a.high < b.low:
+        return f"{name_a} beats {name_b} (95 % intervals separate)"
+    if b.high < a.low:
+        return f"{name_b} beats {name_a} (95 % intervals separate)"
+    return f"no verdict: the 95 % intervals of {name_a} and {name_b} overlap"
+
+
+def converged(history: Sequence[Mapping[str, float]]) -> dict[str, float | bool]:
+    """Did the last doubling of steps improve the best validation loss by < 2 %?
+
+    Args:
+        history: evaluations ``{"step", "val_loss"}`` in step order.
+
+    Returns:
+        ``{"converged", "improvement", "steps"}``: the relative improvement of
+        the best validation loss from step ``S / 2`` to the last step ``S``
+        (``nan`` and not converged with fewer than two evaluations).
+    """
+    if len(history) < 2:
+        return {"converged": False, "improvement": float("nan"), "steps": 0}
+    steps = np.array([h["step"] for h in history], np.float64)
+    loss = np.array([h["val_loss"] for h in history], np.float64)
+    last = steps[-1]
+    half = steps <= last / 2
+    if not half.any():
+        return {"converged": False, "improvement": float("nan"), "steps": int(last)}
+    best_half, best_all = loss[half].min(), loss.min()
+    improvement = float((best_half - best_all) / max(abs(best_half), 1e-12))
+    return {
+        "converged": bool(improvement < CONVERGED_IMPROVEMENT),
+        "improvement": improvement,
+        "steps": int(last),
+    }
