@@ -100,7 +100,7 @@ def test_cli_preview_unknown_family(variant, tmp_path):
 
 
 def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(variant, tmp_path):
-    from mincam_render.data.dataset import open_dataset
+    from mincam_render.data.dataset import open_dataset, sha256_file
 
     out = tmp_path / "main"
     args = [
@@ -122,8 +122,8 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     for k in eps:
         assert open_dataset(out / "episodes" / k).verify() == []
     designs = metrics["designs"]
-    assert designs["mincam"]["model"]["pixels"] == 2
-    assert designs["baseline"]["model"]["grid"] == [2, 2]
+    assert designs["mincam-2px"]["model"]["pixels"] == 2
+    assert designs["baseline-2x2"]["model"]["grid"] == [2, 2]
     for d in designs.values():
         lo, hi = d["error"]["ci95"]
         assert lo <= d["error"]["mean"] <= hi and len(d["error_per_seed"]) == 2
@@ -132,9 +132,14 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     assert metrics["trivial"]["error"]["mean"] > 0
     assert metrics["verdict"] in res.output
     assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    sidecar = json.loads((out / "masks" / "patches" / "masks.json").read_text())
+    sidecar = json.loads((out / "masks" / "patches" / "mincam-2px" / "masks.json").read_text())
     assert sidecar["masks"] == 2 and len(sidecar["files"]["png"]) == 2
-    assert sidecar["provenance"]["test_error_over_seeds"] == designs["mincam"]["error"]
+    assert sidecar["provenance"]["test_error_over_seeds"] == designs["mincam-2px"]["error"]
+    prov = sidecar["provenance"]
+    assert prov["episodes"]["train-0"]["manifest_sha256"] == sha256_file(
+        out / "episodes" / "train-0" / "manifest.json"
+    )
+    assert prov["versions"]["git_revision"]
     # a second run finds every episode and run on disk and reports the same figures
     again = CliRunner().invoke(main, args)
     assert again.exit_code == 0, again.output

@@ -14,8 +14,12 @@
 4. Report each design's error as mean over seeds with a 95 % bootstrap interval
    over seeds and test episodes (:mod:`mincam_render.analysis.statistics`), whether
    each run converged, and a verdict only where intervals separate.
-5. Keep the masks of the best minimalist run (lowest validation loss) with a
-   sidecar holding the figures above; write ``metrics.json`` and ``comparison.png``.
+5. Keep the masks of each minimalist design's best run (lowest validation
+   loss) with a sidecar holding the figures above; write ``metrics.json`` and
+   ``comparison.png``.
+
+The main job compares two designs (:class:`Design`); a study passes more (a
+pixel-count sweep against baselines of several resolutions).
 
 Everything resumes: finished episodes and runs are found on disk and kept.
 """
@@ -48,6 +52,48 @@ from mincam_render.learn.train import TrainConfig, TrainingData, metrics
 ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0.0, 1.0)}
 
 
+@dataclass(frozen=True)
+class Design:
+    """One camera design: a minimalist camera of ``pixels`` or a baseline of ``grid``.
+
+    Args:
+        pixels: freeform pixels (minimalist camera), or None for a baseline.
+        grid: ``(rows, cols)`` of a conventional camera, or None.
+        sensor_model: train the minimalist camera with the detector model (noise,
+            saturation); False is the paper's supplement-A ablation.
+    """
+
+    pixels: int | None = None
+    grid: tuple[int, int] | None = None
+    sensor_model: bool = True
+
+    def __post_init__(self) -> None:
+        if (self.pixels is None) == (self.grid is None):
+            raise ValueError(f"{self}: give exactly one of pixels (mincam) or grid (baseline)")
+        if self.pixels is not None and self.pixels < 1:
+            raise ValueError(f"pixels = {self.pixels}: need at least 1")
+        if self.grid is not None:
+            object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
+
+    @property
+    def name(self) -> str:
+        """``mincam-8px``, ``mincam-8px-nosensor`` or ``baseline-8x8``."""
+        if self.grid is not None:
+            return f"baseline-{self.grid[0]}x{self.grid[1]}"
+        return f"mincam-{self.pixels}px" + ("" if self.sensor_model else "-nosensor")
+
+    @property
+    def is_mincam(self) -> bool:
+        """A minimalist camera (it has masks to keep)."""
+        return self.pixels is not None
+
+    def train_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`mincam_render.learn.train.train_run`."""
+        if self.grid is not None:
+            return {"baseline_grid": self.grid}
+        return {"pixels": self.pixels, "sensor_model": self.sensor_model}
+
+
 @dataclass(frozen=True, kw_only=True)
 class ComparisonConfig:
     """What the main job renders and trains.
@@ -55,14 +101,13 @@ class ComparisonConfig:
     Args:
         family: scene family name or description (.toml).
         seed: root seed of every episode and training seed.
-        fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        fps: frame rate of the episodes (1/s); 2 fps: 3,600 frames = 30 min of activity.
         train_frames: frames of the training episode.
         val_frames: frames of the validation episode.
         test_frames: frames of each test episode.
         test_episodes: number of test episodes (>= 2 for an interval over episodes).
         seeds: training seeds per design (>= 2 for an interval over seeds).
-        pixels: freeform pixels of the minimalist camera.
-        baseline_grid: ``(rows, cols)`` of the conventional camera.
+        designs: the camera designs; the verdict compares the first two.
         train: the training recipe (its ``seed`` is replaced per training seed).
         fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
     """
@@ -70,13 +115,12 @@ class ComparisonConfig:
     family: str = "workspace"
     seed: int = 0
     fps: float = 2.0
-    train_frames: int = 1200
-    val_frames: int = 400
-    test_frames: int = 400
+    train_frames: int = 3600
+    val_frames: int = 600
+    test_frames: int = 600
     test_episodes: int = 3
     seeds: int = 3
-    pixels: int = 8
-    baseline_grid: tuple[int, int] = (8, 8)
+    designs: tuple[Design, ...] = (Design(pixels=8), Design(grid=(8, 8)))
     train: TrainConfig = TrainConfig()
     fidelity: Mapping[str, Any] = field(default_factory=dict)
 
@@ -84,9 +128,12 @@ class ComparisonConfig:
         for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
             if getattr(self, name) < lo:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least {lo} frames")
-        for name in ("test_episodes", "seeds", "pixels"):
+        for name in ("test_episodes", "seeds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
+        names = [d.name for d in self.designs]
+        if len(names) < 2 or len(set(names)) != len(names):
+            raise ValueError(f"designs {names}: need at least two, each once")
 
 
 def episode_requests(cfg: ComparisonConfig, workers: int = 2) -> dict[str, RenderRequest]:
@@ -131,6 +178,14 @@ def render_episodes(
     return data
 
 
+def _episode_record(data: TrainingData) -> dict[str, Any]:
+    """Samples, provenance and the sha256 of the episode dataset's manifest."""
+    from mincam_render.data.dataset import MANIFEST_NAME, sha256_file
+
+    path = Path(data.source["dataset"]) / MANIFEST_NAME
+    return {"samples": len(data), **data.source, "manifest_sha256": sha256_file(path)}
+
+
 def _pooling(error_name: str) -> str:
     return "rms" if error_name.endswith("RMSE") else "mean"
 
@@ -149,7 +204,7 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
 
 
 def _design_runs(
-    kind: str,
+    design: Design,
     cfg: ComparisonConfig,
     data: Mapping[str, TrainingData],
     out: Path,
@@ -159,21 +214,21 @@ def _design_runs(
     from mincam_render.learn.train import train_run
 
     tests = {k: v for k, v in data.items() if k.startswith("test-")}
-    design = {"pixels": cfg.pixels} if kind == "mincam" else {"baseline_grid": cfg.baseline_grid}
     runs = []
     for i in range(cfg.seeds):
-        config = dataclasses.replace(cfg.train, seed=stream_seed(cfg.seed, f"train/{kind}", i))
+        seed = stream_seed(cfg.seed, f"train/{design.name}", i)
+        run_dir = out / "runs" / f"{design.name}-seed{i}"
         run = train_run(
             data["train-0"],
             data["val-0"],
             None,
-            out / "runs" / f"{kind}-seed{i}",
-            config=config,
+            run_dir,
+            config=dataclasses.replace(cfg.train, seed=seed),
             episodes=tests,
             progress=progress,
-            **design,
+            **design.train_kwargs(),
         )
-        runs.append(dict(run, run_dir=str(out / "runs" / f"{kind}-seed{i}"), seed_index=i))
+        runs.append(dict(run, run_dir=str(run_dir), seed_index=i))
     return runs
 
 
@@ -203,9 +258,14 @@ def _design_summary(runs: list[dict[str, Any]], interval: Interval) -> dict[str,
 
 
 def _keep_masks(
-    runs: list[dict[str, Any]], summary: Mapping[str, Any], masks_dir: Path, task: str
+    runs: list[dict[str, Any]],
+    summary: Mapping[str, Any],
+    episodes: Mapping[str, Any],
+    out_dir: Path,
+    task: str,
 ) -> dict[str, str]:
-    """Export the masks of the run with the lowest validation loss."""
+    """Export into ``out_dir`` the masks of the run with the lowest validation loss."""
+    from mincam_render.data.render_job import package_versions
     from mincam_render.export.masks import export_masks
     from mincam_render.learn.train import run_masks
 
@@ -214,7 +274,7 @@ def _keep_masks(
     exported = export_masks(
         m,
         camera,
-        masks_dir / task,
+        out_dir,
         task=task,
         provenance={
             "run": best["run_dir"],
@@ -224,6 +284,8 @@ def _keep_masks(
             "test_error_over_seeds": summary["error"],
             "test_episodes": best["episodes"],
             "detectors": run["model"]["detectors"],
+            "episodes": episodes,
+            "versions": package_versions(),
         },
     )
     return {k: str(v) for k, v in exported.items()}
@@ -240,8 +302,8 @@ def run_comparison(
     """Render, train, test and compare (module docstring); ``metrics.json`` contents.
 
     Writes ``out_dir/episodes/``, ``out_dir/runs/``, ``out_dir/metrics.json``,
-    ``out_dir/comparison.png`` and, unless ``masks_dir`` is None, the best
-    minimalist camera's masks into ``masks_dir/<task>/``.
+    ``out_dir/comparison.png`` and, unless ``masks_dir`` is None, every
+    minimalist design's best masks into ``masks_dir/<task>/<design>/``.
     """
     from mincam_render.analysis.plots import plot_comparison
 
@@ -250,30 +312,104 @@ def run_comparison(
     data = render_episodes(cfg, out, workers=workers, progress=progress)
     tests = {k: v for k, v in data.items() if k.startswith("test-")}
     task = Path(str(data["train-0"].source.get("family") or cfg.family)).stem
-    runs = {kind: _design_runs(kind, cfg, data, out, progress) for kind in ("mincam", "baseline")}
+    runs = {d.name: _design_runs(d, cfg, data, out, progress) for d in cfg.designs}
     trivial = {k: trivial_metrics(data["train-0"], d) for k, d in tests.items()}
     intervals = {
-        kind: bootstrap_interval(_episode_errors([r["episodes"] for r in rs]), seed=cfg.seed)
-        for kind, rs in runs.items()
+        name: bootstrap_interval(_episode_errors([r["episodes"] for r in rs]), seed=cfg.seed)
+        for name, rs in runs.items()
     }
-    intervals["trivial"] = bootstrap_interval(_episode_errors([trivial]), seed=cfg.seed)
-    designs = {kind: _design_summary(rs, intervals[kind]) for kind, rs in runs.items()}
-    error_name = next(iter(trivial.values()))["error_name"]
+    trivial_iv = bootstrap_interval(_episode_errors([trivial]), seed=cfg.seed)
+    designs = {name: _design_summary(rs, intervals[name]) for name, rs in runs.items()}
+    first, second = (d.name for d in cfg.designs[:2])
     result: dict[str, Any] = {
         "task": task,
-        "error_name": error_name,
+        "error_name": next(iter(trivial.values()))["error_name"],
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
-        "episodes": {k: {"samples": len(d), **d.source} for k, d in data.items()},
+        "episodes": {k: _episode_record(d) for k, d in data.items()},
         "designs": designs,
-        "trivial": {"error": intervals["trivial"].as_dict(), "episodes": trivial},
-        "verdict": verdict("mincam", intervals["mincam"], "baseline", intervals["baseline"]),
+        "trivial": {"error": trivial_iv.as_dict(), "episodes": trivial},
+        "verdict": verdict(first, intervals[first], second, intervals[second]),
         "versus_trivial": {
-            kind: verdict(kind, intervals[kind], "trivial", intervals["trivial"]) for kind in runs
+            name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
         },
         "figure": str(out / "comparison.png"),
     }
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
-        result["masks"] = _keep_masks(runs["mincam"], designs["mincam"], Path(masks_dir), task)
+        result["masks"] = {
+            d.name: _keep_masks(
+                runs[d.name],
+                designs[d.name],
+                result["episodes"],
+                Path(masks_dir) / task / d.name,
+                task,
+            )
+            for d in cfg.designs
+            if d.is_mincam
+        }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     return result
+
+
+def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
+    """Pixel reduction of design ``reference`` at equal error (the paper's 256x, 2048x).
+
+    The smallest baseline whose 95 % interval overlaps or lies below the
+    reference's (its lower bound at most the reference's upper bound); the
+    factor is its pixel count over the reference's. None when no baseline of
+    the study comes that close (the factor then exceeds the largest tried).
+    """
+    designs = result["designs"]
+    if reference not in designs:
+        raise ValueError(f"reference design {reference!r} not in the study: {sorted(designs)}")
+    ref = designs[reference]
+    baselines = sorted(
+        (d for n, d in designs.items() if n.startswith("baseline-")),
+        key=lambda d: d["model"]["pixels"],
+    )
+    match = next((d for d in baselines if d["error"]["ci95"][0] <= ref["error"]["ci95"][1]), None)
+    px = ref["model"]["pixels"]
+    largest = baselines[-1]["model"]["pixels"] if baselines else None
+    return {
+        "reference": reference,
+        "baseline": None if match is None else "x".join(map(str, match["model"]["grid"])),
+        "factor": None if match is None else match["model"]["pixels"] / px,
+        "largest_tried_factor": None if largest is None else largest / px,
+    }
+
+
+def study_table(result: Mapping[str, Any]) -> str:
+    """Markdown table of a comparison: every design, the trivial predictor, verdicts."""
+    lines = [
+        f"## {result['task']}: test {result['error_name']} (mean over seeds, 95 % CI over "
+        "seeds and test episodes)",
+        "",
+        "| design | pixels | error [95 % CI] | per seed | converged | steps | training (s) |",
+        "|---|---:|---|---|---|---|---:|",
+    ]
+    for name, d in result["designs"].items():
+        e = d["error"]
+        lines.append(
+            f"| {name} | {d['model']['pixels']} | {e['mean']:.3f} [{e['ci95'][0]:.3f}, "
+            f"{e['ci95'][1]:.3f}] | {', '.join(f'{v:.3f}' for v in d['error_per_seed'])} | "
+            f"{'yes' if d['converged'] else 'no (budget-limited)'} | "
+            f"{', '.join(map(str, d['steps']))} | {sum(d['train_wall_time_s']):.0f} |"
+        )
+    t = result["trivial"]["error"]
+    lines += [
+        f"| trivial predictor | 0 | {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}] "
+        "| | | | |",
+        "",
+        f"Verdict: {result['verdict']}.",
+    ]
+    rf = result.get("reduction_factor")
+    if rf is not None:
+        lines.append(
+            f"Reduction factor of {rf['reference']}: "
+            + (
+                f"{rf['factor']:g}x (matches baseline {rf['baseline']})"
+                if rf["factor"] is not None
+                else f"above {rf['largest_tried_factor']:g}x (no baseline tried matches it)"
+            )
+        )
+    return "\n".join(lines)

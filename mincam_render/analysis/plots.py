@@ -64,9 +64,10 @@ def plot_transport_grid(
     return path
 
 
-def _design_name(model: dict) -> str:
-    grid = model.get("grid")
-    return f"{grid[0]}x{grid[1]} ({model['pixels']} px)" if grid else f"{model['pixels']} px"
+def _series_name(design: str) -> str:
+    """``mincam``, ``mincam-nosensor`` or ``baseline`` of a design name (``mincam-8px``)."""
+    kind = design.split("-", 1)[0]
+    return f"{kind}-nosensor" if design.endswith("-nosensor") else kind
 
 
 def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
@@ -74,26 +75,35 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
 
     ``result`` is :func:`mincam_render.analysis.comparison.run_comparison`'s
     output: one point per design (mean over seeds, bootstrap interval as error
-    bar, each seed as a faint dot) and the trivial predictor as a band.
+    bar, each seed as a faint dot), designs of one kind joined by a line
+    (minimalist cameras, their no-sensor-model ablation, baselines), and the
+    trivial predictor as a band.
     """
-    fig, ax = plt.subplots(figsize=(5.5, 3.8))
+    fig, ax = plt.subplots(figsize=(6, 4))
     lo, hi = result["trivial"]["error"]["ci95"]
     ax.axhspan(lo, hi, color="0.85", label="trivial predictor (95 % CI)")
     ax.axhline(result["trivial"]["error"]["mean"], color="0.5", lw=1, ls="--")
-    for (kind, d), colour in zip(result["designs"].items(), ("C0", "C1"), strict=False):
-        px = d["model"]["pixels"]
-        e = d["error"]
-        yerr = [[e["mean"] - e["ci95"][0]], [e["ci95"][1] - e["mean"]]]
+    series: dict[str, list] = {}
+    for name, d in result["designs"].items():
+        series.setdefault(_series_name(name), []).append(d)
+    for (kind, ds), colour in zip(series.items(), ("C0", "C1", "C2"), strict=False):
+        ds = sorted(ds, key=lambda d: d["model"]["pixels"])
+        px = np.array([d["model"]["pixels"] for d in ds])
+        mean = np.array([d["error"]["mean"] for d in ds])
+        ci = np.array([d["error"]["ci95"] for d in ds])
         ax.errorbar(
-            [px],
-            [e["mean"]],
-            yerr=yerr,
-            fmt="o",
+            px,
+            mean,
+            yerr=[mean - ci[:, 0], ci[:, 1] - mean],
+            fmt="o-",
             color=colour,
             capsize=4,
-            label=f"{kind} {_design_name(d['model'])}: {e['mean']:.3f}",
+            label=kind,
         )
-        ax.plot([px] * len(d["error_per_seed"]), d["error_per_seed"], ".", color=colour, alpha=0.4)
+        for p, d in zip(px, ds, strict=True):
+            ax.plot(
+                [p] * len(d["error_per_seed"]), d["error_per_seed"], ".", color=colour, alpha=0.4
+            )
     ax.set_xscale("log", base=2)
     ax.set_xlabel("pixels")
     ax.set_ylabel(f"test {result['error_name']}")

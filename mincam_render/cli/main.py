@@ -971,49 +971,102 @@ def export_exr_cmd(dataset, frame_list, out):
     click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
 
 
-def _frames_option(name: str, default: int, what: str):
-    return click.option(
-        f"--{name}",
-        type=click.IntRange(30),
-        default=default,
-        show_default=True,
-        help=f"Frames of {what} (at --fps).",
+def _episode_options(f):
+    """Options of the commands that render independent episodes and compare designs.
+
+    Defaults are :class:`ComparisonConfig`'s (one source of truth).
+    """
+    from mincam_render.analysis.comparison import ComparisonConfig as C
+
+    options = [
+        click.option("--family", default="workspace", show_default=True,
+                     help="Scene family name or scene description (.toml)."),
+        click.option("--train-frames", type=click.IntRange(30), default=C.train_frames,
+                     show_default=True,
+                     help="Frames of the training episode (at --fps)."),
+        click.option("--val-frames", type=click.IntRange(30), default=C.val_frames,
+                     show_default=True,
+                     help="Frames of the validation episode."),
+        click.option("--test-frames", type=click.IntRange(30), default=C.test_frames,
+                     show_default=True,
+                     help="Frames of each test episode."),
+        click.option("--test-episodes", type=click.IntRange(1, 100), default=C.test_episodes,
+                     show_default=True, help="Independent test episodes (other scene seeds)."),
+        click.option("--seeds", type=click.IntRange(1, 100), default=C.seeds, show_default=True,
+                     help="Training seeds per camera design."),
+        click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
+                     help="Root random seed."),
+        click.option("--steps", type=click.IntRange(1), default=C().train.max_steps,
+                     show_default=True,
+                     help="Training steps at most per run (early stopping on validation may "
+                     "end sooner)."),
+        click.option("--workers", type=click.IntRange(0), default=2, show_default=True,
+                     help="Render worker processes (0 = in this process)."),
+        click.option("--spp", type=click.IntRange(1, 1 << 20), default=None,
+                     help="Render at a fixed quick fidelity (SPP samples per texel, every "
+                     "detector, the scene's path depth) instead of the measured (auto) "
+                     "fidelity."),
+        click.option("--fps", type=click.FloatRange(0.1, 1000.0), default=C.fps,
+                     show_default=True, help="Frame rate of the episodes (overrides the "
+                     "family's): at 2 fps, 3,600 frames cover 30 minutes of activity."),
+    ]  # fmt: skip
+    for option in reversed(options):
+        f = option(f)
+    return f
+
+
+def _compare(out: Path, designs: tuple, **episode) -> dict:
+    """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
+    from mincam_render.analysis.comparison import ComparisonConfig, run_comparison
+    from mincam_render.core.config import ConfigError
+    from mincam_render.data.render_job import RenderError
+    from mincam_render.learn.train import TrainConfig
+    from mincam_render.render.mitsuba_scene import SceneError
+
+    t0 = time.perf_counter()
+    spp, steps, workers = episode.pop("spp"), episode.pop("steps"), episode.pop("workers")
+    quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
+    try:
+        cfg = ComparisonConfig(
+            **episode,
+            designs=designs,
+            train=TrainConfig(max_steps=steps),
+            fidelity=quick if spp is not None else {},
+        )
+        click.echo(
+            f"[1/2] episodes of {cfg.family}: train {cfg.train_frames}, val {cfg.val_frames}, "
+            f"test {cfg.test_episodes} x {cfg.test_frames} frames; {len(designs)} designs x "
+            f"{cfg.seeds} seeds"
+        )
+        result = run_comparison(cfg, out, workers=workers, masks_dir=out / "masks")
+    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
+        raise click.ClickException(str(err)) from None
+    click.echo(f"[2/2] test {result['error_name']}, mean over {cfg.seeds} seeds [95 % CI]")
+    for name, d in result["designs"].items():
+        e = d["error"]
+        state = "converged" if d["converged"] else "budget-limited"
+        click.echo(
+            f"  {name:18s} {e['mean']:.3f} [{e['ci95'][0]:.3f}, {e['ci95'][1]:.3f}]  "
+            f"({state}; {sum(d['train_wall_time_s']):.0f} s training)"
+        )
+    t = result["trivial"]["error"]
+    click.echo(f"  {'trivial':18s} {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
+    click.echo(f"  verdict: {result['verdict']}")
+    click.echo(
+        f"  {time.perf_counter() - t0:.0f} s; figure {result['figure']}; masks in "
+        f"{out / 'masks' / result['task']}/; metrics {out / 'metrics.json'}"
     )
+    return result
 
 
 @main.command("pipeline")
-@click.option(
-    "--family",
-    default="workspace",
-    show_default=True,
-    help="Scene family name or scene description (.toml).",
-)
+@_episode_options
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
     default=Path("runs/main"),
     show_default=True,
     help="Output directory (episodes, runs, figure, metrics, masks).",
-)
-@_frames_option("train-frames", 1200, "the training episode")
-@_frames_option("val-frames", 400, "the validation episode")
-@_frames_option("test-frames", 400, "each test episode")
-@click.option(
-    "--test-episodes",
-    type=click.IntRange(1, 100),
-    default=3,
-    show_default=True,
-    help="Independent test episodes (other scene seeds).",
-)
-@click.option(
-    "--seeds",
-    type=click.IntRange(1, 100),
-    default=3,
-    show_default=True,
-    help="Training seeds per camera design.",
-)
-@click.option(
-    "--seed", type=click.IntRange(0), default=0, show_default=True, help="Root random seed."
 )
 @click.option(
     "--pixels",
@@ -1029,51 +1082,7 @@ def _frames_option(name: str, default: int, what: str):
     callback=_grid,
     help="Baseline camera resolution ROWSxCOLS.",
 )
-@click.option(
-    "--steps",
-    type=click.IntRange(1),
-    default=3000,
-    show_default=True,
-    help="Training steps at most per run (early stopping on validation may end sooner).",
-)
-@click.option(
-    "--workers",
-    type=click.IntRange(0),
-    default=2,
-    show_default=True,
-    help="Render worker processes (0 = in this process).",
-)
-@click.option(
-    "--spp",
-    type=click.IntRange(1, 1 << 20),
-    default=None,
-    help="Render at a fixed quick fidelity (SPP samples per texel, every detector, "
-    "the scene's path depth) instead of the measured (auto) fidelity.",
-)
-@click.option(
-    "--fps",
-    type=click.FloatRange(0.1, 1000.0),
-    default=2.0,
-    show_default=True,
-    help="Frame rate of the episodes (overrides the family's): at 2 fps, 1,200 frames "
-    "cover 10 minutes of activity.",
-)
-def pipeline_cmd(
-    family,
-    out,
-    train_frames,
-    val_frames,
-    test_frames,
-    test_episodes,
-    seeds,
-    seed,
-    pixels,
-    baseline_grid,
-    steps,
-    workers,
-    spp,
-    fps,
-):
+def pipeline_cmd(out, pixels, baseline_grid, **episode):
     """The main job: a minimalist camera against a conventional one, with a verdict that holds.
 
     Renders independent episodes of the family (other scene seeds) into
@@ -1085,65 +1094,78 @@ def pipeline_cmd(
     as mean over seeds with a 95 % bootstrap interval (over seeds and test
     episodes), the trivial predictor's, whether every run converged, and a
     verdict only where intervals separate. Keeps the best minimalist run's
-    printable masks in OUT/masks/<family>/, writes OUT/comparison.png and
-    OUT/metrics.json. Killed runs resume where they stopped.
+    printable masks in OUT/masks/<family>/<design>/, writes OUT/comparison.png
+    and OUT/metrics.json. Killed runs resume where they stopped.
 
     \b
     Example:
       mincam-render pipeline --out runs/main
       mincam-render pipeline --family patches --pixels 4 --baseline-grid 2x2
     """
-    from mincam_render.analysis.comparison import ComparisonConfig, run_comparison
-    from mincam_render.core.config import ConfigError
-    from mincam_render.data.render_job import RenderError
-    from mincam_render.learn.train import TrainConfig
-    from mincam_render.render.mitsuba_scene import SceneError
+    from mincam_render.analysis.comparison import Design
 
-    quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
-    t0 = time.perf_counter()
-    try:
-        cfg = ComparisonConfig(
-            family=family,
-            seed=seed,
-            fps=fps,
-            train_frames=train_frames,
-            val_frames=val_frames,
-            test_frames=test_frames,
-            test_episodes=test_episodes,
-            seeds=seeds,
-            pixels=pixels,
-            baseline_grid=baseline_grid,
-            train=TrainConfig(max_steps=steps),
-            fidelity=quick if spp is not None else {},
-        )
-        click.echo(
-            f"[1/2] episodes of {family}: train {train_frames}, val {val_frames}, "
-            f"test {test_episodes} x {test_frames} frames"
-        )
-        result = run_comparison(cfg, out, workers=workers, masks_dir=out / "masks")
-    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
-        raise click.ClickException(str(err)) from None
-    click.echo(f"[2/2] test {result['error_name']}, mean over {seeds} seeds [95 % CI]")
-    _echo_comparison(result)
-    click.echo(
-        f"  {time.perf_counter() - t0:.0f} s; figure {result['figure']}; masks in "
-        f"{out / 'masks' / result['task']}; metrics {out / 'metrics.json'}"
-    )
+    _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
 
 
-def _echo_comparison(result: dict) -> None:
-    for kind, d in result["designs"].items():
-        e = d["error"]
-        state = "converged" if d["converged"] else "budget-limited"
-        click.echo(
-            f"  {kind:8s} {d['model']['pixels']:>4} px: {e['mean']:.3f} "
-            f"[{e['ci95'][0]:.3f}, {e['ci95'][1]:.3f}]  ({state}; "
-            f"{sum(d['train_wall_time_s']):.0f} s training)"
-        )
-    t = result["trivial"]["error"]
-    click.echo(f"  trivial           {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
-    click.echo(f"  verdict: {result['verdict']}")
-    click.echo(f"  against the trivial predictor: {'; '.join(result['versus_trivial'].values())}")
+@main.command("study")
+@_episode_options
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Output directory (episodes, runs, figure, metrics, table, masks).",
+)
+@click.option(
+    "--pixels",
+    default="1,2,4,8,16",
+    show_default=True,
+    callback=_int_list,
+    help="Minimalist-camera pixel counts.",
+)
+@click.option(
+    "--baseline-grids",
+    default="2x2,4x4,8x8,16x16,32x32",
+    show_default=True,
+    callback=_grid_list,
+    help="Baseline resolutions.",
+)
+@click.option(
+    "--ablation/--no-ablation",
+    default=False,
+    help="Also train every minimalist camera without the detector model (supplement A).",
+)
+@click.option(
+    "--reference-pixels",
+    type=click.IntRange(1),
+    default=4,
+    show_default=True,
+    help="Pixel count of the design whose pixel reduction factor is reported.",
+)
+def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode):
+    """A sweep of minimalist cameras against baselines on independent episodes.
+
+    Like `pipeline`, with every design of --pixels (and, with --ablation, the
+    same cameras trained without the detector model) and --baseline-grids;
+    adds OUT/study.md (the table, with convergence and the trivial predictor)
+    and the pixel reduction factor of the --reference-pixels camera: the
+    baseline pixels of the smallest baseline whose interval overlaps or beats
+    it, over its pixels.
+
+    \b
+    Example:
+      mincam-render study --family patches --out runs/study-patches --spp 16
+    """
+    from mincam_render.analysis.comparison import Design, reduction_factor, study_table
+
+    designs = [Design(pixels=k) for k in pixels]
+    if ablation:
+        designs += [Design(pixels=k, sensor_model=False) for k in pixels]
+    designs += [Design(grid=g) for g in baseline_grids]
+    result = _compare(out, tuple(designs), **episode)
+    result["reduction_factor"] = reduction_factor(result, f"mincam-{reference_pixels}px")
+    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    (out / "study.md").write_text(study_table(result) + "\n")
+    click.echo(study_table(result))
 
 
 @main.group("bench")

@@ -1,0 +1,110 @@
+"""Comparisons of designs: design names, episode seeds, reduction factor, study table, CLI."""
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from mincam_render.analysis.comparison import (
+    ComparisonConfig,
+    Design,
+    episode_requests,
+    reduction_factor,
+    study_table,
+)
+from mincam_render.cli.main import main
+
+
+def _design(pixels, mean, lo, hi, grid=None):
+    model = {"pixels": pixels, **({"grid": list(grid)} if grid else {})}
+    return {
+        "model": model,
+        "error": {"mean": mean, "ci95": [lo, hi]},
+        "error_per_seed": [mean],
+        "converged": True,
+        "steps": [100],
+        "train_wall_time_s": [1.0],
+    }
+
+
+def _result():
+    return {
+        "task": "toy",
+        "error_name": "count RMSE",
+        "verdict": "x",
+        "trivial": {"error": {"mean": 3.0, "ci95": [2.9, 3.1]}},
+        "designs": {
+            "mincam-4px": _design(4, 1.0, 0.9, 1.1),
+            "baseline-2x2": _design(4, 2.0, 1.8, 2.2, (2, 2)),
+            "baseline-4x4": _design(16, 1.3, 1.05, 1.5, (4, 4)),  # overlaps 4 px
+            "baseline-8x8": _design(64, 0.8, 0.7, 0.9, (8, 8)),
+        },
+    }
+
+
+def test_reduction_factor_is_the_smallest_baseline_whose_interval_reaches_the_reference():
+    rf = reduction_factor(_result(), "mincam-4px")
+    assert rf["baseline"] == "4x4" and rf["factor"] == 16 / 4
+    assert rf["largest_tried_factor"] == 64 / 4
+
+
+def test_reduction_factor_without_a_match_says_it_exceeds_the_largest_tried():
+    res = _result()
+    res["designs"]["mincam-4px"]["error"] = {"mean": 0.3, "ci95": [0.2, 0.4]}
+    rf = reduction_factor(res, "mincam-4px")
+    assert rf["factor"] is None and rf["largest_tried_factor"] == 16
+    res["reduction_factor"] = rf
+    assert "above 16x" in study_table(res)
+    with pytest.raises(ValueError, match="not in the study"):
+        reduction_factor(res, "mincam-3px")
+
+
+def test_study_table_lists_every_design_and_the_trivial_predictor():
+    res = _result()
+    res["reduction_factor"] = reduction_factor(res, "mincam-4px")
+    table = study_table(res)
+    for name in res["designs"]:
+        assert f"| {name} |" in table
+    assert "| trivial predictor | 0 | 3.000 [2.900, 3.100]" in table
+    assert "4x (matches baseline 4x4)" in table
+
+
+def test_designs_are_named_and_validated():
+    assert Design(pixels=8).name == "mincam-8px"
+    assert Design(pixels=8, sensor_model=False).name == "mincam-8px-nosensor"
+    assert Design(grid=(4, 6)).name == "baseline-4x6"
+    with pytest.raises(ValueError, match="exactly one"):
+        Design(pixels=4, grid=(2, 2))
+    with pytest.raises(ValueError, match="at least two"):
+        ComparisonConfig(designs=(Design(pixels=2), Design(pixels=2)))
+
+
+def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
+    reqs = episode_requests(ComparisonConfig(test_episodes=3), workers=2)
+    assert sorted(reqs) == ["test-0", "test-1", "test-2", "train-0", "val-0"]
+    assert len({r.seed for r in reqs.values()}) == 5
+    assert reqs["train-0"].splits == (1.0, 0.0, 0.0) and reqs["test-2"].splits == (0.0, 0.0, 1.0)
+    assert reqs["train-0"].num_frames == 3600 and reqs["train-0"].shard_frames == 900
+    # another root seed: other episodes
+    other = episode_requests(ComparisonConfig(seed=1))
+    assert not {r.seed for r in reqs.values()} & {r.seed for r in other.values()}
+
+
+def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant, tmp_path):
+    out = tmp_path / "study"
+    args = [
+        "study", "--family", "patches", "--train-frames", "60", "--val-frames", "30",
+        "--test-frames", "30", "--test-episodes", "2", "--seeds", "2", "--steps", "20",
+        "--workers", "0", "--spp", "2", "--pixels", "1,2", "--baseline-grids", "1x1,2x2",
+        "--ablation", "--reference-pixels", "2", "--out", str(out),
+    ]  # fmt: skip
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    metrics = json.loads((out / "metrics.json").read_text())
+    names = {"mincam-1px", "mincam-2px", "mincam-1px-nosensor", "mincam-2px-nosensor"}
+    assert set(metrics["designs"]) == names | {"baseline-1x1", "baseline-2x2"}
+    assert metrics["reduction_factor"]["reference"] == "mincam-2px"
+    table = (out / "study.md").read_text()
+    assert all(f"| {n} |" in table for n in metrics["designs"])
+    for n in names:  # every minimalist design keeps its masks
+        assert (out / "masks" / "patches" / n / "masks.json").is_file()
