@@ -115,10 +115,10 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     metrics = json.loads((out / "metrics.json").read_text())
     # independent episodes: one dataset each, each its own scene seed, all complete
     eps = metrics["episodes"]
-    assert sorted(eps) == ["test-0", "test-1", "train-0", "val-0"]
-    assert len({e["dataset"] for e in eps.values()}) == 4
+    assert sorted(eps) == ["test-0", "test-1", "train-0", "train-1", "val-0"]
+    assert len({e["dataset"] for e in eps.values()}) == 5
     seeds = {open_dataset(out / "episodes" / k).manifest["request"]["seed"] for k in eps}
-    assert len(seeds) == 4
+    assert len(seeds) == 5
     for k in eps:
         assert open_dataset(out / "episodes" / k).verify() == []
     designs = metrics["designs"]

@@ -81,10 +81,10 @@ def test_designs_are_named_and_validated():
 
 def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
     reqs = episode_requests(ComparisonConfig(test_episodes=3), workers=2)
-    assert sorted(reqs) == ["test-0", "test-1", "test-2", "train-0", "val-0"]
-    assert len({r.seed for r in reqs.values()}) == 5
+    assert sorted(reqs) == ["test-0", "test-1", "test-2", "train-0", "train-1", "val-0"]
+    assert len({r.seed for r in reqs.values()}) == 6
     assert reqs["train-0"].splits == (1.0, 0.0, 0.0) and reqs["test-2"].splits == (0.0, 0.0, 1.0)
-    assert reqs["train-0"].num_frames == 3600 and reqs["train-0"].shard_frames == 900
+    assert reqs["train-1"].num_frames == 1200 and reqs["train-1"].shard_frames == 300
     # another root seed: other episodes
     other = episode_requests(ComparisonConfig(seed=1))
     assert not {r.seed for r in reqs.values()} & {r.seed for r in other.values()}

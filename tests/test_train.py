@@ -333,3 +333,18 @@ def test_training_from_float16_dataset_learns(float16_dataset):
     res = tr.train_model(model, train, val, tr.TrainConfig(max_steps=30, batch_size=8))
     assert res.steps == 30 and np.isfinite(res.best_val_loss)
     assert np.isfinite(model.logits.detach().numpy()).all()
+
+
+def test_concat_joins_static_episodes_and_refuses_temporal_or_mismatched_ones():
+    a, b = linear_task(40, seed=1), linear_task(30, seed=2)
+    both = tr.TrainingData.concat([a, b])
+    assert len(both) == 70
+    np.testing.assert_array_equal(both.frames_np(40, 70), b.frames_np(0, 30))
+    np.testing.assert_array_equal(both.labels["count"][:40], a.labels["count"])
+    assert both.source == {"episodes": [a.source, b.source]}
+    with pytest.raises(ValueError, match="temporal"):
+        tr.TrainingData.concat([replace(a, history=3), b])
+    with pytest.raises(ValueError, match="differs"):
+        tr.TrainingData.concat([a, replace(b, fps=10.0)])
+    with pytest.raises(ValueError, match="no episodes"):
+        tr.TrainingData.concat([])

@@ -1,7 +1,8 @@
 """The main job: a minimalist camera against a conventional one, with a verdict that holds.
 
-1. Render independent scene episodes (:func:`episode_requests`): one training
-   episode, one validation episode and several test episodes, each its own
+1. Render independent scene episodes (:func:`episode_requests`): training
+   episodes (joined into one training set), one validation episode and several
+   test episodes, each its own
    dataset with its own scene seed (other schedules of people, other door and
    lamp events), derived from the root seed by
    :func:`mincam_render.core.seeds.stream_seed`. All episodes of one length
@@ -101,8 +102,9 @@ class ComparisonConfig:
     Args:
         family: scene family name or description (.toml).
         seed: root seed of every episode and training seed.
-        fps: frame rate of the episodes (1/s); 2 fps: 3,600 frames = 30 min of activity.
-        train_frames: frames of the training episode.
+        fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        train_episodes: training episodes (static tasks; a temporal task trains on one).
+        train_frames: frames of each training episode.
         val_frames: frames of the validation episode.
         test_frames: frames of each test episode.
         test_episodes: number of test episodes (>= 2 for an interval over episodes).
@@ -115,7 +117,8 @@ class ComparisonConfig:
     family: str = "workspace"
     seed: int = 0
     fps: float = 2.0
-    train_frames: int = 3600
+    train_episodes: int = 2
+    train_frames: int = 1200
     val_frames: int = 600
     test_frames: int = 600
     test_episodes: int = 3
@@ -128,7 +131,7 @@ class ComparisonConfig:
         for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
             if getattr(self, name) < lo:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least {lo} frames")
-        for name in ("test_episodes", "seeds"):
+        for name in ("train_episodes", "test_episodes", "seeds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
         names = [d.name for d in self.designs]
@@ -137,13 +140,13 @@ class ComparisonConfig:
 
 
 def episode_requests(cfg: ComparisonConfig, workers: int = 2) -> dict[str, RenderRequest]:
-    """``{"train-0" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
+    """``{"train-i" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
 
     Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; shards
     are sized so that every worker gets two (no lone last shard).
     """
     counts = {
-        "train": (1, cfg.train_frames),
+        "train": (cfg.train_episodes, cfg.train_frames),
         "val": (1, cfg.val_frames),
         "test": (cfg.test_episodes, cfg.test_frames),
     }
@@ -206,25 +209,27 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
 def _design_runs(
     design: Design,
     cfg: ComparisonConfig,
-    data: Mapping[str, TrainingData],
+    splits: Mapping[str, Any],
     out: Path,
     progress: bool,
 ) -> list[dict[str, Any]]:
-    """Train one design with every training seed; each run's metrics (with episodes)."""
+    """Train one design with every training seed; each run's metrics (with episodes).
+
+    ``splits``: ``{"train": TrainingData, "val": TrainingData, "tests": {name: TrainingData}}``.
+    """
     from mincam_render.learn.train import train_run
 
-    tests = {k: v for k, v in data.items() if k.startswith("test-")}
     runs = []
     for i in range(cfg.seeds):
         seed = stream_seed(cfg.seed, f"train/{design.name}", i)
         run_dir = out / "runs" / f"{design.name}-seed{i}"
         run = train_run(
-            data["train-0"],
-            data["val-0"],
+            splits["train"],
+            splits["val"],
             None,
             run_dir,
             config=dataclasses.replace(cfg.train, seed=seed),
-            episodes=tests,
+            episodes=splits["tests"],
             progress=progress,
             **design.train_kwargs(),
         )
@@ -311,9 +316,11 @@ def run_comparison(
     out.mkdir(parents=True, exist_ok=True)
     data = render_episodes(cfg, out, workers=workers, progress=progress)
     tests = {k: v for k, v in data.items() if k.startswith("test-")}
-    task = Path(str(data["train-0"].source.get("family") or cfg.family)).stem
-    runs = {d.name: _design_runs(d, cfg, data, out, progress) for d in cfg.designs}
-    trivial = {k: trivial_metrics(data["train-0"], d) for k, d in tests.items()}
+    train = TrainingData.concat([v for k, v in data.items() if k.startswith("train-")])
+    splits = {"train": train, "val": data["val-0"], "tests": tests}
+    task = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
+    runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
+    trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
     intervals = {
         name: bootstrap_interval(_episode_errors([r["episodes"] for r in rs]), seed=cfg.seed)
         for name, rs in runs.items()

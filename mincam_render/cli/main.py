@@ -981,9 +981,12 @@ def _episode_options(f):
     options = [
         click.option("--family", default="workspace", show_default=True,
                      help="Scene family name or scene description (.toml)."),
+        click.option("--train-episodes", type=click.IntRange(1, 100),
+                     default=C.train_episodes, show_default=True,
+                     help="Training episodes (other scene seeds; temporal tasks: 1)."),
         click.option("--train-frames", type=click.IntRange(30), default=C.train_frames,
                      show_default=True,
-                     help="Frames of the training episode (at --fps)."),
+                     help="Frames of each training episode (at --fps)."),
         click.option("--val-frames", type=click.IntRange(30), default=C.val_frames,
                      show_default=True,
                      help="Frames of the validation episode."),
@@ -1008,7 +1011,7 @@ def _episode_options(f):
                      "fidelity."),
         click.option("--fps", type=click.FloatRange(0.1, 1000.0), default=C.fps,
                      show_default=True, help="Frame rate of the episodes (overrides the "
-                     "family's): at 2 fps, 3,600 frames cover 30 minutes of activity."),
+                     "family's): at 2 fps, 1,200 frames cover 10 minutes of activity."),
     ]  # fmt: skip
     for option in reversed(options):
         f = option(f)

@@ -235,6 +235,38 @@ class TrainingData:
             },
         )
 
+    @classmethod
+    def concat(cls, parts: Sequence[TrainingData]) -> TrainingData:
+        """Several static episodes as one training set (a copy of their stored frames).
+
+        Raises:
+            ValueError: no parts, temporal data (windows would cross episode
+                boundaries), or parts of other cameras, labels, frame rates or storage.
+        """
+        if not parts:
+            raise ValueError("concat: no episodes given")
+        first = parts[0]
+        if any(p.history != 1 for p in parts):
+            raise ValueError(
+                "concat: temporal data (history > 1) would get windows across episode "
+                "boundaries; train on one episode"
+            )
+        for p in parts[1:]:
+            same = (p.camera, p.label_specs, p.fps, p.transport.dtype, p.scales is None)
+            if same != (first.camera, first.label_specs, first.fps, first.transport.dtype,
+                        first.scales is None):  # fmt: skip
+                raise ValueError(
+                    f"concat: episode {p.source} differs from {first.source} in camera, labels, "
+                    "frame rate or storage"
+                )
+        return replace(
+            first,
+            transport=np.concatenate([np.asarray(p.transport) for p in parts]),
+            labels={k: np.concatenate([p.labels[k] for p in parts]) for k in first.labels},
+            scales=None if first.scales is None else np.concatenate([p.scales for p in parts]),
+            source={"episodes": [p.source for p in parts]},
+        )
+
     def subset(self, start: int, stop: int, name: str = "") -> TrainingData:
         """Frames ``[start, stop)`` as a new split (contiguous in time)."""
         src = dict(self.source, split=name or self.source.get("split", ""), range=[start, stop])
