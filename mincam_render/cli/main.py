@@ -1055,6 +1055,8 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
     t = result["trivial"]["error"]
     click.echo(f"  {'trivial':18s} {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
     click.echo(f"  verdict: {result['verdict']}")
+    for name, against in result["versus_trivial"].items():
+        click.echo(f"  {name} against the trivial predictor: {against}")
     click.echo(
         f"  {time.perf_counter() - t0:.0f} s; figure {result['figure']}; masks in "
         f"{out / 'masks' / result['task']}/; metrics {out / 'metrics.json'}"
