@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import OpenEXR
@@ -114,3 +115,25 @@ def test_bad_input(tmp_path, camera):
         export_masks(np.zeros((8, 12)), camera, tmp_path)
     with pytest.raises(ValueError, match="NaN"):
         export_masks(np.full((1, 8, 12), np.nan), camera, tmp_path)
+
+
+KEPT = sorted((Path(__file__).parents[1] / "masks").glob("*/*/masks.json"))
+
+
+@pytest.mark.parametrize("sidecar", KEPT, ids=lambda p: f"{p.parent.parent.name}/{p.parent.name}")
+def test_kept_designs_are_complete_and_agree_with_their_sidecar(sidecar):
+    side = json.loads(sidecar.read_text())
+    folder = sidecar.parent
+    lo, hi = side["printable_transmittance_range"]
+    ch = OpenEXR.File(str(folder / side["files"]["exr"])).channels()
+    assert len(side["files"]["png"]) == side["masks"] == len(ch)
+    for k, name in enumerate(side["files"]["png"]):
+        png = np.asarray(Image.open(folder / name), np.float64) / 65535.0
+        exr = np.asarray(ch[f"mask{k:04d}"].pixels, np.float64)
+        assert png.shape == exr.shape == tuple(side["mask_resolution"])
+        np.testing.assert_allclose(png, np.clip(exr, lo, hi), atol=1 / 65535)
+    err = side["provenance"]["test_error_over_seeds"]
+    assert err["ci95"][0] <= err["mean"] <= err["ci95"][1]
+    for ep in side["provenance"]["episodes"].values():
+        assert len(ep["manifest_sha256"]) == 64
+    assert (folder / side["files"]["svg"]).read_text().lstrip().startswith("<")
