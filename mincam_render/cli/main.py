@@ -1037,7 +1037,8 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
             fidelity=quick if spp is not None else {},
         )
         click.echo(
-            f"[1/2] episodes of {cfg.family}: train {cfg.train_frames}, val {cfg.val_frames}, "
+            f"[1/2] episodes of {cfg.family}: train {cfg.train_episodes} x {cfg.train_frames}, "
+            f"val {cfg.val_frames}, "
             f"test {cfg.test_episodes} x {cfg.test_frames} frames; {len(designs)} designs x "
             f"{cfg.seeds} seeds"
         )
