@@ -104,6 +104,9 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
     names = {"mincam-1px", "mincam-2px", "mincam-1px-nosensor", "mincam-2px-nosensor"}
     assert set(metrics["designs"]) == names | {"baseline-1x1", "baseline-2x2"}
     assert metrics["reduction_factor"]["reference"] == "mincam-2px"
+    summary = metrics["configurations"]["mincam-2px"]
+    assert summary["rmse_mean"] == metrics["designs"]["mincam-2px"]["error"]["mean"]
+    assert summary["seeds"] == 2 and isinstance(summary["converged"], bool)
     table = (out / "study.md").read_text()
     assert all(f"| {n} |" in table for n in metrics["designs"])
     for n in names:  # every minimalist design keeps its masks

@@ -385,6 +385,20 @@ def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any
     }
 
 
+def study_summary(result: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per design: ``rmse_mean``/``rmse_ci95`` (or ``error_rate_*``), ``seeds``, ``converged``."""
+    kind = "rmse" if result["error_name"].endswith("RMSE") else "error_rate"
+    return {
+        name: {
+            f"{kind}_mean": d["error"]["mean"],
+            f"{kind}_ci95": d["error"]["ci95"],
+            "seeds": len(d["error_per_seed"]),
+            "converged": d["converged"],
+        }
+        for name, d in result["designs"].items()
+    }
+
+
 def study_table(result: Mapping[str, Any]) -> str:
     """Markdown table of a comparison: every design, the trivial predictor, verdicts."""
     lines = [

@@ -1161,7 +1161,12 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     Example:
       mincam-render study --family patches --out runs/study-patches --spp 16
     """
-    from mincam_render.analysis.comparison import Design, reduction_factor, study_table
+    from mincam_render.analysis.comparison import (
+        Design,
+        reduction_factor,
+        study_summary,
+        study_table,
+    )
 
     designs = [Design(pixels=k) for k in pixels]
     if ablation:
@@ -1169,6 +1174,7 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     designs += [Design(grid=g) for g in baseline_grids]
     result = _compare(out, tuple(designs), **episode)
     result["reduction_factor"] = reduction_factor(result, f"mincam-{reference_pixels}px")
+    result["configurations"] = study_summary(result)
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     (out / "study.md").write_text(study_table(result) + "\n")
     click.echo(study_table(result))
