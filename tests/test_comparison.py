@@ -80,7 +80,7 @@ def test_designs_are_named_and_validated():
 
 
 def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
-    reqs = episode_requests(ComparisonConfig(test_episodes=3), workers=2)
+    reqs = episode_requests(ComparisonConfig(test_episodes=3))
     assert sorted(reqs) == ["test-0", "test-1", "test-2", "train-0", "train-1", "val-0"]
     assert len({r.seed for r in reqs.values()}) == 6
     assert reqs["train-0"].splits == (1.0, 0.0, 0.0) and reqs["test-2"].splits == (0.0, 0.0, 1.0)

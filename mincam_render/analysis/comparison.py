@@ -49,6 +49,8 @@ from mincam_render.core.seeds import stream_seed
 from mincam_render.data.render_job import RenderRequest
 from mincam_render.learn.train import TrainConfig, TrainingData, metrics
 
+#: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
+SHARDS_PER_EPISODE = 4
 #: Episode roles and the split each episode's dataset puts all its frames in.
 ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0.0, 1.0)}
 
@@ -139,11 +141,12 @@ class ComparisonConfig:
             raise ValueError(f"designs {names}: need at least two, each once")
 
 
-def episode_requests(cfg: ComparisonConfig, workers: int = 2) -> dict[str, RenderRequest]:
+def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
     """``{"train-i" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
 
-    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; shards
-    are sized so that every worker gets two (no lone last shard).
+    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; every
+    episode has :data:`SHARDS_PER_EPISODE` shards whatever the worker count (so
+    a run resumes with any ``--workers``, and 1, 2 or 4 workers share them evenly).
     """
     counts = {
         "train": (cfg.train_episodes, cfg.train_frames),
@@ -159,7 +162,7 @@ def episode_requests(cfg: ComparisonConfig, workers: int = 2) -> dict[str, Rende
                 seed=stream_seed(cfg.seed, f"episode/{role}", i),
                 overrides={"fps": cfg.fps},
                 splits=ROLE_SPLITS[role],
-                shard_frames=-(-frames // (2 * max(1, workers))),
+                shard_frames=-(-frames // SHARDS_PER_EPISODE),
                 **dict(cfg.fidelity),
             )
     return requests
@@ -173,7 +176,7 @@ def render_episodes(
     from mincam_render.data.render_job import render_dataset
 
     data = {}
-    for name, request in episode_requests(cfg, workers).items():
+    for name, request in episode_requests(cfg).items():
         path = out / "episodes" / name
         render_dataset(request, path, workers=workers, progress=progress)
         role = name.split("-")[0]
