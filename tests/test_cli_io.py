@@ -147,3 +147,11 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     for kind, d in designs.items():
         for key in ("error", "error_per_seed", "convergence", "steps"):
             assert redone[kind][key] == d[key]
+
+
+def test_cli_train_refuses_more_pixels_than_rendered_detectors(variant, tmp_path):
+    args = ["train", "--family", "patches", "--frames", "40", "--spp", "1", "--steps", "5",
+            "--pixels", "8", "--out", str(tmp_path / "t")]  # fmt: skip
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code != 0 and "Traceback" not in res.output
+    assert "pixels = 8: the data has only 4 rendered detectors" in res.output

@@ -348,3 +348,17 @@ def test_concat_joins_static_episodes_and_refuses_temporal_or_mismatched_ones():
         tr.TrainingData.concat([a, replace(b, fps=10.0)])
     with pytest.raises(ValueError, match="no episodes"):
         tr.TrainingData.concat([])
+
+
+def test_more_pixels_than_rendered_detectors_is_an_error_unless_asked_for():
+    data = linear_task(40, k=2)
+    assert tr.build_mincam(data).detectors.tolist() == [0, 1]  # default: every detector
+    with pytest.raises(ValueError, match="only 2 rendered detectors.*--detectors 4"):
+        tr.build_mincam(data, 4)
+    # reusing a detector's transport stays possible when asked for explicitly
+    assert tr.build_mincam(data, detectors=[0, 1, 0]).detectors.tolist() == [0, 1, 0]
+
+
+@pytest.mark.parametrize(("k", "counts"), [(1, [1]), (4, [1, 2, 4]), (6, [1, 2, 4, 6])])
+def test_default_pixel_counts_double_up_to_the_detectors(k, counts):
+    assert tr.default_pixel_counts(k) == counts

@@ -242,6 +242,8 @@ def preview_cmd(scene, out, seed, n_shown, duration_s, spp):
 
 
 def _int_list(ctx, param, value):
+    if value is None:  # the option's default: decided by the command
+        return None
     try:
         out = [int(v) for v in value.split(",") if v.strip()]
     except ValueError:
@@ -369,9 +371,9 @@ _TRAIN_ERRORS = (ValueError, KeyError, RuntimeError, OSError, ImportError)
 @click.option(
     "--pixels",
     type=click.IntRange(1, 4096),
-    default=8,
-    show_default=True,
-    help="Freeform pixels of the minimalist camera.",
+    default=None,
+    help="Freeform pixels of the minimalist camera (default: one per rendered detector; "
+    "at most that many).",
 )
 @click.option(
     "--baseline",
@@ -491,10 +493,9 @@ def train_cmd(
 @click.option(
     "--pixels",
     "pixel_counts",
-    default="1,2,4,8",
-    show_default=True,
+    default=None,
     callback=_int_list,
-    help="Minimalist-camera pixel counts.",
+    help="Minimalist-camera pixel counts (default: 1, 2, 4, ... up to the rendered detectors).",
 )
 @click.option(
     "--baselines",
@@ -1018,6 +1019,17 @@ def _episode_options(f):
     return f
 
 
+def _family_detectors(family: str) -> int:
+    """Detectors of a family's camera (its default pixel count)."""
+    from mincam_render.core.config import ConfigError
+    from mincam_render.scenes.registry import load_family
+
+    try:
+        return load_family(family, seed=0, num_frames=30).camera().num_detectors
+    except ConfigError as err:
+        raise click.ClickException(str(err)) from None
+
+
 def _compare(out: Path, designs: tuple, **episode) -> dict:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
     from mincam_render.analysis.comparison import ComparisonConfig, run_comparison
@@ -1077,9 +1089,8 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
 @click.option(
     "--pixels",
     type=click.IntRange(1, 64),
-    default=8,
-    show_default=True,
-    help="Freeform pixels of the minimalist camera.",
+    default=None,
+    help="Freeform pixels of the minimalist camera (default: the family's detectors).",
 )
 @click.option(
     "--baseline-grid",
@@ -1110,6 +1121,7 @@ def pipeline_cmd(out, pixels, baseline_grid, **episode):
     """
     from mincam_render.analysis.comparison import Design
 
+    pixels = pixels or _family_detectors(episode["family"])
     _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
 
 
@@ -1123,10 +1135,9 @@ def pipeline_cmd(out, pixels, baseline_grid, **episode):
 )
 @click.option(
     "--pixels",
-    default="1,2,4,8,16",
-    show_default=True,
+    default=None,
     callback=_int_list,
-    help="Minimalist-camera pixel counts.",
+    help="Minimalist-camera pixel counts (default: 1, 2, 4, ... up to the family's detectors).",
 )
 @click.option(
     "--baseline-grids",
@@ -1167,7 +1178,9 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
         study_summary,
         study_table,
     )
+    from mincam_render.learn.train import default_pixel_counts
 
+    pixels = pixels or default_pixel_counts(_family_detectors(episode["family"]))
     designs = [Design(pixels=k) for k in pixels]
     if ablation:
         designs += [Design(pixels=k, sensor_model=False) for k in pixels]

@@ -499,7 +499,10 @@ def build_mincam(
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
 
-    Pixel ``j`` reads detector ``j % K`` of the data unless ``detectors`` is given.
+    Pixel ``j`` reads detector ``j`` of the data unless ``detectors`` is given
+    (None: every rendered detector). More pixels than rendered detectors is an
+    error: reusing a detector's transport for a second mask must be asked for
+    with an explicit ``detectors`` list.
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
     """
     k_data = data.transport.shape[1]
@@ -507,7 +510,13 @@ def build_mincam(
         n = k_data if pixels is None else int(pixels)
         if n < 1:
             raise ValueError(f"pixels = {pixels!r}: need at least 1")
-        detectors = [j % k_data for j in range(n)]
+        if n > k_data:
+            raise ValueError(
+                f"pixels = {n}: the data has only {k_data} rendered detectors; render it with "
+                f"more (`render --detectors {n}`, or camera.detectors = {n} in the scene "
+                "description), or ask for fewer pixels"
+            )
+        detectors = list(range(n))
     detectors = list(detectors)
     if any(not 0 <= d < k_data for d in detectors):
         raise ValueError(f"detectors {detectors} outside the data's [0, {k_data})")
@@ -1213,12 +1222,18 @@ def _parse_grid(g: Any) -> tuple[int, int]:
     return int(g[0]), int(g[1])
 
 
+def default_pixel_counts(num_detectors: int) -> list[int]:
+    """Pixel counts of a sweep: 1, 2, 4, ... up to ``num_detectors`` (and it, if not a power)."""
+    out = [1 << i for i in range(num_detectors.bit_length()) if 1 << i <= num_detectors]
+    return out if out[-1] == num_detectors else [*out, num_detectors]
+
+
 def sweep(
     train: TrainingData,
     val: TrainingData,
     test: TrainingData,
     *,
-    pixel_counts: Sequence[int] = (1, 2, 4, 8),
+    pixel_counts: Sequence[int] | None = None,
     baseline_grids: Sequence[Any] = ((1, 1), (2, 2), (4, 4), (8, 8), (16, 16)),
     config: TrainConfig = TrainConfig(),
     out_dir: str | os.PathLike | None = None,
@@ -1227,6 +1242,7 @@ def sweep(
 ) -> list[dict[str, Any]]:
     """Train minimalist cameras and baselines at several pixel counts; error vs pixels.
 
+    ``pixel_counts`` None: :func:`default_pixel_counts` of the rendered detectors.
     Every model gets the same ``config`` (equal training budget). With
     ``out_dir``, each run trains in ``out_dir/<name>/`` (resumable) and
     ``sweep.json``, ``sweep.md`` and ``sweep.png`` (log-x axis) are written.
@@ -1234,7 +1250,7 @@ def sweep(
     rows: list[dict[str, Any]] = []
     out = Path(out_dir) if out_dir is not None else None
     jobs: list[tuple[str, Callable[[], Model]]] = []
-    for k in pixel_counts:
+    for k in pixel_counts or default_pixel_counts(train.transport.shape[1]):
         jobs.append(
             (
                 f"mincam_{k}px",
