@@ -10,7 +10,9 @@ from mincam_render.analysis.comparison import (
     Design,
     episode_requests,
     reduction_factor,
+    reference_verdicts,
     study_table,
+    training_state,
 )
 from mincam_render.cli.main import main
 
@@ -22,6 +24,7 @@ def _design(pixels, mean, lo, hi, grid=None):
         "error": {"mean": mean, "ci95": [lo, hi]},
         "error_per_seed": [mean],
         "converged": True,
+        "state": "converged",
         "steps": [100],
         "train_wall_time_s": [1.0],
     }
@@ -37,7 +40,7 @@ def _result():
             "mincam-4px": _design(4, 1.0, 0.9, 1.1),
             "baseline-2x2": _design(4, 2.0, 1.8, 2.2, (2, 2)),
             "baseline-4x4": _design(16, 1.3, 1.05, 1.5, (4, 4)),  # overlaps 4 px
-            "baseline-8x8": _design(64, 0.8, 0.7, 0.9, (8, 8)),
+            "baseline-8x8": _design(64, 0.8, 0.7, 0.85, (8, 8)),
         },
     }
 
@@ -111,3 +114,16 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
     assert all(f"| {n} |" in table for n in metrics["designs"])
     for n in names:  # every minimalist design keeps its masks
         assert (out / "masks" / "patches" / n / "masks.json").is_file()
+
+
+def test_reference_verdicts_and_training_states():
+    res = _result()
+    v = reference_verdicts(res, "mincam-4px")
+    assert v[0].startswith("mincam-4px beats baseline-2x2")
+    assert v[1].startswith("no verdict") and v[2].startswith("baseline-8x8 beats mincam-4px")
+    done = {"converged": True, "stopped_early": True}
+    early = {"converged": False, "stopped_early": True}
+    spent = {"converged": False, "stopped_early": False}
+    assert training_state([done, done]) == "converged"
+    assert training_state([done, early]) == "early-stopped, not converged"
+    assert training_state([early, spent]) == "budget-limited"

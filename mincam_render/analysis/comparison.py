@@ -251,13 +251,28 @@ def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeE
     )
 
 
+def training_state(convergence: list[Mapping[str, Any]]) -> str:
+    """``converged`` (every run: last doubling of steps < 2 % better); else why not.
+
+    ``early-stopped, not converged``: validation stopped improving for the
+    patience window, yet the last doubling of steps still gained >= 2 %
+    (noisy or slow); ``budget-limited``: some run used every step.
+    """
+    if all(c["converged"] for c in convergence):
+        return "converged"
+    if all(c["converged"] or c["stopped_early"] for c in convergence):
+        return "early-stopped, not converged"
+    return "budget-limited"
+
+
 def _design_summary(runs: list[dict[str, Any]], interval: Interval) -> dict[str, Any]:
-    conv = [converged(r["history"]) for r in runs]
+    conv = [dict(converged(r["history"]), stopped_early=r["stopped_early"]) for r in runs]
     return {
         "model": runs[0]["model"],
         "error": interval.as_dict(),
         "error_per_seed": [_episode_errors([r["episodes"]]).point() for r in runs],
         "converged": all(c["converged"] for c in conv),
+        "state": training_state(conv),
         "convergence": conv,
         "train_wall_time_s": [r["train_wall_time_s"] for r in runs],
         "steps": [r["steps"] for r in runs],
@@ -416,7 +431,7 @@ def study_table(result: Mapping[str, Any]) -> str:
         lines.append(
             f"| {name} | {d['model']['pixels']} | {e['mean']:.3f} [{e['ci95'][0]:.3f}, "
             f"{e['ci95'][1]:.3f}] | {', '.join(f'{v:.3f}' for v in d['error_per_seed'])} | "
-            f"{'yes' if d['converged'] else 'no (budget-limited)'} | "
+            f"{d['state']} | "
             f"{', '.join(map(str, d['steps']))} | {sum(d['train_wall_time_s']):.0f} |"
         )
     t = result["trivial"]["error"]
@@ -424,8 +439,11 @@ def study_table(result: Mapping[str, Any]) -> str:
         f"| trivial predictor | 0 | {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}] "
         "| | | | |",
         "",
-        f"Verdict: {result['verdict']}.",
     ]
+    if "reference_verdicts" not in result:
+        lines.append(f"Verdict: {result['verdict']}.")
+    for line in result.get("reference_verdicts", []):
+        lines.append(f"- {line}")
     rf = result.get("reduction_factor")
     if rf is not None:
         lines.append(
@@ -437,3 +455,15 @@ def study_table(result: Mapping[str, Any]) -> str:
             )
         )
     return "\n".join(lines)
+
+
+def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
+    """The reference design against every baseline: a verdict only where intervals separate."""
+    designs = result["designs"]
+    ref = designs[reference]["error"]
+    iv = Interval(ref["mean"], *ref["ci95"])
+    return [
+        verdict(reference, iv, name, Interval(d["error"]["mean"], *d["error"]["ci95"]))
+        for name, d in designs.items()
+        if name.startswith("baseline-")
+    ]

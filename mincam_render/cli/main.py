@@ -1060,7 +1060,7 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
     click.echo(f"[2/2] test {result['error_name']}, mean over {cfg.seeds} seeds [95 % CI]")
     for name, d in result["designs"].items():
         e = d["error"]
-        state = "converged" if d["converged"] else "budget-limited"
+        state = d["state"]
         click.echo(
             f"  {name:18s} {e['mean']:.3f} [{e['ci95'][0]:.3f}, {e['ci95'][1]:.3f}]  "
             f"({state}; {sum(d['train_wall_time_s']):.0f} s training)"
@@ -1175,6 +1175,7 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     from mincam_render.analysis.comparison import (
         Design,
         reduction_factor,
+        reference_verdicts,
         study_summary,
         study_table,
     )
@@ -1188,6 +1189,7 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     result = _compare(out, tuple(designs), **episode)
     result["reduction_factor"] = reduction_factor(result, f"mincam-{reference_pixels}px")
     result["configurations"] = study_summary(result)
+    result["reference_verdicts"] = reference_verdicts(result, f"mincam-{reference_pixels}px")
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     (out / "study.md").write_text(study_table(result) + "\n")
     click.echo(study_table(result))
