@@ -107,7 +107,9 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
     ax.set_xscale("log", base=2)
     ax.set_xlabel("pixels")
     ax.set_ylabel(f"test {result['error_name']}")
-    ax.set_title(f"{result['task']}: {result['verdict']}", fontsize=8)
+    n = len(result["designs"])
+    what = result["verdict"] if n == 2 else f"{n} designs, mean over seeds, 95 % CI"
+    ax.set_title(f"{result['task']}: {what}", fontsize=8)
     ax.legend(fontsize=7)
     fig.tight_layout()
     out = Path(path)
