@@ -127,3 +127,11 @@ def test_reference_verdicts_and_training_states():
     assert training_state([done, done]) == "converged"
     assert training_state([done, early]) == "early-stopped, not converged"
     assert training_state([early, spent]) == "budget-limited"
+
+
+def test_cli_study_refuses_a_reference_outside_the_pixel_counts(tmp_path):
+    args = ["study", "--family", "patches", "--pixels", "1,2", "--reference-pixels", "4",
+            "--out", str(tmp_path / "s")]  # fmt: skip
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2 and "--reference-pixels" in res.output
+    assert "Traceback" not in res.output and not (tmp_path / "s").exists()

@@ -342,8 +342,10 @@ def test_concat_joins_static_episodes_and_refuses_temporal_or_mismatched_ones():
     np.testing.assert_array_equal(both.frames_np(40, 70), b.frames_np(0, 30))
     np.testing.assert_array_equal(both.labels["count"][:40], a.labels["count"])
     assert both.source == {"episodes": [a.source, b.source]}
+    temporal = replace(a, history=3)
+    assert tr.TrainingData.concat([temporal]) is temporal  # one episode: nothing to join
     with pytest.raises(ValueError, match="temporal"):
-        tr.TrainingData.concat([replace(a, history=3), b])
+        tr.TrainingData.concat([temporal, b])
     with pytest.raises(ValueError, match="differs"):
         tr.TrainingData.concat([a, replace(b, fps=10.0)])
     with pytest.raises(ValueError, match="no episodes"):
@@ -362,3 +364,16 @@ def test_more_pixels_than_rendered_detectors_is_an_error_unless_asked_for():
 @pytest.mark.parametrize(("k", "counts"), [(1, [1]), (4, [1, 2, 4]), (6, [1, 2, 4, 6])])
 def test_default_pixel_counts_double_up_to_the_detectors(k, counts):
     assert tr.default_pixel_counts(k) == counts
+
+
+def test_a_run_is_not_resumed_on_other_data(tmp_path):
+    cfg = tr.TrainConfig(max_steps=20, batch_size=16, eval_every=10)
+    train, val, test = linear_task(120, seed=3).split((0.6, 0.2, 0.2))
+    tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=cfg)
+    other = linear_task(120, seed=4).subset(0, 60, "train")
+    with pytest.raises(ValueError, match="trained with another data"):
+        tr.train_run(other, val, test, tmp_path / "run", pixels=2, config=cfg)
+    with pytest.raises(ValueError, match="trained with another config"):
+        tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=replace(cfg, lr=0.01))
+    again = tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=cfg)  # same: resumes
+    assert again["steps"] == 20

@@ -111,7 +111,7 @@ class ComparisonConfig:
         test_frames: frames of each test episode.
         test_episodes: number of test episodes (>= 2 for an interval over episodes).
         seeds: training seeds per design (>= 2 for an interval over seeds).
-        designs: the camera designs; the verdict compares the first two.
+        designs: the camera designs; with two, the verdict compares them.
         train: the training recipe (its ``seed`` is replaced per training seed).
         fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
     """
@@ -353,12 +353,17 @@ def run_comparison(
         "episodes": {k: _episode_record(d) for k, d in data.items()},
         "designs": designs,
         "trivial": {"error": trivial_iv.as_dict(), "episodes": trivial},
-        "verdict": verdict(first, intervals[first], second, intervals[second]),
+        "verdict": (
+            verdict(first, intervals[first], second, intervals[second])
+            if len(cfg.designs) == 2
+            else None
+        ),
         "versus_trivial": {
             name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
         },
         "figure": str(out / "comparison.png"),
     }
+    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
         result["masks"] = {
@@ -440,7 +445,7 @@ def study_table(result: Mapping[str, Any]) -> str:
         "| | | | |",
         "",
     ]
-    if "reference_verdicts" not in result:
+    if result.get("verdict"):
         lines.append(f"Verdict: {result['verdict']}.")
     for line in result.get("reference_verdicts", []):
         lines.append(f"- {line}")

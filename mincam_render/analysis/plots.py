@@ -94,7 +94,7 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
         ax.errorbar(
             px,
             mean,
-            yerr=[mean - ci[:, 0], ci[:, 1] - mean],
+            yerr=np.clip([mean - ci[:, 0], ci[:, 1] - mean], 0.0, None),
             fmt="o-",
             color=colour,
             capsize=4,
@@ -108,7 +108,7 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
     ax.set_xlabel("pixels")
     ax.set_ylabel(f"test {result['error_name']}")
     n = len(result["designs"])
-    what = result["verdict"] if n == 2 else f"{n} designs, mean over seeds, 95 % CI"
+    what = result["verdict"] or f"{n} designs, mean over seeds, 95 % CI"
     ax.set_title(f"{result['task']}: {what}", fontsize=8)
     ax.legend(fontsize=7)
     fig.tight_layout()

@@ -1067,7 +1067,8 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
         )
     t = result["trivial"]["error"]
     click.echo(f"  {'trivial':18s} {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
-    click.echo(f"  verdict: {result['verdict']}")
+    if result["verdict"]:
+        click.echo(f"  verdict: {result['verdict']}")
     for name, against in result["versus_trivial"].items():
         click.echo(f"  {name} against the trivial predictor: {against}")
     click.echo(
@@ -1103,7 +1104,7 @@ def pipeline_cmd(out, pixels, baseline_grid, **episode):
     """The main job: a minimalist camera against a conventional one, with a verdict that holds.
 
     Renders independent episodes of the family (other scene seeds) into
-    OUT/episodes: one to train on, one to stop early on, TEST_EPISODES to test
+    OUT/episodes: TRAIN_EPISODES to train on, one to stop early on, TEST_EPISODES to test
     on, at the measured (auto) fidelity unless --spp is given. Trains a
     PIXELS-pixel minimalist camera and a baseline camera with SEEDS training
     seeds each (same recipe and budget), tests every run on every test
@@ -1182,6 +1183,10 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     from mincam_render.learn.train import default_pixel_counts
 
     pixels = pixels or default_pixel_counts(_family_detectors(episode["family"]))
+    if reference_pixels not in pixels:
+        raise click.BadParameter(
+            f"{reference_pixels} is not among --pixels {pixels}", param_hint="--reference-pixels"
+        )
     designs = [Design(pixels=k) for k in pixels]
     if ablation:
         designs += [Design(pixels=k, sensor_model=False) for k in pixels]

@@ -246,10 +246,12 @@ class TrainingData:
         if not parts:
             raise ValueError("concat: no episodes given")
         first = parts[0]
+        if len(parts) == 1:
+            return first
         if any(p.history != 1 for p in parts):
             raise ValueError(
                 "concat: temporal data (history > 1) would get windows across episode "
-                "boundaries; train on one episode"
+                "boundaries; train on one episode (--train-episodes 1)"
             )
         for p in parts[1:]:
             same = (p.camera, p.label_specs, p.fps, p.transport.dtype, p.scales is None)
@@ -1414,6 +1416,7 @@ def train_run(
             for s in train.label_specs
         ],
     }
+    _refuse_other_data(out, run, resume)
     _write_json_atomic(out / "run.json", run)
     res = train_model(
         model,
@@ -1439,6 +1442,24 @@ def train_run(
     }
     _write_json_atomic(out / "metrics.json", metrics)
     return metrics
+
+
+def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
+    """A run resumed on other data or another recipe would mix two trainings: refuse it."""
+    path, ckpt = out / "run.json", out / "checkpoint.pt"
+    if not (resume and path.is_file() and ckpt.is_file()):
+        return
+    try:
+        old = json.loads(path.read_text())
+    except ValueError:
+        return  # a damaged run.json is rewritten; the checkpoint check still applies
+    new = json.loads(json.dumps(run, default=str))
+    for key in ("data", "config"):
+        if old.get(key) != new[key]:
+            raise ValueError(
+                f"{out} was trained with another {key} (see {path}); use another --out, "
+                "delete it, or train with --no-resume"
+            )
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
