@@ -377,3 +377,18 @@ def test_a_run_is_not_resumed_on_other_data(tmp_path):
         tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=replace(cfg, lr=0.01))
     again = tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=cfg)  # same: resumes
     assert again["steps"] == 20
+
+
+def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):
+    cfg = tr.TrainConfig(max_steps=40, batch_size=16, eval_every=10, patience=100)
+    train, val, _ = linear_task(120, seed=5).split((0.6, 0.2, 0.2))
+    model = tr.build_mincam(train, 2)
+    tr.train_model(model, train, val, cfg, out_dir=tmp_path, stop_after_steps=20)
+    # a run killed after logging step 30 but before its checkpoint left this behind
+    with (tmp_path / "history.jsonl").open("a") as fh:
+        fh.write(json.dumps({"step": 30, "train_loss": 1.0, "val_loss": 9.0}) + "\n")
+    model = tr.build_mincam(train, 2)
+    res = tr.train_model(model, train, val, cfg, out_dir=tmp_path)
+    steps = [json.loads(line)["step"] for line in (tmp_path / "history.jsonl").open()]
+    assert steps == [10, 20, 30, 40] == [h["step"] for h in res.history]
+    assert 9.0 not in [json.loads(line)["val_loss"] for line in (tmp_path / "history.jsonl").open()]

@@ -42,6 +42,7 @@ import numpy as np
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
+from mincam_render.data.writer_lock import LOCK_NAME, exclusive_writer
 from mincam_render.render import precision
 from mincam_render.render.fidelity import Fidelity
 
@@ -765,7 +766,7 @@ def _open_or_plan(request: RenderRequest, out: Path, use_plan_cache: bool) -> di
                 versions,
             )
         return manifest
-    if out.is_dir() and any(out.iterdir()):
+    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()):
         raise ds.DatasetError(
             f"{out} is not empty and holds no {ds.MANIFEST_NAME}; refusing to render into it"
         )
@@ -827,7 +828,22 @@ def render_dataset(
         raise ValueError(f"workers = {workers!r}: allowed an integer in [0, 256]")
     if not isinstance(shards_per_worker, int) or shards_per_worker < 1:
         raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
-    out = Path(out)
+    with exclusive_writer(out, "render") as locked:
+        return _render_locked(
+            request, locked, workers, ray_address, progress, shards_per_worker, use_plan_cache
+        )
+
+
+def _render_locked(
+    request: RenderRequest,
+    out: Path,
+    workers: int,
+    ray_address: str | None,
+    progress: bool,
+    shards_per_worker: int,
+    use_plan_cache: bool,
+) -> RenderSummary:
+    """:func:`render_dataset` while holding ``out``'s writer lock."""
     t_start = time.perf_counter()
     manifest = _open_or_plan(request, out, use_plan_cache)
     for tmp in ds.remove_stale_temporaries(out):

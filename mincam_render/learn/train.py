@@ -883,6 +883,13 @@ def _atomic_save(obj: Any, path: Path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
+def _write_history(path: Path, history: list[dict[str, float]]) -> None:
+    """``history.jsonl``: one JSON line per evaluation kept in the checkpoint (atomic)."""
+    from mincam_render.data.dataset import atomic_write_bytes
+
+    atomic_write_bytes(path, "".join(json.dumps(r) + "\n" for r in history).encode())
+
+
 def _load_checkpoint(path: Path) -> dict[str, Any]:
     """``torch.load`` of a checkpoint; a damaged file is a one-line ValueError naming it."""
     try:
@@ -969,7 +976,10 @@ def train_model(
         from torch.utils.tensorboard import SummaryWriter
 
         out.mkdir(parents=True, exist_ok=True)
-        writer = SummaryWriter(str(out))
+        # resume is exact: events after the checkpoint's step (written by a killed run)
+        # are purged, and history.jsonl is cut back to the checkpoint's evaluations
+        writer = SummaryWriter(str(out), purge_step=step if step > 0 else None)
+        _write_history(out / "history.jsonl", history)
 
     def save_checkpoint() -> None:
         if ckpt_path is None:
@@ -1378,8 +1388,30 @@ def train_run(
     test episodes evaluated one by one (``metrics["episodes"][name]``), beside
     ``test``; the metrics also hold the validation ``history``.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    from mincam_render.data.writer_lock import exclusive_writer
+
+    with exclusive_writer(out_dir, "training") as out:
+        return _train_run_locked(
+            train, val, test, out, pixels, baseline_grid, sensor_model, config, on_the_fly,
+            episodes, resume, progress,
+        )  # fmt: skip
+
+
+def _train_run_locked(
+    train: TrainingData,
+    val: TrainingData,
+    test: TrainingData | None,
+    out: Path,
+    pixels: int | None,
+    baseline_grid: tuple[int, int] | None,
+    sensor_model: bool,
+    config: TrainConfig,
+    on_the_fly: RenderedBatches | None,
+    episodes: Mapping[str, TrainingData] | None,
+    resume: bool,
+    progress: bool,
+) -> dict[str, Any]:
+    """:func:`train_run` while holding ``out``'s writer lock."""
     if baseline_grid is not None:
         model: Model = build_baseline(
             train, baseline_grid, count_loss=config.count_loss, seed=config.seed
