@@ -131,6 +131,16 @@ def _damage(root: Path, how: str) -> str:
     if how == "truncated-shard":
         npy.write_bytes(npy.read_bytes()[:300])
         return npy.name
+    if how == "flipped-byte":  # same size, intact header: one value silently wrong
+        data = bytearray(npy.read_bytes())
+        data[len(data) // 2] ^= 0x40
+        npy.write_bytes(bytes(data))
+        return npy.name
+    if how == "corrupt-npy-header":
+        data = bytearray(npy.read_bytes())
+        data[10:40] = b"{'descr': <f4', 'fortran_ord"[:30]
+        npy.write_bytes(bytes(data))
+        return npy.name
     if how == "truncated-shard-metadata":
         meta.write_bytes(meta.read_bytes()[:40])
         return meta.name
@@ -147,6 +157,8 @@ def _damage(root: Path, how: str) -> str:
         "missing-shard",
         "truncated-shard",
         "truncated-shard-metadata",
+        "flipped-byte",
+        "corrupt-npy-header",
     ],
 )
 def test_damaged_datasets_fail_training_with_one_line(tmp_path, tiny_dataset, how):

@@ -166,6 +166,9 @@ class TrainingData:
         """A split of a dataset opened with ``mincam_render.data.dataset.open_dataset``."""
         if split not in ds.splits:
             raise ValueError(f"split {split!r} not in the dataset; have {sorted(ds.splits)}")
+        check = getattr(ds, "check_intact", None)
+        if check is not None:  # never train on a shard that fails its checksums
+            check()
         family = getattr(ds, "family", None)
         name = family if isinstance(family, str) else getattr(family, "name", "")
         if isinstance(family, str):
