@@ -46,8 +46,16 @@ from mincam_render.analysis.statistics import (
 )
 from mincam_render.core.labels import LabelKind
 from mincam_render.core.seeds import stream_seed
-from mincam_render.data.render_job import RenderRequest
-from mincam_render.learn.train import TrainConfig, TrainingData, metrics
+from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
+from mincam_render.data.render_job import RenderRequest, package_versions, render_dataset
+from mincam_render.export.masks import export_masks
+from mincam_render.learn.train import (
+    TrainConfig,
+    TrainingData,
+    metrics,
+    run_masks,
+    train_run,
+)
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
 SHARDS_PER_EPISODE = 4
@@ -172,9 +180,6 @@ def render_episodes(
     cfg: ComparisonConfig, out: Path, *, workers: int = 2, progress: bool = True
 ) -> dict[str, TrainingData]:
     """Render (or resume) every episode into ``out/episodes/<name>``; their training views."""
-    from mincam_render.data.dataset import open_dataset
-    from mincam_render.data.render_job import render_dataset
-
     data = {}
     for name, request in episode_requests(cfg).items():
         path = out / "episodes" / name
@@ -186,8 +191,6 @@ def render_episodes(
 
 def _episode_record(data: TrainingData) -> dict[str, Any]:
     """Samples, provenance and the sha256 of the episode dataset's manifest."""
-    from mincam_render.data.dataset import MANIFEST_NAME, sha256_file
-
     path = Path(data.source["dataset"]) / MANIFEST_NAME
     return {"samples": len(data), **data.source, "manifest_sha256": sha256_file(path)}
 
@@ -220,8 +223,6 @@ def _design_runs(
 
     ``splits``: ``{"train": TrainingData, "val": TrainingData, "tests": {name: TrainingData}}``.
     """
-    from mincam_render.learn.train import train_run
-
     runs = []
     for i in range(cfg.seeds):
         seed = stream_seed(cfg.seed, f"train/{design.name}", i)
@@ -288,10 +289,6 @@ def _keep_masks(
     task: str,
 ) -> dict[str, str]:
     """Export into ``out_dir`` the masks of the run with the lowest validation loss."""
-    from mincam_render.data.render_job import package_versions
-    from mincam_render.export.masks import export_masks
-    from mincam_render.learn.train import run_masks
-
     best = min(runs, key=lambda r: r["best_val_loss"])
     m, camera, run = run_masks(best["run_dir"])
     exported = export_masks(
@@ -472,3 +469,11 @@ def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
         for name, d in designs.items()
         if name.startswith("baseline-")
     ]
+
+
+def summarise_study(result: dict[str, Any], reference: str) -> dict[str, Any]:
+    """Add a study's reduction factor, per-configuration summary and reference verdicts."""
+    result["reduction_factor"] = reduction_factor(result, reference)
+    result["configurations"] = study_summary(result)
+    result["reference_verdicts"] = reference_verdicts(result, reference)
+    return result

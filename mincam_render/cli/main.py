@@ -980,7 +980,7 @@ def _episode_options(f):
     from mincam_render.analysis.comparison import ComparisonConfig as C
 
     options = [
-        click.option("--family", default="workspace", show_default=True,
+        click.option("--family", default=C.family, show_default=True,
                      help="Scene family name or scene description (.toml)."),
         click.option("--train-episodes", type=click.IntRange(1, 100),
                      default=C.train_episodes, show_default=True,
@@ -998,7 +998,7 @@ def _episode_options(f):
                      show_default=True, help="Independent test episodes (other scene seeds)."),
         click.option("--seeds", type=click.IntRange(1, 100), default=C.seeds, show_default=True,
                      help="Training seeds per camera design."),
-        click.option("--seed", type=click.IntRange(0), default=0, show_default=True,
+        click.option("--seed", type=click.IntRange(0), default=C.seed, show_default=True,
                      help="Root random seed."),
         click.option("--steps", type=click.IntRange(1), default=C().train.max_steps,
                      show_default=True,
@@ -1173,13 +1173,7 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     Example:
       mincam-render study --family patches --out runs/study-patches --spp 16
     """
-    from mincam_render.analysis.comparison import (
-        Design,
-        reduction_factor,
-        reference_verdicts,
-        study_summary,
-        study_table,
-    )
+    from mincam_render.analysis.comparison import Design, study_table, summarise_study
     from mincam_render.learn.train import default_pixel_counts
 
     pixels = pixels or default_pixel_counts(_family_detectors(episode["family"]))
@@ -1191,10 +1185,9 @@ def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode
     if ablation:
         designs += [Design(pixels=k, sensor_model=False) for k in pixels]
     designs += [Design(grid=g) for g in baseline_grids]
-    result = _compare(out, tuple(designs), **episode)
-    result["reduction_factor"] = reduction_factor(result, f"mincam-{reference_pixels}px")
-    result["configurations"] = study_summary(result)
-    result["reference_verdicts"] = reference_verdicts(result, f"mincam-{reference_pixels}px")
+    result = summarise_study(
+        _compare(out, tuple(designs), **episode), f"mincam-{reference_pixels}px"
+    )
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     (out / "study.md").write_text(study_table(result) + "\n")
     click.echo(study_table(result))

@@ -828,147 +828,132 @@ def render_dataset(
         raise ValueError(f"workers = {workers!r}: allowed an integer in [0, 256]")
     if not isinstance(shards_per_worker, int) or shards_per_worker < 1:
         raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
-    with exclusive_writer(out, "render") as locked:
-        return _render_locked(
-            request, locked, workers, ray_address, progress, shards_per_worker, use_plan_cache
-        )
+    with exclusive_writer(out, "render") as out:
+        t_start = time.perf_counter()
+        manifest = _open_or_plan(request, out, use_plan_cache)
+        for tmp in ds.remove_stale_temporaries(out):
+            log.info("removed %s, left by a killed render", tmp)
+        (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
+        job = manifest["job"]
+        num_shards = manifest["num_shards"]
 
-
-def _render_locked(
-    request: RenderRequest,
-    out: Path,
-    workers: int,
-    ray_address: str | None,
-    progress: bool,
-    shards_per_worker: int,
-    use_plan_cache: bool,
-) -> RenderSummary:
-    """:func:`render_dataset` while holding ``out``'s writer lock."""
-    t_start = time.perf_counter()
-    manifest = _open_or_plan(request, out, use_plan_cache)
-    for tmp in ds.remove_stale_temporaries(out):
-        log.info("removed %s, left by a killed render", tmp)
-    (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
-    job = manifest["job"]
-    num_shards = manifest["num_shards"]
-
-    kept, repaired, todo = [], [], []
-    changed = False
-    for i in range(num_shards):
-        rec = manifest["shards"][i]
-        found, reason = ds.verify_shard(out, i, rec)
-        if found is not None and rec is None:
-            # finished by a previous run that was killed before updating the manifest
-            meta = json.loads(ds.shard_paths(out, i)[1].read_text())
-            if meta.get("request_sha256") != job["request_sha256"]:
-                found, reason = None, "belongs to another configuration"
-        if found is not None:
-            kept.append(i)
-            if rec != found:
-                manifest["shards"][i] = found
+        kept, repaired, todo = [], [], []
+        changed = False
+        for i in range(num_shards):
+            rec = manifest["shards"][i]
+            found, reason = ds.verify_shard(out, i, rec)
+            if found is not None and rec is None:
+                # finished by a previous run that was killed before updating the manifest
+                meta = json.loads(ds.shard_paths(out, i)[1].read_text())
+                if meta.get("request_sha256") != job["request_sha256"]:
+                    found, reason = None, "belongs to another configuration"
+            if found is not None:
+                kept.append(i)
+                if rec != found:
+                    manifest["shards"][i] = found
+                    changed = True
+                continue
+            if rec is not None or reason != "missing":
+                log.warning("shard %d: %s; re-rendering it", i, reason)
+                repaired.append(i)
+                manifest["shards"][i] = None
                 changed = True
-            continue
-        if rec is not None or reason != "missing":
-            log.warning("shard %d: %s; re-rendering it", i, reason)
-            repaired.append(i)
-            manifest["shards"][i] = None
-            changed = True
-        todo.append(i)
-    if changed or (not todo and not manifest["complete"]):
-        manifest["complete"] = not todo
-        ds.write_manifest(out, manifest)
+            todo.append(i)
+        if changed or (not todo and not manifest["complete"]):
+            manifest["complete"] = not todo
+            ds.write_manifest(out, manifest)
 
-    frames_of = {
-        i: min(job["num_frames"], (i + 1) * job["shard_frames"]) - i * job["shard_frames"]
-        for i in range(num_shards)
-    }
-    backgrounds_of = _shard_backgrounds(out, manifest, progress) if todo else (lambda i: None)
-    done_frames = sum(frames_of[i] for i in kept)
-    _append_log(
-        out,
-        {
-            "event": "start",
-            "pid": os.getpid(),
-            "time": time.time(),
-            "kept": kept,
-            "repaired": repaired,
-            "todo": todo,
-            "workers": workers,
-            "ray": ray_address,
-        },
-    )
-    bar = None
-    if progress and todo:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=job["num_frames"],
-            initial=done_frames,
-            unit="frame",
-            desc=f"render {out.name}",
-            dynamic_ncols=True,
-            smoothing=0.1,
-        )
-
-    rendered: list[int] = []
-
-    def finish(result: tuple[int, np.ndarray, dict, float], per_frame_progress: bool) -> None:
-        shard, stored, meta, seconds = result
-        record = ds.write_shard(out, shard, stored, meta)
-        manifest["shards"][shard] = record
-        manifest["complete"] = all(s is not None for s in manifest["shards"])
-        ds.write_manifest(out, manifest)
-        rendered.append(shard)
+        frames_of = {
+            i: min(job["num_frames"], (i + 1) * job["shard_frames"]) - i * job["shard_frames"]
+            for i in range(num_shards)
+        }
+        backgrounds_of = _shard_backgrounds(out, manifest, progress) if todo else (lambda i: None)
+        done_frames = sum(frames_of[i] for i in kept)
         _append_log(
             out,
             {
-                "event": "shard",
-                "shard": shard,
-                "frames": [meta["start"], meta["stop"]],
-                "seconds": seconds,
+                "event": "start",
                 "pid": os.getpid(),
                 "time": time.time(),
+                "kept": kept,
+                "repaired": repaired,
+                "todo": todo,
+                "workers": workers,
+                "ray": ray_address,
             },
         )
-        if bar is not None and not per_frame_progress:
-            bar.update(meta["stop"] - meta["start"])
+        bar = None
+        if progress and todo:
+            from tqdm import tqdm
 
-    try:
-        if not todo:
-            pass
-        elif ray_address is not None:
-            _run_ray(ray_address, job, todo, finish, shards_per_worker, backgrounds_of)
-        elif workers == 0:
-            on_frame = None if bar is None else bar.update
-            for i in todo:
-                finish(render_shard(job, i, backgrounds_of(i), on_frame), on_frame is not None)
-        else:
-            _run_processes(job, todo, finish, workers, shards_per_worker, bar, backgrounds_of)
-    finally:
-        if bar is not None:
-            bar.close()
-    seconds = time.perf_counter() - t_start
-    n_rendered = sum(frames_of[i] for i in rendered)
-    _append_log(
-        out,
-        {
-            "event": "end",
-            "pid": os.getpid(),
-            "time": time.time(),
-            "rendered": rendered,
-            "seconds": seconds,
-        },
-    )
-    return RenderSummary(
-        path=out,
-        num_frames=job["num_frames"],
-        shards_total=num_shards,
-        shards_rendered=sorted(rendered),
-        shards_kept=kept,
-        shards_repaired=repaired,
-        seconds=seconds,
-        frames_per_s=n_rendered / seconds if seconds > 0 else 0.0,
-    )
+            bar = tqdm(
+                total=job["num_frames"],
+                initial=done_frames,
+                unit="frame",
+                desc=f"render {out.name}",
+                dynamic_ncols=True,
+                smoothing=0.1,
+            )
+
+        rendered: list[int] = []
+
+        def finish(result: tuple[int, np.ndarray, dict, float], per_frame_progress: bool) -> None:
+            shard, stored, meta, seconds = result
+            record = ds.write_shard(out, shard, stored, meta)
+            manifest["shards"][shard] = record
+            manifest["complete"] = all(s is not None for s in manifest["shards"])
+            ds.write_manifest(out, manifest)
+            rendered.append(shard)
+            _append_log(
+                out,
+                {
+                    "event": "shard",
+                    "shard": shard,
+                    "frames": [meta["start"], meta["stop"]],
+                    "seconds": seconds,
+                    "pid": os.getpid(),
+                    "time": time.time(),
+                },
+            )
+            if bar is not None and not per_frame_progress:
+                bar.update(meta["stop"] - meta["start"])
+
+        try:
+            if not todo:
+                pass
+            elif ray_address is not None:
+                _run_ray(ray_address, job, todo, finish, shards_per_worker, backgrounds_of)
+            elif workers == 0:
+                on_frame = None if bar is None else bar.update
+                for i in todo:
+                    finish(render_shard(job, i, backgrounds_of(i), on_frame), on_frame is not None)
+            else:
+                _run_processes(job, todo, finish, workers, shards_per_worker, bar, backgrounds_of)
+        finally:
+            if bar is not None:
+                bar.close()
+        seconds = time.perf_counter() - t_start
+        n_rendered = sum(frames_of[i] for i in rendered)
+        _append_log(
+            out,
+            {
+                "event": "end",
+                "pid": os.getpid(),
+                "time": time.time(),
+                "rendered": rendered,
+                "seconds": seconds,
+            },
+        )
+        return RenderSummary(
+            path=out,
+            num_frames=job["num_frames"],
+            shards_total=num_shards,
+            shards_rendered=sorted(rendered),
+            shards_kept=kept,
+            shards_repaired=repaired,
+            seconds=seconds,
+            frames_per_s=n_rendered / seconds if seconds > 0 else 0.0,
+        )
 
 
 def _shard_backgrounds(out: Path, manifest: dict, progress: bool) -> Callable[[int], dict | None]:

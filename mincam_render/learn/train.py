@@ -1394,89 +1394,68 @@ def train_run(
     from mincam_render.data.writer_lock import exclusive_writer
 
     with exclusive_writer(out_dir, "training") as out:
-        return _train_run_locked(
-            train, val, test, out, pixels, baseline_grid, sensor_model, config, on_the_fly,
-            episodes, resume, progress,
-        )  # fmt: skip
-
-
-def _train_run_locked(
-    train: TrainingData,
-    val: TrainingData,
-    test: TrainingData | None,
-    out: Path,
-    pixels: int | None,
-    baseline_grid: tuple[int, int] | None,
-    sensor_model: bool,
-    config: TrainConfig,
-    on_the_fly: RenderedBatches | None,
-    episodes: Mapping[str, TrainingData] | None,
-    resume: bool,
-    progress: bool,
-) -> dict[str, Any]:
-    """:func:`train_run` while holding ``out``'s writer lock."""
-    if baseline_grid is not None:
-        model: Model = build_baseline(
-            train, baseline_grid, count_loss=config.count_loss, seed=config.seed
+        if baseline_grid is not None:
+            model: Model = build_baseline(
+                train, baseline_grid, count_loss=config.count_loss, seed=config.seed
+            )
+        else:
+            model = build_mincam(
+                train,
+                pixels,
+                sensor_model=sensor_model,
+                count_loss=config.count_loss,
+                seed=config.seed,
+            )
+        run = {
+            "model": describe_model(model),
+            "camera": _camera_dict(train.camera),
+            "data": {
+                "train": train.source,
+                "val": val.source,
+                "test": test.source if test is not None else None,
+                "train_samples": len(train),
+                "on_the_fly": on_the_fly is not None,
+            },
+            "config": asdict(config),
+            "fps": train.fps,
+            "history": train.history,
+            "label_specs": [
+                {
+                    "name": s.name,
+                    "kind": s.kind.value,
+                    "size": s.size,
+                    "unit": s.unit,
+                    "median_filter_s": s.median_filter_s,
+                }
+                for s in train.label_specs
+            ],
+        }
+        _refuse_other_data(out, run, resume)
+        _write_json_atomic(out / "run.json", run)
+        res = train_model(
+            model,
+            on_the_fly if on_the_fly is not None else train,
+            val,
+            config,
+            out_dir=out,
+            resume=resume,
+            progress=progress,
+            desc=f"{run['model']['kind']} {model.num_pixels} px",
         )
-    else:
-        model = build_mincam(
-            train,
-            pixels,
-            sensor_model=sensor_model,
-            count_loss=config.count_loss,
-            seed=config.seed,
-        )
-    run = {
-        "model": describe_model(model),
-        "camera": _camera_dict(train.camera),
-        "data": {
-            "train": train.source,
-            "val": val.source,
-            "test": test.source if test is not None else None,
+        metrics = {
+            "model": run["model"],
+            "steps": res.steps,
+            "best_step": res.best_step,
+            "best_val_loss": res.best_val_loss,
+            "stopped_early": res.stopped_early,
+            "train_wall_time_s": res.wall_time_s,
             "train_samples": len(train),
-            "on_the_fly": on_the_fly is not None,
-        },
-        "config": asdict(config),
-        "fps": train.fps,
-        "history": train.history,
-        "label_specs": [
-            {
-                "name": s.name,
-                "kind": s.kind.value,
-                "size": s.size,
-                "unit": s.unit,
-                "median_filter_s": s.median_filter_s,
-            }
-            for s in train.label_specs
-        ],
-    }
-    _refuse_other_data(out, run, resume)
-    _write_json_atomic(out / "run.json", run)
-    res = train_model(
-        model,
-        on_the_fly if on_the_fly is not None else train,
-        val,
-        config,
-        out_dir=out,
-        resume=resume,
-        progress=progress,
-        desc=f"{run['model']['kind']} {model.num_pixels} px",
-    )
-    metrics = {
-        "model": run["model"],
-        "steps": res.steps,
-        "best_step": res.best_step,
-        "best_val_loss": res.best_val_loss,
-        "stopped_early": res.stopped_early,
-        "train_wall_time_s": res.wall_time_s,
-        "train_samples": len(train),
-        "test": evaluate(model, test) if test is not None else None,
-        "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
-        "history": res.history,
-    }
-    _write_json_atomic(out / "metrics.json", metrics)
-    return metrics
+            "test": evaluate(model, test) if test is not None else None,
+            "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
+            "history": res.history,
+        }
+        _write_json_atomic(out / "metrics.json", metrics)
+        return metrics
 
 
 def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
