@@ -1,34 +1,50 @@
-"""mincam_render: physically-based rendering for designing minimalist cameras."""
+"""mincam_render: physically-based rendering for designing minimalist cameras.
 
-from mincam_render.optics.camera import (
-    DetectorElectronics,
-    DetectorLayout,
-    DirectionalResponse,
-    FreeformCamera,
-)
-from mincam_render.optics.maskplane import logits_for_transmittance, mask_power, transmittance
-from mincam_render.optics.radiometry import parallel_rectangles_coupling
-from mincam_render.optics.sensor import detector_voltage, leaky_saturation
-from mincam_render.render.backend import Backend, BackendUnavailableError, use_variant
-from mincam_render.render.mitsuba_scene import SceneError, demo_scene, load_scene
-from mincam_render.render.transport import render_transport
+The public names below are imported on first use (PEP 562), so that
+``mincam-render --help`` and other light commands start without loading
+PyTorch, Mitsuba and Dr.Jit.
+"""
 
-__all__ = [
-    "Backend",
-    "BackendUnavailableError",
-    "DetectorElectronics",
-    "DetectorLayout",
-    "DirectionalResponse",
-    "FreeformCamera",
-    "SceneError",
-    "demo_scene",
-    "detector_voltage",
-    "leaky_saturation",
-    "load_scene",
-    "logits_for_transmittance",
-    "mask_power",
-    "parallel_rectangles_coupling",
-    "render_transport",
-    "transmittance",
-    "use_variant",
-]
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the module that defines it
+_EXPORTS = {
+    "Backend": "mincam_render.render.backend",
+    "BackendUnavailableError": "mincam_render.render.backend",
+    "use_variant": "mincam_render.render.backend",
+    "DetectorElectronics": "mincam_render.optics.camera",
+    "DetectorLayout": "mincam_render.optics.camera",
+    "DirectionalResponse": "mincam_render.optics.camera",
+    "FreeformCamera": "mincam_render.optics.camera",
+    "logits_for_transmittance": "mincam_render.optics.maskplane",
+    "mask_power": "mincam_render.optics.maskplane",
+    "transmittance": "mincam_render.optics.maskplane",
+    "parallel_rectangles_coupling": "mincam_render.optics.radiometry",
+    "detector_voltage": "mincam_render.optics.sensor",
+    "leaky_saturation": "mincam_render.optics.sensor",
+    "SceneError": "mincam_render.render.mitsuba_scene",
+    "demo_scene": "mincam_render.render.mitsuba_scene",
+    "load_scene": "mincam_render.render.mitsuba_scene",
+    "render_transport": "mincam_render.render.transport",
+    "render_transport_with_noise": "mincam_render.render.transport",
+    "check_scene": "mincam_render.render.user_scene",
+    "check_transport": "mincam_render.render.user_scene",
+    "rescale_scene": "mincam_render.render.user_scene",
+    "sensor_pose": "mincam_render.render.user_scene",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'mincam_render' has no attribute {name!r}")
+    value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -3,8 +3,9 @@
 # CPU backend, a virtual environment in .venv, and the package with pinned deps.
 #
 # Usage: scripts/setup.sh [--dev]
-#   --dev   also install the test and lint tools (pytest, hypothesis, ruff) and the
-#           traffic (Eclipse SUMO) and ray extras, so the traffic and Ray tests run
+#   --dev   also install the test and lint tools (pytest, hypothesis, ruff), the
+#           traffic (Eclipse SUMO) and ray extras, so the traffic and Ray tests run,
+#           and Debian's chromium, so the HTML reports are checked in a real browser
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -27,18 +28,23 @@ find_libllvm() {
     echo "$best"
 }
 
+# apt_install PACKAGE WHY: install a Debian package as root (or with sudo)
+apt_install() {
+    local sudo=""
+    if [[ "$(id -u)" != "0" ]]; then
+        command -v sudo >/dev/null || die "$2 and we are not root: run 'apt-get install -y $1' as root"
+        sudo="sudo"
+    fi
+    command -v apt-get >/dev/null || die "$2 and apt-get is unavailable: install $1 by other means"
+    $sudo apt-get update -qq >/dev/null
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "$1" >/dev/null \
+        || die "apt-get install $1 failed ($2)"
+}
+
 llvm="${DRJIT_LIBLLVM_PATH:-$(find_libllvm)}"
 if [[ -z "$llvm" ]]; then
     log "no libLLVM >= 16 found; installing Debian's libllvm19"
-    sudo=""
-    if [[ "$(id -u)" != "0" ]]; then
-        command -v sudo >/dev/null || die "libLLVM >= 16 is missing and we are not root: run 'apt-get install -y libllvm19' as root, or set DRJIT_LIBLLVM_PATH"
-        sudo="sudo"
-    fi
-    command -v apt-get >/dev/null || die "libLLVM >= 16 is missing and apt-get is unavailable: install LLVM 16-19 and set DRJIT_LIBLLVM_PATH to its libLLVM .so"
-    $sudo apt-get update -qq >/dev/null
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq libllvm19 >/dev/null \
-        || die "apt-get install libllvm19 failed: install LLVM 16-19 and set DRJIT_LIBLLVM_PATH"
+    apt_install libllvm19 "libLLVM >= 16 is missing (or set DRJIT_LIBLLVM_PATH to an LLVM 16-19 libLLVM .so)"
     llvm="$(find_libllvm)"
     [[ -n "$llvm" ]] || die "libllvm19 installed but no libLLVM >= 16 found under /usr/lib: set DRJIT_LIBLLVM_PATH"
 fi
@@ -62,4 +68,8 @@ log "installing mincam_render$extras (pinned: mitsuba 3.9.1, drjit 1.5.0, torch 
 .venv/bin/python -c "import mincam_render" || die "installation failed: 'import mincam_render' does not work in .venv"
 DRJIT_LIBLLVM_PATH="$llvm" .venv/bin/python -m mincam_render.render.backend \
     || die "Dr.Jit cannot use $llvm; install libllvm19 or set DRJIT_LIBLLVM_PATH"
+if [[ -n "$extras" && ! -x /usr/bin/chromium ]]; then
+    log "installing Debian's chromium (headless checks of the HTML reports)"
+    apt_install chromium "the report tests need a headless browser"
+fi
 log "ready: .venv/bin/mincam-render --help"

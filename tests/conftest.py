@@ -8,12 +8,17 @@ import pytest
 from mincam_render.render import backend
 
 
-@pytest.fixture(autouse=True)
-def isolated_plan_cache(tmp_path_factory, monkeypatch):
-    """Fidelity plans of one test session go to a temporary cache, not the user's."""
+@pytest.fixture(autouse=True, scope="session")
+def isolated_plan_cache(tmp_path_factory):
+    """Fidelity plans of one test session go to a temporary cache, not the user's.
+
+    Session-scoped, so module-scoped fixtures that render are isolated too.
+    """
     from mincam_render.data.plan_cache import CACHE_ENV
 
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "plan-cache"))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv(CACHE_ENV, str(tmp_path_factory.getbasetemp() / "plan-cache"))
+        yield
 
 
 @pytest.fixture

@@ -61,3 +61,16 @@ def test_ruff_finds_nothing():
         check=False,
     )
     assert run.returncode == 0, run.stdout[-3000:]
+
+
+def test_the_command_line_starts_without_torch_or_mitsuba():
+    """Regression: every command, --help included, took ~7 s importing torch first."""
+    code = (
+        "import sys; from click.testing import CliRunner; from mincam_render.cli.main import main; "
+        "r = CliRunner().invoke(main, ['render', '--help']); assert r.exit_code == 0, r.output; "
+        "print(sorted(m for m in ('torch', 'mitsuba', 'drjit') if m in sys.modules))"
+    )
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True
+    )
+    assert run.stdout.strip() == "[]", run.stdout + run.stderr

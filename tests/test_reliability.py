@@ -214,6 +214,7 @@ def stubbed_heavy_work(monkeypatch):
         raise _Reached
 
     monkeypatch.setattr(transport, "render_transport", stub)
+    monkeypatch.setattr(transport, "render_transport_with_noise", stub)
     monkeypatch.setattr(rj, "render_dataset", render_dataset_stub)
     monkeypatch.setattr(tr.TrainingData, "render", classmethod(lambda cls, *a, **k: stub()))
     monkeypatch.setattr(preview, "render_preview", stub)
@@ -263,6 +264,8 @@ _OPTIONS = {
         "--look-at",
         "--up",
         "--max-depth",
+        "--scene-scale",
+        "--sensor-id",
     ],
     "render": [
         "--frames",
@@ -435,7 +438,7 @@ def test_damaged_checkpoint_is_one_line_naming_it(tmp_path, finished_run):
     ck = run / "checkpoint.pt"
     ck.write_bytes(ck.read_bytes()[: len(ck.read_bytes()) // 2])
     r = CliRunner().invoke(main, ["export-masks", str(run), "--out", str(tmp_path / "m")])
-    assert r.exit_code == 1
+    assert r.exit_code == 2  # damaged data is bad input
     one_clear_line(r.output, "checkpoint.pt", "--no-resume")
     assert not (tmp_path / "m").exists() or not list((tmp_path / "m").rglob("masks.json"))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import logging
 import os
 import re
 import signal
@@ -218,16 +219,15 @@ def test_dtype_chosen_by_error_bound(tiny_request, bound, expected, variant):
     assert 0 < decision["float16_error"]["max"] < 1e-2  # the measured figure is recorded
 
 
-def test_auto_fidelity_records_measured_decisions(tmp_path, variant):
-    req = RenderRequest(
-        family="patches",
-        num_frames=16,
-        seed=0,
-        overrides=TINY,
-        shard_frames=8,
-        target_error=0.2,
+def _tiny_patches(**fields) -> RenderRequest:
+    """16 patches frames in two shards, 2 detectors at 8x8: planning takes about a second."""
+    return RenderRequest(
+        family="patches", num_frames=16, seed=0, overrides=TINY, shard_frames=8, **fields
     )
-    m = plan_render(req)
+
+
+def test_auto_fidelity_records_measured_decisions(tmp_path, variant):
+    m = plan_render(_tiny_patches(target_error=0.2))
     f = m["fidelity"]
     for key in (
         "shared_render",
@@ -343,3 +343,47 @@ def test_ray_local_mode_renders_many_shards_like_local_workers(tmp_path, many_sh
     summary = render_dataset(request, tmp_path / "ray", ray_address="local")
     assert summary.shards_rendered == list(range(13))
     assert _files(summary.path) == _files(reference)
+
+
+def _assert_reasons_match_values(f: dict, req: RenderRequest) -> None:
+    """Each automatic knob's recorded figure agrees with its bound and its choice."""
+    shared = f["shared_render"]
+    if "error_shared_vs_per_detector" in shared:
+        err, bound = shared["error_shared_vs_per_detector"]["rms"], shared["error_bound"]
+        noise = shared["noise_floor_two_seeds"]["rms"]
+        geometric = shared["parallax_texels"] < req.parallax_fraction and err <= noise
+        assert shared["value"] == (err < bound or geometric)
+        assert (f"{err:.3g} rms < bound" in shared["reason"]) == (err < bound)
+    depth = f["max_depth"]
+    if "change_vs_reference" in depth:
+        kept = depth["change_vs_reference"].get(str(depth["value"]), {"rms": 0.0})["rms"]
+        assert kept < req.indirect_fraction
+    spp = f["spp"]
+    if spp["source"] == "auto" and "predicted_error_rms" in spp:
+        met = spp["predicted_error_rms"] <= req.target_error
+        assert ("meets target" in spp["reason"]) == met
+    dtype = f["dtype"]
+    if dtype["source"] == "auto":
+        assert (dtype["value"] == "float16") == (
+            dtype["float16_error"]["max"] < req.dtype_error_bound
+        )
+
+
+@pytest.mark.parametrize("target", [0.2, 0.02])
+def test_recorded_fidelity_reasons_agree_with_values_and_bounds(target, variant):
+    req = _tiny_patches(target_error=target)
+    f = plan_render(req)["fidelity"]
+    _assert_reasons_match_values(f, req)
+    assert f["achieved"]["met"] == (f["achieved"]["error_rms"] <= target)
+
+
+def test_a_missed_error_target_warns_and_names_the_knob(variant, caplog):
+    """Regression: `render --spp 4` recorded 16 % error against a 1 % target silently."""
+    req = _tiny_patches(target_error=0.01, spp=1)
+    with caplog.at_level(logging.WARNING):
+        f = plan_render(req)["fidelity"]
+    achieved = f["achieved"]
+    assert not achieved["met"] and achieved["error_rms"] > 0.01
+    assert "--spp " in achieved["advice"] and "drop --spp" in achieved["advice"]
+    assert "rms off the reference, target 0.01" in caplog.text and achieved["advice"] in caplog.text
+    _assert_reasons_match_values(f, req)

@@ -316,3 +316,12 @@ def test_sample_passes_sum_to_spp_in_full_grids_under_the_cap(spp, cap):
     assert sum(passes) == spp
     assert all(1 <= n <= cap and n % math.isqrt(n) == 0 for n in passes)
     assert passes == sorted(passes, reverse=True)  # largest grid first
+
+
+def test_mitsuba_warnings_reach_python_logging_without_the_mono_film_notice(variant, caplog):
+    import logging
+
+    with caplog.at_level(logging.DEBUG, logger="mitsuba"):
+        mi.Log(mi.LogLevel.Warn, "a real problem")
+        mi.load_dict(mi.cornell_box())  # its RGB film would print the monochrome notice
+    assert "a real problem" in caplog.text and "Monochrome" not in caplog.text

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
+import math
 import os
 import time
 from pathlib import Path
@@ -15,6 +17,42 @@ from . import __name__ as _pkg
 
 MM = 1e-3
 log = logging.getLogger(_pkg)
+
+
+class FiniteFloat(click.FloatRange):
+    """A float range that also refuses NaN and infinities (click's FloatRange passes NaN)."""
+
+    name = "finite float"
+
+    def convert(self, value, param, ctx):
+        """The float, or a usage error naming the option."""
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
+
+
+class InputError(click.ClickException):
+    """Bad input (an option, a file, a field): exit code 2, like click's own usage errors."""
+
+    exit_code = 2
+
+
+#: OSError numbers that are the machine's failure, not the user's input.
+_MACHINE_ERRNOS = {errno.ENOSPC, errno.EIO, errno.EDQUOT, errno.ENOMEM}
+
+
+def _user_error(err: Exception) -> click.ClickException:
+    """One line for an error: bad input (exit 2), or a failure while working (exit 1).
+
+    Bad input: invalid values, files and data (ValueError, KeyError, path errors).
+    A failure: a worker or the machine failed (RuntimeError, a full disk), or an
+    optional extra is not installed (ImportError).
+    """
+    failed = isinstance(err, RuntimeError | ImportError) or (
+        isinstance(err, OSError) and err.errno in _MACHINE_ERRNOS
+    )
+    return click.ClickException(str(err)) if failed else InputError(str(err))
 
 
 def _vec3(ctx, param, value):
@@ -36,6 +74,8 @@ def _grid(ctx, param, value):
         r, c = (int(p) for p in value.lower().split("x"))
     except ValueError:
         raise click.BadParameter(f"{value!r} is not ROWSxCOLS, e.g. 4x6") from None
+    if not (1 <= r <= 64 and 1 <= c <= 64):
+        raise click.BadParameter(f"{value!r}: rows and columns must each be in [1, 64], e.g. 4x6")
     return (r, c)
 
 
@@ -82,7 +122,11 @@ def main(verbose: bool) -> None:
     help="Detector grid ROWSxCOLS on the board.",
 )
 @click.option(
-    "--pitch-mm", type=float, default=20.0, show_default=True, help="Detector pitch (mm)."
+    "--pitch-mm",
+    type=FiniteFloat(0.0, min_open=True),
+    default=20.0,
+    show_default=True,
+    help="Detector pitch (mm).",
 )
 @click.option(
     "--position", callback=_vec3, default="0,0,0", show_default=True, help="Board centre x,y,z (m)."
@@ -102,14 +146,30 @@ def main(verbose: bool) -> None:
     help="Up direction x,y,z (row 0 of the masks).",
 )
 @click.option(
+    "--pose-from-sensor",
+    is_flag=True,
+    help="Take position, view direction and up from the scene's sensor (see --sensor-id).",
+)
+@click.option(
+    "--sensor-id",
+    default=None,
+    help="With --pose-from-sensor: the id of the sensor to use (default: the first).",
+)
+@click.option(
+    "--scene-scale",
+    type=FiniteFloat(0.0, min_open=True, max=1e6),
+    default=1.0,
+    show_default=True,
+    help="Multiply the scene's lengths by this (0.001 for a scene modelled in millimetres).",
+)
+@click.option(
     "--max-depth",
     type=click.IntRange(1, 64),
     default=None,
     help="Override the scene's path depth (1 = emitters only).",
 )
-def transport_cmd(
-    scene, out, spp, seed, mask_res, grid, pitch_mm, position, look_at, up, max_depth
-):
+@click.pass_context
+def transport_cmd(ctx, scene, out, spp, seed, mask_res, grid, pitch_mm, max_depth, **pose):
     """Render transport images T[detector, row, col] of a camera in a scene.
 
     SCENE is a Mitsuba XML file; without it the built-in demo scene is used.
@@ -123,19 +183,19 @@ def transport_cmd(
     from mincam_render.analysis.plots import plot_transport_grid
     from mincam_render.data.exr import write_transport_exr
     from mincam_render.optics.camera import DetectorLayout, FreeformCamera
-    from mincam_render.render import backend
-    from mincam_render.render.mitsuba_scene import SceneError, demo_scene
-    from mincam_render.render.transport import render_transport
+    from mincam_render.render import backend, user_scene
+    from mincam_render.render.mitsuba_scene import SceneError, demo_scene, load_scene
+    from mincam_render.render.transport import render_transport_with_noise
 
     try:
+        mi_scene = load_scene(str(scene) if scene is not None else demo_scene())
+        user_scene.rescale_scene(mi_scene, pose.pop("scene_scale"))
         camera = FreeformCamera(
             mask_resolution=(mask_res, mask_res),
             layout=DetectorLayout.grid(rows=grid[0], cols=grid[1], pitch_m=pitch_mm * MM),
-            position=position,
-            look_at=look_at,
-            up=up,
+            **_transport_pose(ctx, mi_scene, **pose),
         )
-        scene_input = str(scene) if scene is not None else demo_scene()
+        warnings = user_scene.check_scene(mi_scene, camera, require_emitter=True)
         info = backend.describe()
         log.info(
             "rendering %d detectors x %dx%d texels x %d spp (%s)",
@@ -146,19 +206,34 @@ def transport_cmd(
             info["variant"],
         )
         t0 = time.perf_counter()
-        t = render_transport(scene_input, camera, spp=spp, seed=seed, max_depth=max_depth)
+        t, noise = render_transport_with_noise(
+            mi_scene, camera, spp=spp, seed=seed, max_depth=max_depth
+        )
         seconds = time.perf_counter() - t0
+        warnings += user_scene.check_transport(t)
     except (ValueError, SceneError, backend.BackendUnavailableError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
+    spp_target = user_scene.spp_for_noise(spp, noise)
+    worst = float(np.nanmax(noise))
+    if worst > user_scene.TARGET_RELATIVE_NOISE:
+        warnings.append(
+            f"worst detector relative error {worst:.1%}: --spp {spp_target} reaches 1 %"
+        )
+        log.warning("%s", warnings[-1])
     out.mkdir(parents=True, exist_ok=True)
     config = {
         "scene": str(scene) if scene is not None else "builtin:demo",
+        "scene_scale": ctx.params["scene_scale"],
+        "pose_from_sensor": pose["pose_from_sensor"],
         "spp": spp,
         "seed": seed,
         "max_depth": max_depth,
         "camera": camera.to_dict(),
         "backend": info,
         "render_seconds": seconds,
+        "relative_noise": [None if np.isnan(x) else float(x) for x in noise],
+        "spp_for_1_percent": spp_target,
+        "warnings": warnings,
         "units": {"transport": "W per unit transmittance", "lengths": "m"},
         "array_axes": "T[detector, row, col]; row 0 = up side, col 0 = left, seen from the camera",
     }
@@ -173,8 +248,29 @@ def transport_cmd(
     click.echo(
         f"wrote {out / 'transport.exr'} ({t.shape[0]} detectors, {t.shape[1]}x{t.shape[2]}), "
         f"transport.png, config.json; render {seconds:.2f} s; total power at M=1: "
-        f"{t.sum(axis=(1, 2)).mean():.3e} W per detector"
+        f"{t.sum(axis=(1, 2)).mean():.3e} W per detector; worst detector relative error "
+        f"{worst:.2%} (--spp {spp_target} for 1 %)"
     )
+
+
+def _transport_pose(ctx, mi_scene, *, position, look_at, up, pose_from_sensor, sensor_id) -> dict:
+    """Camera pose keywords from the options, or from the scene's sensor."""
+    from mincam_render.render.user_scene import sensor_pose
+
+    given = [
+        name
+        for name in ("position", "look_at", "up")
+        if ctx.get_parameter_source(name) is not click.core.ParameterSource.DEFAULT
+    ]
+    if not pose_from_sensor:
+        if sensor_id is not None:
+            raise click.UsageError("--sensor-id needs --pose-from-sensor")
+        return {"position": position, "look_at": look_at, "up": up}
+    if given:
+        flags = ", ".join("--" + name.replace("_", "-") for name in given)
+        raise click.UsageError(f"--pose-from-sensor takes the pose from the scene: drop {flags}")
+    p = sensor_pose(mi_scene, sensor_id)
+    return {"position": p.position, "look_at": p.look_at, "up": p.up}
 
 
 @main.command("preview")
@@ -197,7 +293,7 @@ def transport_cmd(
 )
 @click.option(
     "--duration-s",
-    type=click.FloatRange(0.0, min_open=True),
+    type=FiniteFloat(0.0, min_open=True),
     default=60.0,
     show_default=True,
     help="Length of the sequence the frames are spread over (s).",
@@ -234,7 +330,7 @@ def preview_cmd(scene, out, seed, n_shown, duration_s, spp):
         out.mkdir(parents=True, exist_ok=True)
         path = render_preview(family, frames, out / f"preview_{family.name}.png", spp=spp)
     except (ConfigError, SceneError, ValueError, ImportError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(f"wrote {path}")
 
 
@@ -295,13 +391,13 @@ def _training_options(f):
         click.option("--batch-size", type=click.IntRange(2), default=64, show_default=True),
         click.option(
             "--lr",
-            type=click.FloatRange(0, 1, min_open=True, max_open=True),
+            type=FiniteFloat(0, 1, min_open=True, max_open=True),
             default=None,
             help="Head learning rate [default: 1e-3*min(1,sqrt(16/inputs))].",
         ),
         click.option(
             "--mask-lr",
-            type=click.FloatRange(0, 10),
+            type=FiniteFloat(0, 10),
             default=0.05,
             show_default=True,
             help="Adam learning rate of the mask logits.",
@@ -345,7 +441,7 @@ def _splits(dataset, family, frames, spp, seed):
         ds = open_dataset(dataset)
         return tuple(TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
     if family is None:
-        raise click.ClickException("give a DATASET directory (mincam-render render) or --family")
+        raise InputError("give a DATASET directory (mincam-render render) or --family")
     from mincam_render.scenes import load_family
 
     fam = load_family(family, seed=seed, num_frames=frames)
@@ -440,7 +536,7 @@ def train_cmd(
         stream = None
         if on_the_fly:
             if family is None:
-                raise click.ClickException("--on-the-fly needs --family (frames are rendered)")
+                raise InputError("--on-the-fly needs --family (frames are rendered)")
             from mincam_render.scenes import load_family
 
             n = steps * batch_size * train.history
@@ -472,7 +568,7 @@ def train_cmd(
                 provenance={"run": str(out), "data": run["data"]},
             )
     except _TRAIN_ERRORS as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     t = metrics["test"]
     click.echo(
         f"{metrics['model']['kind']} {metrics['model']['pixels']} px: test "
@@ -546,7 +642,7 @@ def sweep_cmd(
             progress=True,
         )
     except _TRAIN_ERRORS as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     from mincam_render.learn.train import sweep_table
 
     click.echo(sweep_table(rows))
@@ -614,7 +710,7 @@ def prune_cmd(
         model.load_state_dict(state)
         records = greedy_prune(model, train, val, test, config, progress=True)
     except _TRAIN_ERRORS as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     out.mkdir(parents=True, exist_ok=True)
     (out / "prune.json").write_text(json.dumps(records, indent=2, default=str))
     rows = [
@@ -675,7 +771,7 @@ def export_masks_cmd(run_dir, task, out, no_pdf):
             provenance={"run": str(run_dir), "data": run["data"]},
         )
     except _TRAIN_ERRORS as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(
         f"wrote {len(paths['png'])} masks to {out / task} "
         f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
@@ -720,7 +816,7 @@ def _render_settings(ctx, param, values):
     required=True,
     help="Dataset directory (created; an unfinished one is resumed).",
 )
-@click.option("--frames", type=click.IntRange(1), required=True, help="Frames to render.")
+@click.option("--frames", type=click.IntRange(1, 10**9), required=True, help="Frames to render.")
 @click.option(
     "--seed",
     type=click.IntRange(0, 2**63 - 1),
@@ -789,7 +885,7 @@ def _render_settings(ctx, param, values):
 @click.option(
     "--background-interval",
     "background_interval_s",
-    type=click.FloatRange(1e-3, 1e6),
+    type=FiniteFloat(1e-3, 1e6),
     default=60.0,
     show_default=True,
     help="Scene seconds between the daylight components a background is interpolated "
@@ -821,14 +917,14 @@ def _render_settings(ctx, param, values):
 )
 @click.option(
     "--target-error",
-    type=click.FloatRange(1e-6, 1.0),
+    type=FiniteFloat(1e-6, 1.0),
     default=0.01,
     show_default=True,
     help="Target relative measurement error (chooses spp).",
 )
 @click.option(
     "--dtype-error",
-    type=click.FloatRange(1e-9, 1.0),
+    type=FiniteFloat(1e-9, 1.0),
     default=1e-3,
     show_default=True,
     help="Largest relative measurement error float16 may add.",
@@ -932,7 +1028,7 @@ def render_cmd(
             use_plan_cache=not replan,
         )
     except (ValueError, DatasetError, RenderError, OSError, ImportError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(
         f"{out}: {summary.num_frames} frames in {summary.shards_total} shards; rendered "
         f"{len(summary.shards_rendered)}, kept {len(summary.shards_kept)}, repaired "
@@ -968,7 +1064,7 @@ def export_exr_cmd(dataset, frame_list, out):
         ds = open_dataset(dataset)
         paths = ds.export_exr(parse_frame_list(frame_list, ds.num_frames), out)
     except (ValueError, DatasetError, OSError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
 
 
@@ -977,7 +1073,7 @@ def _episode_options(f):
 
     Defaults are :class:`ComparisonConfig`'s (one source of truth).
     """
-    from mincam_render.analysis.comparison import ComparisonConfig as C
+    from mincam_render.analysis.comparison_config import ComparisonConfig as C
 
     options = [
         click.option("--family", default=C.family, show_default=True,
@@ -1010,7 +1106,7 @@ def _episode_options(f):
                      help="Render at a fixed quick fidelity (SPP samples per texel, every "
                      "detector, the scene's path depth) instead of the measured (auto) "
                      "fidelity."),
-        click.option("--fps", type=click.FloatRange(0.1, 1000.0), default=C.fps,
+        click.option("--fps", type=FiniteFloat(0.1, 1000.0), default=C.fps,
                      show_default=True, help="Frame rate of the episodes (overrides the "
                      "family's): at 2 fps, 1,200 frames cover 10 minutes of activity."),
     ]  # fmt: skip
@@ -1027,7 +1123,7 @@ def _family_detectors(family: str) -> int:
     try:
         return load_family(family, seed=0, num_frames=30).camera().num_detectors
     except ConfigError as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
 
 
 def _compare(out: Path, designs: tuple, **episode) -> dict:
@@ -1056,7 +1152,7 @@ def _compare(out: Path, designs: tuple, **episode) -> dict:
         )
         result = run_comparison(cfg, out, workers=workers, masks_dir=out / "masks")
     except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(f"[2/2] test {result['error_name']}, mean over {cfg.seeds} seeds [95 % CI]")
     for name, d in result["designs"].items():
         e = d["error"]
@@ -1263,7 +1359,7 @@ def bench_fidelity_cmd(families, out, frames, reference_spp, base_spp, mask_res,
         results = [bench_fidelity(f, cfg) for f in families]
         paths = write_fidelity_report(results, out)
     except (ValueError, ConfigError, OSError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     for r in results:
         click.echo(f"== {r['family']}\n{pareto_table(r)}\n" + "\n".join(r["statements"]))
     click.echo(f"wrote {paths['json']} and {paths['html']}")
@@ -1333,7 +1429,7 @@ def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps,
     from mincam_render.core.config import ConfigError
 
     if (measurements is None) == (surrogate_family is None):
-        raise click.ClickException("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
+        raise InputError("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
     try:
         if surrogate_family is not None:
             measurements = make_surrogate(
@@ -1342,7 +1438,7 @@ def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps,
         result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed)
         paths = write_sim2real_report(result, out)
     except (ValueError, ConfigError, Sim2RealError, OSError) as err:
-        raise click.ClickException(str(err)) from None
+        raise _user_error(err) from None
     click.echo(result["verdict"]["summary"])
     click.echo(f"wrote {paths['json']} and {paths['html']}")
 

@@ -43,7 +43,6 @@ its own gain and noise, exactly as if its frames had been stacked.
 
 from __future__ import annotations
 
-import enum
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -52,6 +51,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.learn.train_config import CountLoss
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.maskplane import (
     MaskPlaneBackend,
@@ -78,18 +78,6 @@ BASELINE_BITS = 8
 BASELINE_READ_NOISE_DN = 1.0
 #: Percentile of training pixel power that the baseline's fixed exposure maps to full scale.
 BASELINE_EXPOSURE_PERCENTILE = 99.5
-
-
-class CountLoss(enum.Enum):
-    """How a COUNT label is learned.
-
-    * ``MSE``: regression of the standardised count (paper, supplement C: people count).
-    * ``CROSS_ENTROPY``: classification into counts ``0 .. n-1`` (paper Sec. 5: patches);
-      predicts the expected count under the softmax.
-    """
-
-    MSE = "mse"
-    CROSS_ENTROPY = "cross_entropy"
 
 
 def _as_5d(transport: torch.Tensor) -> torch.Tensor:

@@ -57,6 +57,7 @@ import torch
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.models import BaselineCamera, CountLoss, Head, MincamCamera, task_loss
+from mincam_render.learn.train_config import TrainConfig
 from mincam_render.optics.camera import FreeformCamera
 
 log = logging.getLogger(__name__)
@@ -403,70 +404,6 @@ def count_classes_for(data: TrainingData, count_loss: CountLoss | None = None) -
 def learning_rate_for(num_inputs: int) -> float:
     """The head's Adam learning rate: ``1e-3 * min(1, sqrt(16 / num_inputs))``."""
     return 1e-3 * min(1.0, math.sqrt(16.0 / max(1, num_inputs)))
-
-
-@dataclass(frozen=True, kw_only=True)
-class TrainConfig:
-    """Training recipe (the paper's, with the choices documented in the module).
-
-    Args:
-        max_steps: optimisation steps at most (early stopping may end sooner).
-        batch_size: samples per step.
-        lr: head learning rate; None = :func:`learning_rate_for` the input count.
-        mask_lr: Adam learning rate of the mask logits (logit units per step).
-        eval_every: steps between validation evaluations (and checkpoints).
-        patience: evaluations without improvement before stopping.
-        gain_range: random global gain per sample (augmentation), (lo, hi).
-        max_eval_samples: validation samples used per evaluation (evenly spaced).
-        count_loss: how COUNT labels are learned; None = the paper's choice for the
-            data's scene family (:data:`PAPER_COUNT_LOSS`). Used where this module
-            builds the models (:func:`sweep`, :func:`train_run`).
-        seed: seed of batches, noise and initialisation.
-        torch_threads: intra-op threads while training (restored afterwards). The
-            head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
-            oversubscribe a small machine: on 2 shared cores one thread measured
-            7x faster per step than two.
-
-    """
-
-    max_steps: int = 3000
-    batch_size: int = 64
-    lr: float | None = None
-    mask_lr: float = 0.05
-    eval_every: int = 100
-    patience: int = 8
-    gain_range: tuple[float, float] = (0.8, 1.2)
-    max_eval_samples: int = 2048
-    count_loss: CountLoss | None = None
-    seed: int = 0
-    torch_threads: int | None = 1
-
-    def __post_init__(self) -> None:
-        for name, lo in (
-            ("max_steps", 1),
-            ("batch_size", 2),
-            ("eval_every", 1),
-            ("patience", 1),
-            ("max_eval_samples", 2),
-        ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ValueError(f"TrainConfig.{name} = {v!r}: allowed an integer >= {lo}")
-        if self.lr is not None and not 0 < self.lr < 1:
-            raise ValueError(f"TrainConfig.lr = {self.lr!r}: allowed (0, 1) or None")
-        if not 0 <= self.mask_lr < 10:
-            raise ValueError(f"TrainConfig.mask_lr = {self.mask_lr!r}: allowed [0, 10)")
-        if self.count_loss is not None and not isinstance(self.count_loss, CountLoss):
-            allowed = [c.value for c in CountLoss]
-            try:
-                object.__setattr__(self, "count_loss", CountLoss(self.count_loss))
-            except ValueError:
-                raise ValueError(
-                    f"TrainConfig.count_loss = {self.count_loss!r}: allowed {allowed} or None"
-                ) from None
-        g0, g1 = self.gain_range
-        if not 0 < g0 <= g1:
-            raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
 
 
 def build_head(

@@ -78,10 +78,35 @@ def use_variant(backend: Backend = Backend.AUTO) -> str:
         if problem is not None:
             raise BackendUnavailableError(problem)
         variant = "llvm_ad_mono"
+    if not isinstance(mi.logger().appender(0), _MitsubaToLogging):
+        _route_mitsuba_log()
     if mi.variant() != variant:
         mi.set_variant(variant)
         log.debug("Mitsuba variant set to %s", variant)
     return variant
+
+
+#: Mitsuba messages that say nothing to our users (every photodiode is monochrome).
+_IRRELEVANT_MITSUBA_MESSAGES = ("Monochrome mode enabled",)
+
+
+class _MitsubaToLogging(mi.Appender):
+    """Mitsuba's log into Python logging (logger ``mitsuba``), irrelevant warnings dropped."""
+
+    def append(self, level, text):
+        if any(m in text for m in _IRRELEVANT_MITSUBA_MESSAGES):
+            return
+        py_level = {mi.LogLevel.Warn: logging.WARNING, mi.LogLevel.Error: logging.ERROR}
+        logging.getLogger("mitsuba").log(py_level.get(level, logging.DEBUG), "%s", text.strip())
+
+    def log_progress(self, progress, name, formatted, eta, ptr=None):
+        """Mitsuba's own progress bars are not used (our commands draw theirs)."""
+
+
+def _route_mitsuba_log() -> None:
+    logger = mi.logger()
+    logger.clear_appenders()
+    logger.add_appender(_MitsubaToLogging())
 
 
 def describe() -> dict[str, str]:

@@ -231,15 +231,9 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     elif k == 1:
         shared, source, reason = False, "auto", "one detector: nothing to share"
     else:
-        err = measured["error_shared_vs_per_detector"]["rms"]
-        bound = measured["error_bound"]
-        shared = parallax < request.parallax_fraction or err < bound
+        shared, reason = _shared_render_choice(parallax, request.parallax_fraction, measured)
         source = "auto"
-        reason = (
-            f"parallax {parallax:.3g} texel (bound {request.parallax_fraction:g}) over depths "
-            f"{z_min:.3g}-{z_max:.3g} m; it changes measurements by {err:.3g} rms "
-            f"({'<' if err < bound else '>='} {bound:.3g}, a share of the target error)"
-        )
+        reason = f"{reason} (depths {z_min:.3g}-{z_max:.3g} m)"
     decisions["shared_render"] = {"value": shared, "source": source, "reason": reason, **measured}
     render_cam = centre_cam if shared else camera
 
@@ -312,10 +306,14 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     if source == "auto":
         spp = _spp_for(e_pilot, request.target_error, MAX_AUTO_SPP)
         measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
-        reason = (
-            f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); "
+        predicted = measured["predicted_error_rms"]
+        verdict = (
             f"{spp} spp meets target {request.target_error:g}"
-            + (" (capped)" if spp == MAX_AUTO_SPP and e_pilot > request.target_error else "")
+            if predicted <= request.target_error
+            else f"capped at {spp} spp: predicted {predicted:.3g} > target {request.target_error:g}"
+        )
+        reason = (
+            f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); {verdict}"
         )
     decisions["spp"] = {"value": spp, "source": source, "reason": reason, **measured}
 
@@ -418,6 +416,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
                     "against the reference missed the target"
                 )
         (diff if background is not None else decisions["spp"]).update(check)
+        decisions["achieved"] = _achieved(check, ref_noise, decisions, request, spp)
 
     # ---- storage type ------------------------------------------------------------------
     stored, scales = encode_transport(chosen, "float16")
@@ -464,8 +463,69 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         "dtype": dtype,
         "background": background,
     }
-    log.info("fidelity: %s", {k_: v["value"] for k_, v in decisions.items() if isinstance(v, dict)})
+    log.info("fidelity: %s", {k_: v["value"] for k_, v in decisions.items() if "value" in v})
     return settings, decisions
+
+
+def _achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
+    """The plan's error against the reference vs the target; a warning naming the knob if missed.
+
+    The reference's own Monte Carlo error is taken out in quadrature. The
+    advice names every knob whose part of the error exceeds the target (else
+    the largest): the measured biases of sharing and path depth, and the
+    Monte Carlo rest with the spp that brings it to the target.
+    """
+    found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
+    record = {"error_rms": found, "target_error": request.target_error}
+    record["met"] = found <= request.target_error
+    if record["met"]:
+        return record
+    shared = decisions["shared_render"]
+    parts = {}
+    if shared["value"] and "error_shared_vs_per_detector" in shared:
+        parts["--per-detector"] = shared["error_shared_vs_per_detector"]["rms"]
+    depth = decisions["max_depth"]
+    kept = depth.get("change_vs_reference", {}).get(str(depth.get("plain_value", depth["value"])))
+    if kept is not None:
+        parts[f"--max-depth {int(depth['value']) + 1}"] = kept["rms"]
+    noise = math.sqrt(max(found**2 - sum(b * b for b in parts.values()), 0.0))
+    parts[f"--spp {_round_up_spp(spp * (noise / request.target_error) ** 2, 1 << 24)}"] = noise
+    ranked = sorted(parts.items(), key=lambda kv: -kv[1])
+    knobs = [kv for kv in ranked if kv[1] > request.target_error] or ranked[:1]
+    record["advice"] = "pass " + " and ".join(f"{k} (now {v:.3g} rms of it)" for k, v in knobs)
+    if request.spp is not None and any(k.startswith("--spp") for k, _ in knobs):
+        record["advice"] += "; or drop --spp to let auto fidelity choose"
+    log.warning(
+        "fidelity: measurements are %.3g rms off the reference, target %g: %s",
+        found,
+        request.target_error,
+        record["advice"],
+    )
+    return record
+
+
+def _shared_render_choice(parallax: float, fraction: float, measured: dict) -> tuple[bool, str]:
+    """Share one centre render? ``(choice, reason)`` from the measured change it makes.
+
+    The change (common random numbers, so the parallax alone plus the noise of
+    rays that land elsewhere) decides; only where it is within the noise of two
+    independent renders does the geometric parallax estimate decide instead.
+    """
+    err = measured["error_shared_vs_per_detector"]["rms"]
+    noise = measured["noise_floor_two_seeds"]["rms"]
+    bound = measured["error_bound"]
+    geometry = (
+        f"parallax {parallax:.3g} texel ({'<' if parallax < fraction else '>='} {fraction:g})"
+    )
+    change = f"sharing changes measurements by {err:.3g} rms"
+    if err < bound:
+        return True, f"{change} < bound {bound:.3g} (a share of the target error); {geometry}"
+    if parallax < fraction and err <= noise:
+        return True, (
+            f"{geometry}; {change} >= bound {bound:.3g} but within the noise of two seeds "
+            f"({noise:.3g} rms at {measured['probe_spp']} spp), so the geometry decides"
+        )
+    return False, f"{change} >= bound {bound:.3g} (a share of the target error); {geometry}"
 
 
 def _spp_for(error_at_pilot: float, target: float, cap: int, steps_per_octave: int = 1) -> int:

@@ -86,8 +86,12 @@ def _transport_pass(
     geo: _PassGeometry,
     seed: mi.UInt32,
     shape: tuple[int, int, int, int],
-) -> mi.Float:
-    """One wavefront of ``K*R*C*S`` rays; returns the mean over S per texel (W), flat K*R*C."""
+    second_moment: bool = False,
+) -> tuple[mi.Float, mi.Float | None]:
+    """One wavefront of ``K*R*C*S`` rays: per texel (flat K*R*C), the mean over S (W).
+
+    Also the mean of the squared samples (W^2) if ``second_moment``, else None.
+    """
     n_det, rows, cols, spp = shape
     n = n_det * rows * cols * spp
     sampler.seed(seed, n)
@@ -155,7 +159,8 @@ def _transport_pass(
     texel_area = w_mask * w_mask / (rows * cols)
     weight = dr.select(on_detector, g * f_dir * texel_area / pdf_q, 0.0)
     value = mi.Float(radiance[0]) * weight
-    return dr.block_sum(value, spp) * (1.0 / spp)
+    mean = dr.block_sum(value, spp) * (1.0 / spp)
+    return mean, dr.block_sum(value * value, spp) * (1.0 / spp) if second_moment else None
 
 
 def _geometry(camera: FreeformCamera, parallax: bool = True) -> _PassGeometry:
@@ -270,25 +275,63 @@ def render_transport(
         SceneError: the scene cannot be loaded.
 
     """
-    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 24:
-        raise ValueError(
-            f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]"
-        )
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        raise ValueError(
-            f"render_transport: seed = {seed!r} is invalid: allowed an integer in [0, 2^63)"
-        )
-    if max_depth is not None and (not isinstance(max_depth, int) or not 1 <= max_depth <= 64):
-        raise ValueError(
-            f"render_transport: max_depth = {max_depth!r} is invalid: allowed None or an "
-            "integer in [1, 64]"
-        )
-    if not isinstance(camera, FreeformCamera):
-        raise ValueError(
-            f"render_transport: camera = {camera!r} is invalid: allowed a FreeformCamera"
-        )
+    t, _ = _render(
+        scene,
+        camera,
+        spp=spp,
+        seed=seed,
+        max_depth=max_depth,
+        max_rays_per_pass=max_rays_per_pass,
+        parallax=parallax,
+        sun_window=sun_window,
+    )
+    return t.astype(np.float32).reshape(camera.num_detectors, *camera.mask_resolution)
+
+
+def render_transport_with_noise(
+    scene: SceneInput, camera: FreeformCamera, **options
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`render_transport` and each detector's relative standard error.
+
+    Takes the same keyword arguments (``spp``, ``seed``, ...). The error of detector k's total power
+    ``sum(T[k])`` is estimated from the spread of the samples within each
+    texel (independent across texels), ``sqrt(sum_texels var / spp) / sum(T[k])``.
+    On the Cornell box it matches the spread of 40 seeded renders within 20 %
+    at 64 spp; at 4 spp, where rare bright paths are mostly missed, it reads
+    about half the true error (``tests/test_user_scene.py``). NaN for detectors
+    that see no light.
+
+    Returns:
+        ``(T[detector, row, col] float32, relative_error[detector] float64)``.
+
+    """
+    mean, var = _render(scene, camera, **options, second_moment=True)
+    k = camera.num_detectors
+    power = mean.reshape(k, -1).sum(axis=1)
+    sigma = np.sqrt(var.reshape(k, -1).sum(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = np.where(power > 0, sigma / power, np.nan)
+    return mean.astype(np.float32).reshape(k, *camera.mask_resolution), relative
+
+
+def _render(
+    scene,
+    camera,
+    *,
+    spp: int = 16,
+    seed: int = 0,
+    max_depth: int | None = None,
+    max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
+    parallax: bool = True,
+    sun_window=None,
+    second_moment: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Per texel (flat, float64): the transport mean (W) and, if asked, its variance (W^2)."""
+    _check_render_args(spp, seed, max_depth, camera)
     use_variant()
     mi_scene = load_scene(scene)
+    if not mi_scene.emitters():
+        log.warning("render_transport: the scene has no emitter; every transport value is zero")
     rows, cols = camera.mask_resolution
     n_texels = camera.num_detectors * rows * cols
     if n_texels > max_rays_per_pass:
@@ -309,11 +352,39 @@ def render_transport(
     geo = _geometry(camera, parallax)
 
     total = np.zeros(n_texels, dtype=np.float64)
+    total_sq = np.zeros(n_texels, dtype=np.float64) if second_moment else None
     with sun_sampled_apart(mi_scene) if sun_window is not None else nullcontext():
         for i, n in enumerate(passes):
             shape = (camera.num_detectors, rows, cols, n)
             seed_i = mi.UInt32(_pass_seed(seed, i))
-            mean = _transport_pass(mi_scene, integrator, _stratified_sampler(n), geo, seed_i, shape)
+            mean, mean_sq = _transport_pass(
+                mi_scene, integrator, _stratified_sampler(n), geo, seed_i, shape, second_moment
+            )
             total += mean.numpy().astype(np.float64) * n
+            if second_moment:
+                total_sq += mean_sq.numpy().astype(np.float64) * n
     log.debug("render_transport: passes of %s spp, %d texels", passes, n_texels)
-    return (total / spp).astype(np.float32).reshape(camera.num_detectors, rows, cols)
+    mean = total / spp
+    if not second_moment:
+        return mean, None
+    return mean, np.maximum(total_sq / spp - mean * mean, 0.0) / spp
+
+
+def _check_render_args(spp, seed, max_depth, camera) -> None:
+    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 24:
+        raise ValueError(
+            f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]"
+        )
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise ValueError(
+            f"render_transport: seed = {seed!r} is invalid: allowed an integer in [0, 2^63)"
+        )
+    if max_depth is not None and (not isinstance(max_depth, int) or not 1 <= max_depth <= 64):
+        raise ValueError(
+            f"render_transport: max_depth = {max_depth!r} is invalid: allowed None or an "
+            "integer in [1, 64]"
+        )
+    if not isinstance(camera, FreeformCamera):
+        raise ValueError(
+            f"render_transport: camera = {camera!r} is invalid: allowed a FreeformCamera"
+        )

@@ -1,0 +1,98 @@
+"""What the main job compares: camera designs and the comparison's configuration, as data.
+
+No PyTorch or Mitsuba import, so the command line shows these defaults at once.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from mincam_render.learn.train_config import TrainConfig
+
+
+@dataclass(frozen=True)
+class Design:
+    """One camera design: a minimalist camera of ``pixels`` or a baseline of ``grid``.
+
+    Args:
+        pixels: freeform pixels (minimalist camera), or None for a baseline.
+        grid: ``(rows, cols)`` of a conventional camera, or None.
+        sensor_model: train the minimalist camera with the detector model (noise,
+            saturation); False is the paper's supplement-A ablation.
+    """
+
+    pixels: int | None = None
+    grid: tuple[int, int] | None = None
+    sensor_model: bool = True
+
+    def __post_init__(self) -> None:
+        if (self.pixels is None) == (self.grid is None):
+            raise ValueError(f"{self}: give exactly one of pixels (mincam) or grid (baseline)")
+        if self.pixels is not None and self.pixels < 1:
+            raise ValueError(f"pixels = {self.pixels}: need at least 1")
+        if self.grid is not None:
+            object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
+
+    @property
+    def name(self) -> str:
+        """``mincam-8px``, ``mincam-8px-nosensor`` or ``baseline-8x8``."""
+        if self.grid is not None:
+            return f"baseline-{self.grid[0]}x{self.grid[1]}"
+        return f"mincam-{self.pixels}px" + ("" if self.sensor_model else "-nosensor")
+
+    @property
+    def is_mincam(self) -> bool:
+        """A minimalist camera (it has masks to keep)."""
+        return self.pixels is not None
+
+    def train_kwargs(self) -> dict[str, Any]:
+        """Keyword arguments of :func:`mincam_render.learn.train.train_run`."""
+        if self.grid is not None:
+            return {"baseline_grid": self.grid}
+        return {"pixels": self.pixels, "sensor_model": self.sensor_model}
+
+
+@dataclass(frozen=True, kw_only=True)
+class ComparisonConfig:
+    """What the main job renders and trains.
+
+    Args:
+        family: scene family name or description (.toml).
+        seed: root seed of every episode and training seed.
+        fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        train_episodes: training episodes (static tasks; a temporal task trains on one).
+        train_frames: frames of each training episode.
+        val_frames: frames of the validation episode.
+        test_frames: frames of each test episode.
+        test_episodes: number of test episodes (>= 2 for an interval over episodes).
+        seeds: training seeds per design (>= 2 for an interval over seeds).
+        designs: the camera designs; with two, the verdict compares them.
+        train: the training recipe (its ``seed`` is replaced per training seed).
+        fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
+    """
+
+    family: str = "workspace"
+    seed: int = 0
+    fps: float = 2.0
+    train_episodes: int = 2
+    train_frames: int = 1200
+    val_frames: int = 600
+    test_frames: int = 600
+    test_episodes: int = 3
+    seeds: int = 3
+    designs: tuple[Design, ...] = (Design(pixels=8), Design(grid=(8, 8)))
+    train: TrainConfig = TrainConfig()
+    fidelity: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
+            if getattr(self, name) < lo:
+                raise ValueError(f"{name} = {getattr(self, name)}: need at least {lo} frames")
+        for name in ("train_episodes", "test_episodes", "seeds"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
+        names = [d.name for d in self.designs]
+        if len(names) < 2 or len(set(names)) != len(names):
+            raise ValueError(f"designs {names}: need at least two, each once")
