@@ -105,12 +105,13 @@ def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
         for q in (f, f.with_suffix(".npy"))
     }
 
-    # resumed with the default workers: one per core
+    # resumed with the default workers: chosen by job size (this tiny job: this process)
     p = _cli([*CLI_TINY, "--out", str(killed)])
     out, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
     log = [json.loads(line) for line in (killed / ds.LOG_NAME).read_text().splitlines()]
-    assert [e["workers"] for e in log if e["event"] == "start"][-1] == (os.cpu_count() or 1)
+    assert [e["workers"] for e in log if e["event"] == "start"][-1] is None
+    assert [e["workers"] for e in log if e["event"] == "workers"][-1] == 0
     got, want = _files(killed), _files(ref)
     assert sorted(got) == sorted(want)
     for name in want:
@@ -387,3 +388,18 @@ def test_a_missed_error_target_warns_and_names_the_knob(variant, caplog):
     assert "--spp " in achieved["advice"] and "drop --spp" in achieved["advice"]
     assert "rms off the reference, target 0.01" in caplog.text and achieved["advice"] in caplog.text
     _assert_reasons_match_values(f, req)
+
+
+@pytest.mark.parametrize("break_even_s", [0.0, 1e9])
+def test_automatic_workers_follow_the_work_left(
+    tmp_path, many_shards, variant, monkeypatch, break_even_s
+):
+    """workers=None: the first shard here, the rest in a pool only if it is long enough."""
+    import mincam_render.data.render_job as rj
+
+    request, reference = many_shards
+    monkeypatch.setattr(rj, "POOL_BREAK_EVEN_S", break_even_s)
+    render_dataset(request, tmp_path / "ds", workers=None)
+    assert _files(tmp_path / "ds") == _files(reference)
+    (chosen,) = [e["workers"] for e in _log(tmp_path / "ds") if e["event"] == "workers"]
+    assert chosen == ((os.cpu_count() or 1) if break_even_s == 0.0 else 0)

@@ -6,7 +6,6 @@ import errno
 import json
 import logging
 import math
-import os
 import time
 from pathlib import Path
 
@@ -933,9 +932,9 @@ def _render_settings(ctx, param, values):
     "--workers",
     type=click.IntRange(0, 256),
     default=None,
-    help="Local worker processes, the cores shared among them (0 = in this process; "
-    "default: one per CPU core, which overlaps one worker's scene updates and kernel "
-    "tracing with another's rendering).",
+    help="Local worker processes, the cores shared among them (0 = in this process). "
+    "Default: by job size; the first shard renders in this process, the rest in one "
+    "worker per core only if that would take this process more than 10 s.",
 )
 @click.option(
     "--ray",
@@ -1022,7 +1021,7 @@ def render_cmd(
         summary = render_dataset(
             request,
             out,
-            workers=(os.cpu_count() or 1) if workers is None else workers,
+            workers=workers,
             ray_address=ray_address,
             progress=not no_progress,
             use_plan_cache=not replan,

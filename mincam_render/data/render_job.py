@@ -579,7 +579,9 @@ def _describe_family(request: RenderRequest):
     return family, description, rebuild
 
 
-def plan_render(request: RenderRequest, *, use_cache: bool = True, ship: bool = False) -> dict:
+def plan_render(
+    request: RenderRequest, *, use_cache: bool = True, ship: bool = False, progress: bool = False
+) -> dict:
     """The manifest of a new render: configuration, fidelity decisions, empty shards.
 
     The fidelity plan comes from :mod:`mincam_render.data.plan_cache` when one is kept
@@ -592,6 +594,7 @@ def plan_render(request: RenderRequest, *, use_cache: bool = True, ship: bool = 
         use_cache: look up and keep plans; False always measures (and keeps nothing).
         ship: measure the plan and write it among the shipped plans
             (``scenes/plans/``, :mod:`mincam_render.data.plan_cache`).
+        progress: show a progress bar while the plan is measured.
     """
     from mincam_render.render import backend
     from mincam_render.render.differential import background_parts
@@ -606,7 +609,7 @@ def plan_render(request: RenderRequest, *, use_cache: bool = True, ship: bool = 
             base_camera, mask_resolution=(request.mask_res, request.mask_res)
         )
     settings, decisions = _fidelity_plan(
-        request, family.name, identity, base_camera, use_cache and not ship, ship
+        request, family.name, identity, base_camera, use_cache and not ship, ship, progress
     )
     camera = base_camera
     num_shards = -(-request.num_frames // request.shard_frames)
@@ -678,7 +681,13 @@ def plan_render(request: RenderRequest, *, use_cache: bool = True, ship: bool = 
 
 
 def _fidelity_plan(
-    request: RenderRequest, family_name: str, identity: dict, camera, use_cache: bool, ship: bool
+    request: RenderRequest,
+    family_name: str,
+    identity: dict,
+    camera,
+    use_cache: bool,
+    ship: bool,
+    progress: bool,
 ) -> tuple[dict, dict]:
     """``(settings, decisions)`` of a request: kept, or measured on the planning episode."""
     from mincam_render.data import plan_cache
@@ -697,7 +706,7 @@ def _fidelity_plan(
     t0 = time.perf_counter()
     plan_request = dataclasses.replace(request, seed=plan_cache.PLAN_SEED)
     family, _, _ = _describe_family(plan_request)
-    settings, decisions = decide_fidelity(family, camera, plan_request)
+    settings, decisions = decide_fidelity(family, camera, plan_request, progress=progress)
     decisions["planning_episode"] = {"seed": plan_cache.PLAN_SEED, "frames": request.num_frames}
     # measured figures are reported to 6 significant digits: last-bit differences
     # of floating-point sums between two planning runs must not change the bytes
@@ -736,7 +745,9 @@ def _rounded(obj: Any, digits: int = 6) -> Any:
     return obj
 
 
-def _open_or_plan(request: RenderRequest, out: Path, use_plan_cache: bool) -> dict:
+def _open_or_plan(
+    request: RenderRequest, out: Path, use_plan_cache: bool, progress: bool = False
+) -> dict:
     """Reuse the manifest of ``out`` if it is the same request; plan a new one if empty."""
     manifest_path = out / ds.MANIFEST_NAME
     if out.exists() and not out.is_dir():
@@ -771,7 +782,7 @@ def _open_or_plan(request: RenderRequest, out: Path, use_plan_cache: bool) -> di
             f"{out} is not empty and holds no {ds.MANIFEST_NAME}; refusing to render into it"
         )
     t0 = time.perf_counter()
-    manifest = plan_render(request, use_cache=use_plan_cache)
+    manifest = plan_render(request, use_cache=use_plan_cache, progress=progress)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
     ds.write_manifest(out, manifest)
     _append_log(out, {"event": "planned", "seconds": time.perf_counter() - t0, "time": time.time()})
@@ -786,6 +797,47 @@ def _append_log(out: Path, entry: dict) -> None:
         f.write(json.dumps(entry, default=ds._json_default) + "\n")
 
 
+#: A worker pool pays off when the shards left would take this process longer than
+#: this (s). Measured on 2 cores (benchmarks/bench_workers.py, first run with 20 s):
+#: a pool renders about 1.6x faster but costs 1.6 s (patches) to 3.5 s (workspace) to
+#: start, so it wins beyond about 2.7x its start-up: 4 s (patches), 9 s (workspace).
+POOL_BREAK_EVEN_S = 10.0
+
+
+def _first_shard_then_choose(
+    job, todo, frames_of, finish, bar, backgrounds_of
+) -> tuple[int, list[int]]:
+    """Render ``todo[0]`` here, then ``(workers, rest)``: a pool only for long remainders.
+
+    The time per frame is taken from the shard's frames after its first (which
+    pays for compiling the kernels) when it has more than one.
+    """
+    stamps = []
+
+    def on_frame(n: int) -> None:
+        stamps.append(time.perf_counter())
+        if bar is not None:
+            bar.update(n)
+
+    first, rest = todo[0], list(todo[1:])
+    t0 = time.perf_counter()
+    finish(render_shard(job, first, backgrounds_of(first), on_frame), True)
+    per_frame = (
+        (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+        if len(stamps) > 1
+        else time.perf_counter() - t0
+    )
+    left_s = per_frame * sum(frames_of[i] for i in rest)
+    workers = (os.cpu_count() or 1) if left_s > POOL_BREAK_EVEN_S and len(rest) > 1 else 0
+    log.info(
+        "workers: %.3g s per frame, about %.0f s left in this process -> %s",
+        per_frame,
+        left_s,
+        f"{workers} worker processes" if workers else "this process",
+    )
+    return workers, rest
+
+
 def _threads_per_worker(workers: int) -> int:
     cores = os.cpu_count() or 1
     return max(1, cores // max(1, workers))
@@ -795,7 +847,7 @@ def render_dataset(
     request: RenderRequest,
     out: str | os.PathLike,
     *,
-    workers: int = 1,
+    workers: int | None = 1,
     ray_address: str | None = None,
     progress: bool = False,
     shards_per_worker: int = DEFAULT_SHARDS_PER_WORKER,
@@ -806,7 +858,10 @@ def render_dataset(
     Args:
         request: what to render.
         out: dataset directory; created, or resumed if it holds the same request.
-        workers: local worker processes (>= 1), or 0 to render in this process.
+        workers: local worker processes (>= 1), 0 to render in this process, or None to
+            choose by job size: the first shard renders in this process, and a pool of
+            one worker per core takes the rest only if this process would need more than
+            :data:`POOL_BREAK_EVEN_S` for it (:func:`_first_shard_then_choose`).
         ray_address: run shards as Ray tasks on this cluster (``"local"`` starts a
             single-node cluster, ``"auto"`` joins the running one); needs the
             ``ray`` extra. ``workers`` is then ignored.
@@ -824,13 +879,15 @@ def render_dataset(
         RenderError: a worker died or Ray is unavailable.
         ValueError: invalid arguments.
     """
-    if isinstance(workers, bool) or not isinstance(workers, int) or not 0 <= workers <= 256:
-        raise ValueError(f"workers = {workers!r}: allowed an integer in [0, 256]")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or not 0 <= workers <= 256
+    ):
+        raise ValueError(f"workers = {workers!r}: allowed None (auto) or an integer in [0, 256]")
     if not isinstance(shards_per_worker, int) or shards_per_worker < 1:
         raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
     with exclusive_writer(out, "render") as out:
         t_start = time.perf_counter()
-        manifest = _open_or_plan(request, out, use_plan_cache)
+        manifest = _open_or_plan(request, out, use_plan_cache, progress)
         for tmp in ds.remove_stale_temporaries(out):
             log.info("removed %s, left by a killed render", tmp)
         (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
@@ -923,12 +980,21 @@ def render_dataset(
                 pass
             elif ray_address is not None:
                 _run_ray(ray_address, job, todo, finish, shards_per_worker, backgrounds_of)
-            elif workers == 0:
-                on_frame = None if bar is None else bar.update
-                for i in todo:
-                    finish(render_shard(job, i, backgrounds_of(i), on_frame), on_frame is not None)
             else:
-                _run_processes(job, todo, finish, workers, shards_per_worker, bar, backgrounds_of)
+                if workers is None:
+                    workers, todo = _first_shard_then_choose(
+                        job, todo, frames_of, finish, bar, backgrounds_of
+                    )
+                    _append_log(out, {"event": "workers", "workers": workers, "time": time.time()})
+                if workers == 0:
+                    on_frame = None if bar is None else bar.update
+                    for i in todo:
+                        shard = render_shard(job, i, backgrounds_of(i), on_frame)
+                        finish(shard, on_frame is not None)
+                elif todo:
+                    _run_processes(
+                        job, todo, finish, workers, shards_per_worker, bar, backgrounds_of
+                    )
         finally:
             if bar is not None:
                 bar.close()

@@ -154,7 +154,9 @@ def nearest_depth_m(scene, camera) -> dict[str, float]:
     return {"min": float(depth.min()), "max": float(depth.max())}
 
 
-def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, dict]]:
+def decide_fidelity(
+    family, camera, request, *, progress: bool = False
+) -> tuple[dict[str, Any], dict[str, dict]]:
     """Choose render settings for ``family`` seen by ``camera`` (see the module doc).
 
     Args:
@@ -162,6 +164,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         camera: the camera to render (mask resolution already final).
         request: a :class:`~mincam_render.data.render_job.RenderRequest`; its explicit
             settings win, its bounds drive the automatic choices.
+        progress: show a progress bar naming what is being measured (stderr).
 
     Returns:
         ``(settings, decisions)``: settings ``{"spp", "max_depth" (0 = scene
@@ -178,6 +181,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     rows, cols = camera.mask_resolution
     lo_hi = camera.transmittance_range
     decisions: dict[str, dict] = {}
+    stages = _Stages(_PLAN_STAGES, enabled=progress)
 
     def render(cam, *, spp, seed_offset=0, max_depth=None, shared=False, parallax=True):
         out = []
@@ -193,6 +197,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     centre_cam = camera.centre_camera()
 
     # ---- shared render ------------------------------------------------------------------
+    stages.start("parallax: one shared render vs one per detector")
     offsets = np.asarray(camera.layout.positions_m)
     baseline = float(np.linalg.norm(offsets, axis=1).max())
     texel_m = camera.mask_size_m / max(rows, cols)
@@ -238,6 +243,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     render_cam = centre_cam if shared else camera
 
     # ---- direct light only ---------------------------------------------------------------
+    stages.start("path depth vs a deep reference")
     scene_depth = scene_max_depth(scene)
     measured = {"scene_integrator_max_depth": scene_depth, "bound": request.indirect_fraction}
     if request.max_depth is not None:
@@ -284,6 +290,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     decisions["max_depth"] = {"value": max_depth, "source": source, "reason": reason, **measured}
 
     # ---- samples per texel (plain estimator) ------------------------------------------
+    stages.start("Monte Carlo error at the pilot spp")
     measured = {"target_error": request.target_error}
     e_pilot = None
     if request.spp is not None:
@@ -318,6 +325,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
     decisions["spp"] = {"value": spp, "source": source, "reason": reason, **measured}
 
     # ---- differential rendering ----------------------------------------------------------
+    stages.start("differential rendering: background and difference")
     background = None
     diff = _decide_differential(
         family,
@@ -350,6 +358,8 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         spp, max_depth = diff["frame_spp"], diff["frame_max_depth"]
 
     # ---- check against a reference -------------------------------------------------------
+    stages.start("the plan against a high-spp reference")
+
     def differential_probes():
         return np.stack(
             [
@@ -419,6 +429,7 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         decisions["achieved"] = _achieved(check, ref_noise, decisions, request, spp)
 
     # ---- storage type ------------------------------------------------------------------
+    stages.start("float16 storage error")
     stored, scales = encode_transport(chosen, "float16")
     f16_err = measurement_relative_error(decode_transport(stored, scales), chosen, lo_hi)
     measured = {"float16_error": f16_err, "bound": request.dtype_error_bound}
@@ -463,8 +474,38 @@ def decide_fidelity(family, camera, request) -> tuple[dict[str, Any], dict[str, 
         "dtype": dtype,
         "background": background,
     }
+    stages.close()
     log.info("fidelity: %s", {k_: v["value"] for k_, v in decisions.items() if "value" in v})
     return settings, decisions
+
+
+#: Measurements of a plan (the progress bar's steps): sharing, depth, spp, differential,
+#: the check against a reference, storage.
+_PLAN_STAGES = 6
+
+
+class _Stages:
+    """A progress bar over the planner's measurements, naming the one under way."""
+
+    def __init__(self, total: int, *, enabled: bool) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(
+            total=total, desc="fidelity plan", unit="step", disable=not enabled, leave=False
+        )
+        self._started = False
+
+    def start(self, what: str) -> None:
+        """Count the previous step done and name this one."""
+        if self._started:
+            self._bar.update(1)
+        self._started = True
+        self._bar.set_postfix_str(f"measuring {what}")
+
+    def close(self) -> None:
+        """Count the last step done and remove the bar."""
+        self._bar.update(1)
+        self._bar.close()
 
 
 def _achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
