@@ -39,3 +39,17 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(case, tmp_path, monk
     assert case["expect"] in errors[0], errors[0]
     assert not out.exists() or not any(out.iterdir()), sorted(out.rglob("*"))
     assert _tree(work) == before
+
+
+def test_training_on_a_dataset_without_validation_frames_says_so(tmp_path, variant):
+    """Regression: `render --splits 1,0,0` then `train` failed with a message about history."""
+    runner = CliRunner()
+    ds = tmp_path / "ds"
+    tiny = ["--frames", "4", "--detectors", "2", "--mask-res", "4", "--spp", "1"]
+    res = runner.invoke(
+        main, ["render", "patches", *tiny, "--splits", "1,0,0", "--no-progress", "--out", str(ds)]
+    )
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(main, ["train", str(ds), "--steps", "2", "--out", str(tmp_path / "run")])
+    assert res.exit_code == 2 and "has no val frames" in res.output and "--splits" in res.output
+    assert not (tmp_path / "run").exists()

@@ -42,6 +42,7 @@ def render_preview(
     spp: int = 32,
     width: int = 320,
     transport_spp: int = 16,
+    progress: bool = False,
 ) -> Path:
     """Save a PNG with, per frame: camera view, bird's-eye view, detector 0's T, labels.
 
@@ -52,6 +53,7 @@ def render_preview(
         spp: samples per pixel of the perspective renders.
         width: pixel width of each perspective render.
         transport_spp: samples per texel of the transport image.
+        progress: show a progress bar over the frames (stderr).
     """
     import matplotlib
 
@@ -68,8 +70,12 @@ def render_preview(
     bird_sensor = ms.perspective_sensor(
         bird.position, bird.look_at, bird.up, bird.fov_deg, width, width
     )
+    from tqdm import tqdm
+
     rendered = []
-    for index in frames:
+    bar = tqdm(frames, desc=f"preview {family.name}", unit="frame", disable=not progress)
+    for index in bar:
+        bar.set_postfix_str("camera view, bird's-eye view, transport")
         labels = family.set_frame(scene, index)
         views = [
             np.asarray(mi.render(scene, sensor=cam_sensor, spp=spp, seed=index))[..., 0],

@@ -399,14 +399,17 @@ def simulate_volts(
     spp: int,
     seed: int,
     stream: int = 0,
+    progress: str | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Noiseless simulated voltages ``V[N, P]`` and powers ``P[N, P]`` (W) of a recording.
 
     Renders the family at each frame index with ``camera`` (one transport per
     distinct frame), applies ``masks[P, row, col]`` to detectors ``pixels``, and
-    the electronics without noise (leaky saturation kept).
+    the electronics without noise (leaky saturation kept). ``progress``: the
+    label of a progress bar over the frames, or None for none.
     """
     import torch
+    from tqdm import tqdm
 
     from mincam_render.optics.sensor import detector_voltage
     from mincam_render.render.transport import render_transport
@@ -414,7 +417,8 @@ def simulate_volts(
     scene = family.build_scene()
     cache: dict[int, np.ndarray] = {}
     power = np.zeros((len(frame_index), len(pixels)))
-    for n, i in enumerate(frame_index):
+    frames = tqdm(frame_index, desc=progress, unit="frame", disable=progress is None)
+    for n, i in enumerate(frames):
         i = int(i)
         if i not in cache:
             family.set_frame(scene, i)
@@ -434,6 +438,7 @@ def make_surrogate(
     seed: int = 0,
     perturbations: SurrogatePerturbations | None = None,
     mask_resolution: int | None = None,
+    progress: bool = False,
 ) -> Path:
     """Write a SURROGATE-real recording of a family to ``out_dir`` (returned).
 
@@ -502,7 +507,15 @@ def make_surrogate(
     frame_index = np.arange(num_frames)
     stream = 0 if pert.common_random_numbers else 1
     _, power = simulate_volts(
-        family, real_cam, frame_index, printed, pixels, spp=spp, seed=seed, stream=stream
+        family,
+        real_cam,
+        frame_index,
+        printed,
+        pixels,
+        spp=spp,
+        seed=seed,
+        stream=stream,
+        progress="surrogate recording" if progress else None,
     )
     _, power_design = simulate_volts(
         family,
@@ -721,7 +734,13 @@ def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int
 
 
 def analyze_sim2real(
-    path: str | Path, *, spp: int = 4, steps: int = 1500, seed: int = 0, tasks: bool = True
+    path: str | Path,
+    *,
+    spp: int = 4,
+    steps: int = 1500,
+    seed: int = 0,
+    tasks: bool = True,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Compare a recording with its simulation (see the module doc); JSON-ready result.
 
@@ -731,6 +750,7 @@ def analyze_sim2real(
         steps: training steps of each head.
         seed: render and training seed.
         tasks: also train and evaluate the task heads.
+        progress: show a progress bar over the simulated frames.
 
     Raises:
         Sim2RealError: invalid recording.
@@ -745,7 +765,14 @@ def analyze_sim2real(
     )
     rec.meta.setdefault("needs_history", bool(family.needs_history))
     sim_volts, sim_power = simulate_volts(
-        family, rec.camera, rec.frame_index, rec.masks, rec.pixels, spp=spp, seed=seed
+        family,
+        rec.camera,
+        rec.frame_index,
+        rec.masks,
+        rec.pixels,
+        spp=spp,
+        seed=seed,
+        progress="simulate the recording" if progress else None,
     )
     th = THRESHOLDS
     pixels = []

@@ -327,7 +327,9 @@ def preview_cmd(scene, out, seed, n_shown, duration_s, spp):
         family = load_family(scene, seed=seed, num_frames=num_frames)
         frames = sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, n_shown)})
         out.mkdir(parents=True, exist_ok=True)
-        path = render_preview(family, frames, out / f"preview_{family.name}.png", spp=spp)
+        path = render_preview(
+            family, frames, out / f"preview_{family.name}.png", spp=spp, progress=True
+        )
     except (ConfigError, SceneError, ValueError, ImportError) as err:
         raise _user_error(err) from None
     click.echo(f"wrote {path}")
@@ -438,6 +440,13 @@ def _splits(dataset, family, frames, spp, seed):
         from mincam_render.data.dataset import open_dataset
 
         ds = open_dataset(dataset)
+        sizes = {name: stop - start for name, (start, stop) in ds.splits.items()}
+        empty = [name for name in ("train", "val") if sizes.get(name, 0) == 0]
+        if empty:
+            raise InputError(
+                f"{dataset} has no {' and no '.join(empty)} frames (split sizes {sizes}): "
+                "training needs both; render it with e.g. --splits 0.7,0.1,0.2"
+            )
         return tuple(TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
     if family is None:
         raise InputError("give a DATASET directory (mincam-render render) or --family")
@@ -1432,9 +1441,14 @@ def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps,
     try:
         if surrogate_family is not None:
             measurements = make_surrogate(
-                surrogate_family, out / "surrogate_input", num_frames=frames, spp=spp, seed=seed
+                surrogate_family,
+                out / "surrogate_input",
+                num_frames=frames,
+                spp=spp,
+                seed=seed,
+                progress=True,
             )
-        result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed)
+        result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed, progress=True)
         paths = write_sim2real_report(result, out)
     except (ValueError, ConfigError, Sim2RealError, OSError) as err:
         raise _user_error(err) from None
