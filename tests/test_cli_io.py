@@ -155,3 +155,18 @@ def test_cli_train_refuses_more_pixels_than_rendered_detectors(variant, tmp_path
     res = CliRunner().invoke(main, args)
     assert res.exit_code != 0 and "Traceback" not in res.output
     assert "pixels = 8: the data has only 4 rendered detectors" in res.output
+
+
+def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
+    """Regression: prune left sweep.json and sweep.md (rows with 0 steps, 0 s) behind."""
+    tiny = ["--family", "patches", "--frames", "40", "--spp", "1", "--steps", "4"]
+    tiny += ["--eval-every", "2", "--batch-size", "4"]
+    run = tmp_path / "run"
+    res = CliRunner().invoke(main, ["train", *tiny, "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "prune"
+    res = CliRunner().invoke(main, ["prune", *tiny, "--run", str(run), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in out.iterdir()) == ["prune.json", "prune.png"]
+    records = json.loads((out / "prune.json").read_text())
+    assert [r["pixels"] for r in records] == sorted((r["pixels"] for r in records), reverse=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 
 import numpy as np
@@ -250,3 +251,18 @@ def test_stale_temporaries_of_dead_writers_are_removed(tmp_path):
         p.write_bytes(b"partial")
     assert ds.remove_stale_temporaries(tmp_path) == [stale]
     assert not stale.exists() and live.exists() and other.exists()
+
+
+def test_manifest_carries_its_own_checksum_and_older_manifests_still_read(tmp_path):
+    body = {"format": ds.FORMAT_NAME, "format_version": ds.FORMAT_VERSION, "shards": [None]}
+    ds.write_manifest(tmp_path, body)
+    on_disk = json.loads((tmp_path / ds.MANIFEST_NAME).read_text())
+    assert on_disk[ds.MANIFEST_CHECKSUM_KEY] == hashlib.sha256(ds.json_bytes(body)).hexdigest()
+    assert ds.read_manifest(tmp_path) == body  # the checksum is not part of what callers see
+    on_disk["shards"] = [None, None]  # any edit
+    (tmp_path / ds.MANIFEST_NAME).write_text(json.dumps(on_disk))
+    with pytest.raises(ds.DatasetError, match="was changed after it was written"):
+        ds.read_manifest(tmp_path)
+    del on_disk[ds.MANIFEST_CHECKSUM_KEY]  # written before manifests had checksums
+    (tmp_path / ds.MANIFEST_NAME).write_text(json.dumps(on_disk))
+    assert ds.read_manifest(tmp_path)["shards"] == [None, None]

@@ -120,11 +120,16 @@ def _damage(root: Path, how: str) -> str:
     if how == "no-manifest":
         man.unlink()
         return ds.MANIFEST_NAME
-    if how == "incomplete":
-        m = json.loads(man.read_text())
+    if how == "incomplete":  # as a killed render leaves it (written by the writer)
+        m = ds.read_manifest(root)
         m["shards"][2], m["complete"] = None, False
-        man.write_text(json.dumps(m))
+        ds.write_manifest(root, m)
         return "incomplete"
+    if how == "edited-manifest":  # a field that defines the data, changed by hand
+        m = json.loads(man.read_text())
+        m["job"]["render"]["spp"] += 1
+        man.write_text(json.dumps(m))
+        return "was changed after it was written"
     if how == "missing-shard":
         npy.unlink()
         return npy.name
@@ -154,6 +159,7 @@ def _damage(root: Path, how: str) -> str:
         "manifest-not-ours",
         "no-manifest",
         "incomplete",
+        "edited-manifest",
         "missing-shard",
         "truncated-shard",
         "truncated-shard-metadata",
@@ -184,6 +190,24 @@ def test_damaged_datasets_fail_training_with_one_line(tmp_path, tiny_dataset, ho
     assert res.exit_code != 0
     one_clear_line(res.output, name)
     assert not (out / "metrics.json").exists()  # nothing that looks like a finished run
+
+
+@pytest.mark.parametrize("how", ["missing-shard", "truncated-shard", "flipped-byte"])
+def test_export_exr_verifies_the_shards_it_reads(tmp_path, tiny_dataset, how):
+    """Frames of a damaged shard (1: frames 8-15) are refused; others still export."""
+    root = tmp_path / "copy"
+    shutil.copytree(tiny_dataset, root)
+    name = _damage(root, how)
+    out = tmp_path / "exr"
+    res = CliRunner().invoke(main, ["export-exr", str(root), "--frames", "0,9", "--out", str(out)])
+    assert res.exit_code == 2
+    one_clear_line(res.output, name)
+    assert not out.exists() or not any(out.iterdir())  # nothing written
+    ok = CliRunner().invoke(
+        main, ["export-exr", str(root), "--frames", "0-7,16", "--out", str(out)]
+    )
+    assert ok.exit_code == 0, ok.output
+    assert len(list(out.glob("frame-*.exr"))) == 9
 
 
 # ---- the CLI, fuzzed -------------------------------------------------------------------

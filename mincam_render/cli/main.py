@@ -699,7 +699,7 @@ def prune_cmd(
           --run runs/patches4 --out runs/patches4_prune
     """
     from mincam_render.learn.models import CountLoss
-    from mincam_render.learn.train import build_mincam, greedy_prune, load_run, write_sweep
+    from mincam_render.learn.train import build_mincam, greedy_prune, load_run, plot_sweep
 
     try:
         config = _config(steps, batch_size, lr, mask_lr, eval_every, patience, seed)
@@ -723,18 +723,14 @@ def prune_cmd(
     (out / "prune.json").write_text(json.dumps(records, indent=2, default=str))
     rows = [
         {
-            "name": f"pruned_{r['pixels']}px",
             "kind": "mincam",
             "pixels": r["pixels"],
             "error": r["test"]["error"],
             "error_name": r["test"]["error_name"],
-            "steps": 0,
-            "train_wall_time_s": 0.0,
         }
         for r in records
     ]
-    write_sweep(rows, out, title="greedy pruning")
-    (out / "sweep.png").replace(out / "prune.png")
+    plot_sweep(rows, out / "prune.png", title="greedy pruning")
     for r in records:
         click.echo(
             f"{r['pixels']:3d} px  removed {r['removed']}  "

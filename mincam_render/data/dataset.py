@@ -54,6 +54,8 @@ FORMAT_NAME = "mincam_render.transport_dataset"
 #: (mincam_render.render.sun_patch): a version-2 dataset resumed now would mix estimators.
 FORMAT_VERSION = 3
 MANIFEST_NAME = "manifest.json"
+#: Key of the manifest's own checksum (sha256 of the canonical JSON of the rest).
+MANIFEST_CHECKSUM_KEY = "manifest_sha256"
 SHARD_DIR = "shards"
 #: Static backgrounds of differentially rendered datasets (mincam_render.render.differential).
 BACKGROUND_DIR = "backgrounds"
@@ -324,6 +326,13 @@ def read_manifest(root: str | os.PathLike) -> dict:
         raise DatasetError(f"{path}: not valid JSON ({err})") from None
     if manifest.get("format") != FORMAT_NAME:
         raise DatasetError(f"{path}: format {manifest.get('format')!r}, expected {FORMAT_NAME!r}")
+    recorded = manifest.pop(MANIFEST_CHECKSUM_KEY, None)
+    if recorded is not None and recorded != _manifest_sha256(manifest):
+        raise DatasetError(
+            f"{path} was changed after it was written (its {MANIFEST_CHECKSUM_KEY} does not "
+            "match): the fields that define the data cannot be trusted; restore the file, or "
+            "render again into a fresh --out directory"
+        )
     if manifest.get("format_version", 0) > FORMAT_VERSION:
         raise DatasetError(
             f"{path}: format version {manifest['format_version']} is newer than this "
@@ -333,8 +342,19 @@ def read_manifest(root: str | os.PathLike) -> dict:
 
 
 def write_manifest(root: str | os.PathLike, manifest: dict) -> Path:
-    """Write ``manifest.json`` atomically (canonical JSON)."""
-    return atomic_write_bytes(Path(root) / MANIFEST_NAME, json_bytes(manifest))
+    """Write ``manifest.json`` atomically (canonical JSON) with its own checksum.
+
+    The checksum (:data:`MANIFEST_CHECKSUM_KEY`, sha256 of the canonical JSON of
+    everything else) makes any later edit detectable by :func:`read_manifest`;
+    manifests written before it existed have none and are read as they are.
+    """
+    body = {k: v for k, v in manifest.items() if k != MANIFEST_CHECKSUM_KEY}
+    protected = body | {MANIFEST_CHECKSUM_KEY: _manifest_sha256(body)}
+    return atomic_write_bytes(Path(root) / MANIFEST_NAME, json_bytes(protected))
+
+
+def _manifest_sha256(body: dict) -> str:
+    return hashlib.sha256(json_bytes(body)).hexdigest()
 
 
 def split_ranges(num_frames: int, fractions: Sequence[float]) -> dict[str, tuple[int, int]]:
@@ -592,46 +612,59 @@ class TransportDataset:
 
     # ---- checks and export ----------------------------------------------------------
 
-    def verify(self) -> list[tuple[int, str]]:
-        """Shards that fail their checksums: ``[(shard, reason), ...]`` (empty = intact)."""
+    def verify(self, shards: Iterable[int] | None = None) -> list[tuple[int, str]]:
+        """Shards that fail their checksums: ``[(shard, reason), ...]`` (empty = intact).
+
+        Args:
+            shards: the shards to check; None checks all.
+        """
         bad = []
-        for i, rec in enumerate(self.manifest["shards"]):
-            ok, reason = verify_shard(self.path, i, rec)
+        for i in range(len(self.manifest["shards"])) if shards is None else sorted(set(shards)):
+            ok, reason = verify_shard(self.path, i, self.manifest["shards"][i])
             if ok is None:
                 bad.append((i, reason))
         return bad
 
-    def check_intact(self) -> None:
+    def check_intact(self, frames: Iterable[int] | None = None) -> None:
         """Raise a one-line :class:`DatasetError` naming the first damaged shard.
 
-        Every reader calls this before using the data (one checksum pass per opened
-        dataset, about 0.3 s per 100 MB here); an intact dataset is checked once.
+        Every reader calls this before using the data: training readers check every
+        shard (one checksum pass per opened dataset, about 0.3 s per 100 MB here);
+        readers of a few ``frames`` check only the shards holding them. A shard is
+        checked at most once per opened dataset.
         """
-        if self.__dict__.get("_intact"):
-            return
-        bad = self.verify()
+        verified = self.__dict__.setdefault("_verified", set())
+        wanted = (
+            set(range(len(self.manifest["shards"])))
+            if frames is None
+            else {self._shard_of(int(i)) for i in frames}
+        )
+        bad = self.verify(wanted - verified)
         if bad:
             shard, reason = bad[0]
             name = shard_paths(self.path, shard)[0].name
             raise DatasetError(
                 f"{self.path}: {name} (shard {shard}) {reason} ({len(bad)} damaged shard(s) "
-                "in all); "
+                "among those checked); "
                 f"re-run the same `mincam-render render ... --out {self.path}` to re-render "
                 "them"
             )
-        self._intact = True
+        verified |= wanted
 
     def export_exr(self, indices: Iterable[int], out_dir: str | os.PathLike) -> list[Path]:
         """Write chosen frames as OpenEXR (one float32 channel per detector, W).
 
         Each file ``frame-000123.exr`` carries the frame's metadata, labels and
-        the camera in its header (``mincam_metadata``).
+        the camera in its header (``mincam_metadata``). The shards holding the
+        frames are verified first: a damaged one is an error and nothing is written.
 
         Returns:
             The written paths.
         """
         from mincam_render.data.exr import write_transport_exr
 
+        indices = list(indices)
+        self.check_intact(indices)
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         paths = []

@@ -1276,15 +1276,21 @@ def write_sweep(
     rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike, title: str = ""
 ) -> dict[str, Path]:
     """Write ``sweep.json``, ``sweep.md`` and ``sweep.png`` (error vs pixel count, log x)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.json").write_text(json.dumps(list(rows), indent=2, default=str))
+    (out / "sweep.md").write_text(sweep_table(rows) + "\n")
+    plot_sweep(rows, out / "sweep.png", title)
+    return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}
+
+
+def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, title: str = "") -> None:
+    """Save test error vs pixel count (log x) of sweep rows ``{"kind", "pixels", "error"}``."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(json.dumps(list(rows), indent=2, default=str))
-    (out / "sweep.md").write_text(sweep_table(rows) + "\n")
     fig, ax = plt.subplots(figsize=(5, 3.5))
     for kind, style, label in (
         ("mincam", "o-", "minimalist camera"),
@@ -1300,9 +1306,8 @@ def write_sweep(
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out / "sweep.png", dpi=120)
+    fig.savefig(path, dpi=120)
     plt.close(fig)
-    return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}
 
 
 def train_run(
