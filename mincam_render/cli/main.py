@@ -1072,6 +1072,34 @@ def export_exr_cmd(dataset, frame_list, out):
     click.echo(f"wrote {len(paths)} EXR file(s) to {out}")
 
 
+@main.command("repair")
+@click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
+def repair_cmd(dataset):
+    """Rebuild an edited or damaged manifest from its request and the shards' own records.
+
+    Shards that pass their own checksum and were rendered for the request are
+    kept; the rest are listed, and the same `render` command renders them again.
+
+    \b
+    Example:
+      mincam-render repair runs/tiny
+    """
+    from mincam_render.data.dataset import DatasetError
+    from mincam_render.data.repair import repair_dataset
+
+    try:
+        summary = repair_dataset(dataset)
+    except (ValueError, DatasetError, OSError, RuntimeError) as err:
+        raise _user_error(err) from None
+    restored = ", ".join(summary.restored_fields) or "none"
+    click.echo(
+        f"{dataset}: manifest rebuilt; kept {len(summary.kept)} of {summary.num_shards} "
+        f"shards; fields restored from the request's plan: {restored}"
+    )
+    for shard, reason in summary.dropped.items():
+        click.echo(f"  shard {shard}: {reason}; the same `render` command renders it again")
+
+
 def _episode_options(f):
     """Options of the commands that render independent episodes and compare designs.
 

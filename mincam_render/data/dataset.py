@@ -330,8 +330,8 @@ def read_manifest(root: str | os.PathLike) -> dict:
     if recorded is not None and recorded != _manifest_sha256(manifest):
         raise DatasetError(
             f"{path} was changed after it was written (its {MANIFEST_CHECKSUM_KEY} does not "
-            "match): the fields that define the data cannot be trusted; restore the file, or "
-            "render again into a fresh --out directory"
+            "match): the fields that define the data cannot be trusted; run `mincam-render "
+            f"repair {Path(root)}` to rebuild it from its request and its shards"
         )
     if manifest.get("format_version", 0) > FORMAT_VERSION:
         raise DatasetError(
