@@ -104,6 +104,40 @@ def test_pdf_page_is_true_size(exported, camera):
     assert float(box.group(4)) == pytest.approx(h / 25.4 * 72, rel=1e-3)
 
 
+def test_pdf_texels_are_vector_rectangles_where_the_design_puts_them(exported, camera):
+    """Issue 18 item 5: every texel's edges in the PDF within 0.01 mm, its grey exact."""
+    import pdfplumber
+
+    m, paths = exported
+    lo, hi = camera.transmittance_range
+    want = np.clip(m, lo, hi)
+    _, _, corners = sheet_layout(camera)
+    rows, cols = camera.mask_resolution
+    texel_mm = camera.mask_size_m / MM / cols, camera.mask_size_m / MM / rows
+    mm_per_pt = 25.4 / 72
+    with pdfplumber.open(paths["pdf"]) as pdf:
+        page = pdf.pages[0]
+        assert page.images == []  # no raster anywhere: nothing a viewer could resample
+        found = {
+            (round(r["x0"] * mm_per_pt, 2), round(r["top"] * mm_per_pt, 2)): r
+            for r in page.rects
+            if r["fill"] and r["width"] * mm_per_pt < 5
+        }
+    assert len(found) == want.size
+    for k, (x, y) in enumerate(corners):
+        for r in range(rows):
+            for c in range(cols):
+                key = (round(x + c * texel_mm[0], 2), round(y + r * texel_mm[1], 2))
+                rect = found[key]
+                assert abs(rect["x0"] * mm_per_pt - (x + c * texel_mm[0])) < 0.01
+                assert abs(rect["top"] * mm_per_pt - (y + r * texel_mm[1])) < 0.01
+                assert abs(rect["width"] * mm_per_pt - texel_mm[0]) < 0.01
+                assert abs(rect["height"] * mm_per_pt - texel_mm[1]) < 0.01
+                assert float(np.ravel(rect["non_stroking_color"])[0]) == pytest.approx(
+                    want[k, r, c], abs=1e-6
+                )
+
+
 def test_more_masks_than_board_positions(tmp_path, camera):
     paths = export_masks(np.full((8, 8, 12), 0.3), camera, tmp_path, pdf=False)
     assert len(paths["png"]) == 8
@@ -137,3 +171,9 @@ def test_kept_designs_are_complete_and_agree_with_their_sidecar(sidecar):
     for ep in side["provenance"]["episodes"].values():
         assert len(ep["manifest_sha256"]) == 64
     assert (folder / side["files"]["svg"]).read_text().lstrip().startswith("<")
+    import pdfplumber
+
+    with pdfplumber.open(folder / side["files"]["pdf"]) as pdf:  # vector texels, no raster
+        page = pdf.pages[0]
+        texels = [r for r in page.rects if r["fill"] and r["width"] < 5 / 25.4 * 72]
+        assert page.images == [] and len(texels) == side["masks"] * np.prod(side["mask_resolution"])

@@ -131,10 +131,41 @@ def print_sheet_svg(masks: np.ndarray, camera: FreeformCamera, *, title: str = "
     return "\n".join(parts) + "\n"
 
 
+def _texel_rectangles(mask: np.ndarray, x_mm: float, y_mm: float, side_mm: float):
+    """A PolyCollection of one square per texel of ``mask`` (grey = transmittance), in mm."""
+    from matplotlib.collections import PolyCollection
+
+    rows, cols = mask.shape
+    tw, th = side_mm / cols, side_mm / rows
+    c, r = np.meshgrid(np.arange(cols), np.arange(rows))
+    x0, y0 = x_mm + c.ravel() * tw, y_mm + r.ravel() * th
+    squares = np.stack(
+        [
+            np.stack([x0, y0], 1),
+            np.stack([x0 + tw, y0], 1),
+            np.stack([x0 + tw, y0 + th], 1),
+            np.stack([x0, y0 + th], 1),
+        ],
+        axis=1,
+    )
+    grey = np.clip(mask.ravel(), 0.0, 1.0)
+    return PolyCollection(
+        squares,
+        facecolors=np.stack([grey, grey, grey], axis=1),
+        edgecolors="none",
+        linewidths=0,
+        antialiased=False,
+    )
+
+
 def print_sheet_pdf(
     masks: np.ndarray, camera: FreeformCamera, path: str | os.PathLike, *, title: str = ""
 ) -> Path:
-    """The same sheet as a PDF at true size (matplotlib; 1 data unit = 1 mm)."""
+    """The same sheet as a PDF at true size (matplotlib; 1 data unit = 1 mm).
+
+    Every texel is a filled vector rectangle (no image, so no resampling by the
+    viewer or the printer driver): its edges sit where the design puts them.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -150,14 +181,7 @@ def print_sheet_pdf(
     pt_per_mm = 72 / 25.4
     o, ln = CUT_MARK_OFFSET_MM, CUT_MARK_LENGTH_MM
     for k, (x, y) in enumerate(corners):
-        ax.imshow(
-            masks[k],
-            cmap="gray",
-            vmin=0,
-            vmax=1,
-            interpolation="nearest",
-            extent=(x, x + side, y + side, y),
-        )
+        ax.add_collection(_texel_rectangles(masks[k], x, y, side))
         for cx, sx in ((x, -1), (x + side, 1)):
             for cy, sy in ((y, -1), (y + side, 1)):
                 ax.plot([cx + sx * o, cx + sx * (o + ln)], [cy, cy], "k-", lw=0.1 * pt_per_mm)
