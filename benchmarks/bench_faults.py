@@ -7,7 +7,8 @@ Classes (each trial runs the real command line in a subprocess):
   finished shard was rewritten. Data lost = finished shards rewritten.
 - ``train_kill``: `train` killed at a random moment after its first checkpoint, then resumed;
   survived = it finishes all steps, the checkpoint was never torn and history.jsonl has each
-  evaluation step exactly once. Data lost = checkpointed steps repeated.
+  evaluation step exactly once. Data lost = checkpointed steps repeated. Each trial records
+  whether the kill landed mid-run (the checkpoint's step below the total).
 - ``corruption``: each damage kind x each reader (train, export-exr); survived = the reader
   refuses with exit 2 and one line naming the damaged file (never trains or exports from it).
 - ``concurrent_writers``: two `render` commands into one directory at once; survived = one
@@ -39,7 +40,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 RENDER = ["render", "patches", "--frames", "40", "--shard-frames", "8", "--detectors", "2"]
 RENDER += ["--mask-res", "8", "--spp", "2", "--seed", "5", "--no-progress", "--workers", "0"]
-TRAIN = ["--steps", "300", "--eval-every", "20", "--batch-size", "8", "--patience", "100"]
+TRAIN_STEPS = 3000  # about 6 s here: the kill lands mid-run, after the first checkpoint
+TRAIN = ["--steps", str(TRAIN_STEPS), "--eval-every", "20", "--batch-size", "8"]
+TRAIN += ["--patience", "1000"]
 DAMAGE = ("missing-shard", "truncated-shard", "flipped-byte", "edited-manifest")
 
 
@@ -91,14 +94,19 @@ def render_kill(tmp: Path, reference: Path, rng) -> dict:
     done = _run([*RENDER, "--out", str(out)])
     rewritten = [n for n, t in before.items() if (out / "shards" / n).stat().st_mtime_ns != t]
     ok = done.returncode == 0 and _files(out) == _files(reference) and not rewritten
-    return {"survived": ok, "lost": len(rewritten), "finished_before_kill": len(before)}
+    return {
+        "survived": ok,
+        "lost": len(rewritten),
+        "finished_before_kill": len(before),
+        "killed_mid_run": len(before) < 5,  # 40 frames in 5 shards
+    }
 
 
 def train_kill(tmp: Path, dataset: Path, rng) -> dict:
     out = tmp / "run"
     p = _cli(["train", str(dataset), "--out", str(out), *TRAIN])
     _wait_for(lambda: (out / "checkpoint.pt").exists(), p)
-    time.sleep(float(rng.uniform(0.0, 1.5)))
+    time.sleep(float(rng.uniform(0.0, 3.0)))
     os.killpg(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
     import torch
@@ -173,6 +181,7 @@ def concurrent_writers(tmp: Path) -> dict:
 def _summary(trials: list[dict]) -> dict:
     return {
         "trials": len(trials),
+        "killed_mid_run": sum(t.get("killed_mid_run", True) for t in trials),
         "survived": sum(t["survived"] for t in trials),
         "data_lost": sum(t["lost"] for t in trials),
         "details": trials,
