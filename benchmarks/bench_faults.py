@@ -116,11 +116,12 @@ def train_kill(tmp: Path, dataset: Path, rng) -> dict:
     steps = [json.loads(line)["step"] for line in (out / "history.jsonl").read_text().splitlines()]
     unique = len(steps) == len(set(steps)) and steps == sorted(steps)
     metrics = json.loads((out / "metrics.json").read_text()) if done.returncode == 0 else {}
-    ok = done.returncode == 0 and unique and metrics.get("steps") == 300
+    ok = done.returncode == 0 and unique and metrics.get("steps") == TRAIN_STEPS
     return {
         "survived": ok,
         "lost": 0 if unique else len(steps) - len(set(steps)),
         "checkpoint_step_at_kill": int(checkpointed),
+        "killed_mid_run": int(checkpointed) < TRAIN_STEPS,
     }
 
 
