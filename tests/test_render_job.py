@@ -403,3 +403,16 @@ def test_automatic_workers_follow_the_work_left(
     assert _files(tmp_path / "ds") == _files(reference)
     (chosen,) = [e["workers"] for e in _log(tmp_path / "ds") if e["event"] == "workers"]
     assert chosen == ((os.cpu_count() or 1) if break_even_s == 0.0 else 0)
+
+
+def test_the_plan_reports_each_detectors_error_against_the_reference(variant):
+    """Item 4 of issue 17: the per-detector figure after a render, not only the pooled one."""
+    shared = plan_render(_tiny_patches(target_error=0.2, shared_render=True))["fidelity"]
+    own = plan_render(_tiny_patches(target_error=0.2, shared_render=False))["fidelity"]
+    same = shared["achieved"]["per_detector_error_rms"]
+    apart = own["achieved"]["per_detector_error_rms"]
+    assert len(same) == len(apart) == 2
+    assert same[0] == same[1]  # one render replicated: the same error on both detectors
+    assert apart[0] != apart[1]  # each detector its own render and its own noise
+    pooled = own["achieved"]["error_rms"]
+    assert all(0.25 * pooled < e < 4 * pooled for e in apart), (apart, pooled)

@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 #: Seed of the planning episode (whatever the dataset's seed).
 PLAN_SEED = 0
 #: Version of the planner's decisions; part of every plan's key.
-PLANNER_VERSION = 2
+PLANNER_VERSION = 3
 #: Plans shipped with the repository.
 SHIPPED_DIR = SCENES_DIR / "plans"
 #: Environment variable naming the user's plan cache directory.

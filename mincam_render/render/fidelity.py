@@ -427,6 +427,9 @@ def decide_fidelity(
                 )
         (diff if background is not None else decisions["spp"]).update(check)
         decisions["achieved"] = _achieved(check, ref_noise, decisions, request, spp)
+        decisions["achieved"]["per_detector_error_rms"] = _per_detector_error(
+            chosen, ref, lo_hi, ref_noise
+        )
 
     # ---- storage type ------------------------------------------------------------------
     stages.start("float16 storage error")
@@ -506,6 +509,17 @@ class _Stages:
         """Count the last step done and remove the bar."""
         self._bar.update(1)
         self._bar.close()
+
+
+def _per_detector_error(chosen, ref, lo_hi, ref_noise: float) -> list[float]:
+    """Each detector's measurement error vs the reference (its noise out in quadrature)."""
+    errors = []
+    for k in range(chosen.shape[1]):
+        rms = measurement_relative_error(chosen[:, k : k + 1], ref[:, k : k + 1], lo_hi)["rms"]
+        errors.append(math.sqrt(max(rms**2 - ref_noise**2, 0.0)))
+    worst = int(np.argmax(errors))
+    log.info("fidelity: worst detector %d: %.3g rms against the reference", worst, errors[worst])
+    return errors
 
 
 def _achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
