@@ -253,7 +253,7 @@ def test_stale_temporaries_of_dead_writers_are_removed(tmp_path):
     assert not stale.exists() and live.exists() and other.exists()
 
 
-def test_manifest_carries_its_own_checksum_and_older_manifests_still_read(tmp_path):
+def test_manifest_carries_its_own_checksum_and_one_without_is_refused(tmp_path):
     body = {"format": ds.FORMAT_NAME, "format_version": ds.FORMAT_VERSION, "shards": [None]}
     ds.write_manifest(tmp_path, body)
     on_disk = json.loads((tmp_path / ds.MANIFEST_NAME).read_text())
@@ -263,6 +263,7 @@ def test_manifest_carries_its_own_checksum_and_older_manifests_still_read(tmp_pa
     (tmp_path / ds.MANIFEST_NAME).write_text(json.dumps(on_disk))
     with pytest.raises(ds.DatasetError, match="was changed after it was written"):
         ds.read_manifest(tmp_path)
-    del on_disk[ds.MANIFEST_CHECKSUM_KEY]  # written before manifests had checksums
+    del on_disk[ds.MANIFEST_CHECKSUM_KEY]  # removed (then perhaps edited) by hand
     (tmp_path / ds.MANIFEST_NAME).write_text(json.dumps(on_disk))
-    assert ds.read_manifest(tmp_path)["shards"] == [None, None]
+    with pytest.raises(ds.DatasetError, match="no manifest_sha256.*mincam-render repair"):
+        ds.read_manifest(tmp_path)

@@ -60,6 +60,23 @@ def test_an_edited_field_is_restored_and_every_shard_kept(original, tmp_path):
     assert ds.open_dataset(root).verify() == []
 
 
+def test_a_stripped_checksum_with_an_edit_is_refused_then_repaired(original, tmp_path):
+    root = _copy(original, tmp_path)
+
+    def strip_and_edit(m):
+        del m[ds.MANIFEST_CHECKSUM_KEY]
+        m["camera"]["mask_distance_m"] *= 10
+
+    _edit(root, strip_and_edit)
+    with pytest.raises(ds.DatasetError, match="no manifest_sha256"):
+        ds.open_dataset(root)
+    summary = repair_dataset(root)
+    assert summary.kept == [0, 1, 2] and summary.restored_fields == ["camera"]
+    assert _without_versions(ds.read_manifest(root)) == _without_versions(
+        ds.read_manifest(original)
+    )
+
+
 def test_a_damaged_shard_is_dropped_and_the_render_command_restores_it(original, tmp_path):
     root = _copy(original, tmp_path)
     npy, _ = ds.shard_paths(root, 1)

@@ -315,7 +315,7 @@ def read_manifest(root: str | os.PathLike) -> dict:
     """The parsed ``manifest.json`` of a dataset directory.
 
     Raises:
-        DatasetError: no manifest, not JSON, or another format.
+        DatasetError: no manifest, not JSON, another format, or no or a wrong checksum.
     """
     path = Path(root) / MANIFEST_NAME
     if not path.is_file():
@@ -327,7 +327,14 @@ def read_manifest(root: str | os.PathLike) -> dict:
     if manifest.get("format") != FORMAT_NAME:
         raise DatasetError(f"{path}: format {manifest.get('format')!r}, expected {FORMAT_NAME!r}")
     recorded = manifest.pop(MANIFEST_CHECKSUM_KEY, None)
-    if recorded is not None and recorded != _manifest_sha256(manifest):
+    if recorded is None:
+        # a removed checksum is indistinguishable from a removed-then-edited one
+        raise DatasetError(
+            f"{path} has no {MANIFEST_CHECKSUM_KEY} (written before manifests carried one, "
+            "or removed by hand), so the fields that define the data cannot be verified; run "
+            f"`mincam-render repair {Path(root)}` to rebuild it from its request and its shards"
+        )
+    if recorded != _manifest_sha256(manifest):
         raise DatasetError(
             f"{path} was changed after it was written (its {MANIFEST_CHECKSUM_KEY} does not "
             "match): the fields that define the data cannot be trusted; run `mincam-render "
@@ -345,8 +352,8 @@ def write_manifest(root: str | os.PathLike, manifest: dict) -> Path:
     """Write ``manifest.json`` atomically (canonical JSON) with its own checksum.
 
     The checksum (:data:`MANIFEST_CHECKSUM_KEY`, sha256 of the canonical JSON of
-    everything else) makes any later edit detectable by :func:`read_manifest`;
-    manifests written before it existed have none and are read as they are.
+    everything else) makes any later edit detectable by :func:`read_manifest`,
+    which refuses a manifest without one (``mincam-render repair`` adds it).
     """
     body = {k: v for k, v in manifest.items() if k != MANIFEST_CHECKSUM_KEY}
     protected = body | {MANIFEST_CHECKSUM_KEY: _manifest_sha256(body)}
