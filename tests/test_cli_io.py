@@ -130,6 +130,10 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
         assert np.mean(d["error_per_seed"]) == pytest.approx(d["error"]["mean"])
         assert len(d["convergence"]) == 2 and isinstance(d["converged"], bool)
     assert metrics["trivial"]["error"]["mean"] > 0
+    (label,) = metrics["labels"]  # patches: the count, with every design and the trivial
+    for name, figure in metrics["labels"][label]["configs"].items():
+        source = metrics["trivial"] if name == "trivial" else designs[name]
+        assert figure == source["error"]  # the primary label is the task's error
     assert metrics["verdict"] in res.output
     assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     sidecar = json.loads((out / "masks" / "patches" / "mincam-2px" / "masks.json").read_text())

@@ -9,11 +9,13 @@ from mincam_render.analysis.comparison import (
     ComparisonConfig,
     Design,
     episode_requests,
+    label_intervals,
     reduction_factor,
     reference_verdicts,
     study_table,
     training_state,
 )
+from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
 
 
@@ -135,3 +137,54 @@ def test_cli_study_refuses_a_reference_outside_the_pixel_counts(tmp_path):
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 2 and "--reference-pixels" in res.output
     assert "Traceback" not in res.output and not (tmp_path / "s").exists()
+
+
+def _episode(count_rmse, door_acc, samples):
+    return {
+        "samples": samples,
+        "labels": {
+            "count": {"rmse": count_rmse, "unit": "people"},
+            "door": {"accuracy": door_acc, "unit": ""},
+        },
+    }
+
+
+def test_label_intervals_pool_each_label_over_frames():
+    """RMSE pools as a frame-weighted root mean square, accuracy as a frame-weighted mean."""
+    runs = [
+        {"a": _episode(1.0, 0.8, 100), "b": _episode(2.0, 0.6, 300)},
+        {"a": _episode(3.0, 1.0, 100), "b": _episode(1.0, 0.4, 300)},
+    ]
+    trivial = [{"a": _episode(2.0, 0.5, 100), "b": _episode(2.0, 0.5, 300)}]
+    out = label_intervals({"mincam-2px": runs, "trivial": trivial}, seed=0)
+    rms = [(0.25 * 1.0 + 0.75 * 4.0) ** 0.5, (0.25 * 9.0 + 0.75 * 1.0) ** 0.5]
+    count = out["count"]
+    assert count["metric"] == "rmse" and count["unit"] == "people"
+    assert count["configs"]["mincam-2px"]["mean"] == pytest.approx(sum(rms) / 2, rel=1e-12)
+    assert count["configs"]["trivial"] == {"mean": 2.0, "ci95": [2.0, 2.0]}
+    door = out["door"]["configs"]["mincam-2px"]
+    assert out["door"]["metric"] == "accuracy"
+    assert door["mean"] == pytest.approx((0.25 * 0.8 + 0.75 * 0.6 + 0.25 * 1.0 + 0.75 * 0.4) / 2)
+    assert door["ci95"][0] <= door["mean"] <= door["ci95"][1]
+
+
+def test_comparison_figure_has_a_panel_per_label_on_axes_from_zero(tmp_path, monkeypatch):
+    import matplotlib.figure
+
+    result = _result()
+    result["labels"] = label_intervals(
+        {
+            "mincam-4px": [{"a": _episode(1.97, 0.9, 10)}],
+            "trivial": [{"a": _episode(2.03, 0.5, 10)}],
+        },
+        seed=0,
+    )
+    seen = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: seen.append(fig))
+    plot_comparison(result, tmp_path / "c.png")
+    (fig,) = seen
+    axes = {ax.get_title(): ax for ax in fig.axes}
+    assert axes["count"].get_ylim()[0] == 0.0 and axes["count"].get_ylim()[1] >= 2.03
+    assert axes["door"].get_ylim() == (0.0, 1.0)
+    assert [t.get_text() for t in axes["door"].get_xticklabels()] == ["mincam-4px", "trivial"]
+    assert min(ax.get_ylim()[0] for ax in fig.axes) == 0.0  # the error-vs-pixels panel too

@@ -112,6 +112,39 @@ def _pooling(error_name: str) -> str:
     return "rms" if error_name.endswith("RMSE") else "mean"
 
 
+def label_intervals(
+    per_config: Mapping[str, list[Mapping[str, Mapping[str, Any]]]], seed: int
+) -> dict[str, dict[str, Any]]:
+    """Every label's figure with its 95 % interval, per configuration.
+
+    Args:
+        per_config: ``{configuration: [per-seed {episode: metrics}]}`` (runs'
+            ``episodes``, or the trivial predictor's as a one-seed list).
+        seed: bootstrap seed.
+
+    Returns:
+        ``{label: {"metric": "rmse"|"accuracy", "unit": str, "configs": {name:
+        {"mean", "ci95"}}}}``: RMSE pooled as a root mean square over test frames,
+        accuracy as a mean (higher is better); intervals resample seeds and episodes.
+    """
+    first = next(iter(per_config.values()))[0]
+    some = first[next(iter(first))]["labels"]
+    out: dict[str, dict[str, Any]] = {}
+    for label, m in some.items():
+        metric = "rmse" if "rmse" in m else "accuracy"
+        configs = {}
+        for name, per_seed in per_config.items():
+            names = sorted(per_seed[0])
+            errors = EpisodeErrors(
+                error=np.array([[s[e]["labels"][label][metric] for e in names] for s in per_seed]),
+                frames=np.array([per_seed[0][e]["samples"] for e in names]),
+                pooling="rms" if metric == "rmse" else "mean",
+            )
+            configs[name] = bootstrap_interval(errors, seed=seed).as_dict()
+        out[label] = {"metric": metric, "unit": m.get("unit", ""), "configs": configs}
+    return out
+
+
 def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
     """Test metrics of the trivial predictor: every label's training mean (mode if binary)."""
     n = len(test)
@@ -271,6 +304,11 @@ def run_comparison(
         "versus_trivial": {
             name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
         },
+        "labels": label_intervals(
+            {name: [r["episodes"] for r in rs] for name, rs in runs.items()}
+            | {"trivial": [trivial]},
+            seed=cfg.seed,
+        ),
         "figure": str(out / "comparison.png"),
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")

@@ -71,22 +71,39 @@ def _series_name(design: str) -> str:
 
 
 def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
-    """Save a PNG of test error against pixel count (log x) with 95 % intervals.
+    """Save a PNG: the task's error against pixel count, and every label with its interval.
 
     ``result`` is :func:`mincam_render.analysis.comparison.run_comparison`'s
-    output: one point per design (mean over seeds, bootstrap interval as error
-    bar, each seed as a faint dot), designs of one kind joined by a line
+    output. Top: one point per design (mean over seeds, bootstrap interval as
+    error bar, each seed as a faint dot), designs of one kind joined by a line
     (minimalist cameras, their no-sensor-model ablation, baselines), and the
-    trivial predictor as a band.
+    trivial predictor as a band. Below, when ``result["labels"]`` is present: one
+    panel per label (people count RMSE, zone and door accuracy, ...) with every
+    design and the trivial predictor. Every axis starts at 0 (accuracy spans
+    0-1), so a small gap looks small.
     """
-    fig, ax = plt.subplots(figsize=(6, 4))
+    labels = result.get("labels") or {}
+    fig = plt.figure(figsize=(max(6.5, 3.3 * len(labels)), 7.6 if labels else 4))
+    grid = fig.add_gridspec(2 if labels else 1, max(1, len(labels)))
+    _plot_error_vs_pixels(fig.add_subplot(grid[0, :]), result)
+    for i, (name, lab) in enumerate(labels.items()):
+        _plot_label(fig.add_subplot(grid[1, i]), name, lab)
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def _plot_error_vs_pixels(ax, result: dict) -> None:
     lo, hi = result["trivial"]["error"]["ci95"]
     ax.axhspan(lo, hi, color="0.85", label="trivial predictor (95 % CI)")
     ax.axhline(result["trivial"]["error"]["mean"], color="0.5", lw=1, ls="--")
     series: dict[str, list] = {}
     for name, d in result["designs"].items():
         series.setdefault(_series_name(name), []).append(d)
-    for (kind, ds), colour in zip(series.items(), ("C0", "C1", "C2"), strict=False):
+    for kind, ds in series.items():
+        colour = f"C{_SERIES.index(kind)}"
         ds = sorted(ds, key=lambda d: d["model"]["pixels"])
         px = np.array([d["model"]["pixels"] for d in ds])
         mean = np.array([d["error"]["mean"] for d in ds])
@@ -105,14 +122,44 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
                 [p] * len(d["error_per_seed"]), d["error_per_seed"], ".", color=colour, alpha=0.4
             )
     ax.set_xscale("log", base=2)
+    ax.set_ylim(bottom=0.0)
     ax.set_xlabel("pixels")
     ax.set_ylabel(f"test {result['error_name']}")
     n = len(result["designs"])
     what = result["verdict"] or f"{n} designs, mean over seeds, 95 % CI"
     ax.set_title(f"{result['task']}: {what}", fontsize=8)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    out = Path(path)
-    fig.savefig(out, dpi=120)
-    plt.close(fig)
-    return out
+
+
+def _plot_label(ax, name: str, lab: dict) -> None:
+    """One label's figure per configuration (the trivial predictor in grey), 95 % CIs."""
+    configs = list(lab["configs"].items())
+    x = np.arange(len(configs))
+    mean = np.array([c["mean"] for _, c in configs])
+    ci = np.array([c["ci95"] for _, c in configs])
+    colours = [
+        "0.5" if n == "trivial" else f"C{_SERIES.index(_series_name(n))}" for n, _ in configs
+    ]
+    for xi, m, c, colour in zip(x, mean, ci, colours, strict=True):
+        ax.errorbar(
+            xi,
+            m,
+            yerr=[[max(m - c[0], 0.0)], [max(c[1] - m, 0.0)]],
+            fmt="o",
+            color=colour,
+            capsize=4,
+        )
+    ax.set_xticks(x, [n for n, _ in configs], rotation=45, ha="right", fontsize=7)
+    ax.set_xlim(-0.6, len(configs) - 0.4)
+    unit = f" ({lab['unit']})" if lab["unit"] else ""
+    if lab["metric"] == "accuracy":
+        ax.set_ylim(0.0, 1.0)
+        ax.set_ylabel("accuracy (higher is better)", fontsize=8)
+    else:
+        ax.set_ylim(0.0, 1.1 * float(np.max(ci[:, 1])) or 1.0)
+        ax.set_ylabel(f"RMSE{unit} (lower is better)", fontsize=8)
+    ax.set_title(name, fontsize=9)
+
+
+#: Design kinds, each drawn in its own colour (C0, C1, C2) in every panel.
+_SERIES = ("mincam", "mincam-nosensor", "baseline")
