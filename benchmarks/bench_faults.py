@@ -9,16 +9,24 @@ Classes (each trial runs the real command line in a subprocess):
   survived = it finishes all steps, the checkpoint was never torn and history.jsonl has each
   evaluation step exactly once. Data lost = checkpointed steps repeated. Each trial records
   whether the kill landed mid-run (the checkpoint's step below the total).
-- ``corruption``: each damage kind x each reader (train, export-exr); survived = the reader
-  refuses with exit 2 and one line naming the damaged file (never trains or exports from it).
+- ``corruption``: each damage kind of a dataset (19: missing, truncated, empty, bit-flipped,
+  grown shards, a bad .npy header, edited shard metadata, labels, scales and checksums,
+  swapped shards, edited, stripped, truncated, foreign or missing manifests, an unfinished
+  render) x each reader of datasets (train, sweep, prune, export-exr); survived = the reader
+  refuses with exit 2 and one line naming the damaged file (or what is wrong), and writes
+  no result (never trains, sweeps, prunes or exports from it).
+- ``recording_corruption``: each damage kind of a sim2real recording x `report sim2real`;
+  survived = the same one-line refusal and no report.
 - ``concurrent_writers``: two `render` commands into one directory at once; survived = one
   fails at once with the writer-lock message and the other's dataset verifies.
-
-Not covered here: a full disk (tests/test_reliability.py fills a real loop-mounted tmpfs when
-run as root; the benchmark machine may not allow it).
+- ``disk_full``: `render` and `train` writing into a real tmpfs too small for their output
+  (root only: mounted here, skipped with a reason elsewhere); survived = exit 1 with one
+  line saying no space is left, what was finished stays intact, and after the tmpfs is
+  grown the same command finishes (render: byte-identical to an uninterrupted render, no
+  finished shard rewritten; train: every evaluation step once).
 
 Usage:
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_faults.py [--trials 3]
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_faults.py [--trials 10]
     (writes benchmarks/results/faults.json)
 """
 
@@ -33,17 +41,20 @@ import subprocess
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+from bench_patches_paper import machine  # noqa: E402
+
 RENDER = ["render", "patches", "--frames", "40", "--shard-frames", "8", "--detectors", "2"]
 RENDER += ["--mask-res", "8", "--spp", "2", "--seed", "5", "--no-progress", "--workers", "0"]
 TRAIN_STEPS = 3000  # about 6 s here: the kill lands mid-run, after the first checkpoint
 TRAIN = ["--steps", str(TRAIN_STEPS), "--eval-every", "20", "--batch-size", "8"]
 TRAIN += ["--patience", "1000"]
-DAMAGE = ("missing-shard", "truncated-shard", "flipped-byte", "edited-manifest")
 
 
 def _cli(args, env=None, **kw) -> subprocess.Popen:
@@ -125,42 +136,178 @@ def train_kill(tmp: Path, dataset: Path, rng) -> dict:
     }
 
 
-def _damage(root: Path, how: str) -> str:
+def _edit_json(path: Path, change) -> None:
+    data = json.loads(path.read_text())
+    change(data)
+    path.write_text(json.dumps(data))
+
+
+def _rewrite(path: Path, change) -> None:
+    path.write_bytes(change(bytearray(path.read_bytes())))
+
+
+def _flip(data: bytearray, at: int, bits: int) -> bytearray:
+    data[at] ^= bits
+    return data
+
+
+def _swap_shards(root: Path) -> None:
     from mincam_render.data import dataset as ds
 
-    npy, _ = ds.shard_paths(root, 1)
-    if how == "missing-shard":
-        npy.unlink()
-        return npy.name
-    if how == "truncated-shard":
-        npy.write_bytes(npy.read_bytes()[:300])
-        return npy.name
-    if how == "flipped-byte":
-        data = bytearray(npy.read_bytes())
-        data[len(data) // 2] ^= 0x40
-        npy.write_bytes(bytes(data))
-        return npy.name
-    manifest = json.loads((root / ds.MANIFEST_NAME).read_text())
-    manifest["job"]["render"]["spp"] += 1
-    (root / ds.MANIFEST_NAME).write_text(json.dumps(manifest))
-    return ds.MANIFEST_NAME
+    for a, b in zip(ds.shard_paths(root, 1), ds.shard_paths(root, 2), strict=True):
+        tmp = a.with_suffix(".swap")
+        a.rename(tmp)
+        b.rename(a)
+        tmp.rename(b)
 
 
-def corruption(tmp: Path, dataset: Path, how: str, reader: str) -> dict:
-    root = tmp / "damaged"
-    shutil.copytree(dataset, root)
-    name = _damage(root, how)
-    out = tmp / "out"
-    args = (
-        ["train", str(root), "--out", str(out), "--steps", "4", "--eval-every", "2"]
-        if reader == "train"
-        else ["export-exr", str(root), "--frames", "0-39", "--out", str(out)]
-    )
-    done = _run(args)
+def _mark_incomplete(root: Path) -> None:
+    """As a killed render leaves it, written by the writer (its checksum is right)."""
+    from mincam_render.data import dataset as ds
+
+    m = ds.read_manifest(root)
+    m["shards"][2], m["complete"] = None, False
+    ds.write_manifest(root, m)
+
+
+def _strip_checksum_and_edit(m: dict) -> None:
+    del m["manifest_sha256"]
+    _move_mask_away(m)
+
+
+def _on(path_of, change, names: str | None = None):
+    """A damage: ``change`` the file ``path_of(root)``; the error must name it (or ``names``)."""
+
+    def damage(root: Path) -> str:
+        path = path_of(root)
+        change(path)
+        return names or path.name
+
+    return damage
+
+
+def _json(change):
+    """A change of a file: edit its parsed JSON in place with ``change(data)``."""
+    return lambda path: _edit_json(path, change)
+
+
+def dataset_damage() -> dict:
+    """``{kind: damage(root) -> what the error must name}`` for a copy of a dataset."""
+    from mincam_render.data import dataset as ds
+
+    def npy(root):
+        return ds.shard_paths(root, 1)[0]
+
+    def meta(root):
+        return ds.shard_paths(root, 1)[1]
+
+    def manifest(root):
+        return root / ds.MANIFEST_NAME
+
+    splits = {"train": [0, 40], "val": [0, 40], "test": [0, 40]}
+    return {
+        "missing-shard": _on(npy, Path.unlink),
+        "truncated-shard": _on(npy, lambda p: _rewrite(p, lambda d: d[:300])),
+        "empty-shard": _on(npy, lambda p: p.write_bytes(b"")),
+        "flipped-byte": _on(npy, lambda p: _rewrite(p, lambda d: _flip(d, len(d) // 2, 0x40))),
+        "appended-bytes": _on(npy, lambda p: _rewrite(p, lambda d: d + b"\0" * 64)),
+        "corrupt-npy-header": _on(npy, lambda p: _rewrite(p, lambda d: _flip(d, 20, 0x20))),
+        "truncated-shard-metadata": _on(meta, lambda p: _rewrite(p, lambda d: d[:40])),
+        "edited-label": _on(meta, _json(_edit_first_label)),
+        "edited-frame-scale": _on(meta, _json(_scale_first_frame)),
+        "zeroed-shard-checksum": _on(meta, _json(lambda m: m.update(transport_sha256="0" * 64))),
+        "swapped-shards": _on(meta, lambda p: _swap_shards(p.parents[1])),
+        "edited-manifest-spp": _on(manifest, _json(lambda m: m["job"]["render"].update(spp=99))),
+        "edited-manifest-camera": _on(manifest, _json(_move_mask_away)),
+        "edited-manifest-splits": _on(manifest, _json(lambda m: m.update(splits=splits))),
+        "stripped-checksum-edited-camera": _on(manifest, _json(_strip_checksum_and_edit)),
+        "truncated-manifest": _on(manifest, lambda p: _rewrite(p, lambda d: d[:100])),
+        "manifest-not-ours": _on(manifest, lambda p: p.write_text('{"format": "other"}')),
+        "no-manifest": _on(manifest, Path.unlink),
+        "unfinished-render": _on(manifest, lambda p: _mark_incomplete(p.parent), "incomplete"),
+    }
+
+
+def _move_mask_away(m: dict) -> None:
+    m["camera"]["mask_distance_m"] *= 10
+
+
+def _scale_first_frame(meta: dict) -> None:
+    """A frame's power-of-two storage scale times 2**30: |T| of that frame x 1e9."""
+    meta["frames"][0]["scale"] *= 2.0**30
+
+
+def _edit_first_label(meta: dict) -> None:
+    name = next(iter(meta["labels"]))
+    meta["labels"][name][0] = [v + 1.0 for v in meta["labels"][name][0]]
+
+
+def dataset_readers(root: Path, run: Path, out: Path) -> dict[str, list[str]]:
+    """The commands that read a dataset, each writing its result into ``out``."""
+    quick = ["--steps", "4", "--eval-every", "2", "--batch-size", "4", "--out", str(out)]
+    return {
+        "train": ["train", str(root), *quick],
+        "sweep": ["sweep", str(root), *quick, "--pixels", "1", "--baselines", "1x1"],
+        "prune": ["prune", str(root), *quick, "--run", str(run)],
+        "export-exr": ["export-exr", str(root), "--frames", "0-39", "--out", str(out)],
+    }
+
+
+def _refused(done: subprocess.CompletedProcess, name: str, out: Path) -> dict:
     lines = [ln for ln in done.stderr.splitlines() if ln.startswith("Error:")]
     refused = done.returncode == 2 and len(lines) == 1 and name in lines[0]
-    used = out.exists() and any(out.iterdir())
-    return {"survived": refused and not used, "lost": 0, "damage": how, "reader": reader}
+    used = out.exists() and any(p.name != ".writer.lock" for p in out.iterdir())
+    return {
+        "survived": refused and not used,
+        "used_corrupt_data": done.returncode == 0 or used,
+        "lost": 0,
+        "exit_code": done.returncode,
+        "error": lines[0][:300] if lines else done.stderr[-300:],
+    }
+
+
+def corruption(tmp: Path, dataset: Path, run: Path, how: str, reader: str) -> dict:
+    root = tmp / "damaged"
+    shutil.copytree(dataset, root)
+    name = dataset_damage()[how](root)
+    out = tmp / "out"
+    done = _run(dataset_readers(root, run, out)[reader])
+    return {**_refused(done, name, out), "damage": how, "reader": reader}
+
+
+def recording_damage() -> dict:
+    """``{kind: damage(root) -> what the error must name}`` for a copy of a recording."""
+
+    def edit_csv(path: Path) -> None:
+        lines = path.read_text().splitlines()
+        cells = lines[3].split(",")
+        cells[-1] = repr(float(cells[-1]) + 0.5)
+        lines[3] = ",".join(cells)
+        path.write_text("\n".join(lines) + "\n")
+
+    def file(name):
+        return lambda root: root / name
+
+    return {
+        "edited-measurement": _on(file("measurements.csv"), edit_csv),
+        "edited-label": _on(file("labels.csv"), edit_csv),
+        "truncated-masks": _on(file("masks.npy"), lambda p: _rewrite(p, lambda d: d[:-7])),
+        "edited-injected": _on(file("injected.json"), lambda p: _rewrite(p, lambda d: d + b" ")),
+        "missing-measurements": _on(file("measurements.csv"), Path.unlink),
+        "missing-recording-json": _on(file("recording.json"), Path.unlink),
+        "truncated-recording-json": _on(
+            file("recording.json"), lambda p: _rewrite(p, lambda d: d[:50])
+        ),
+    }
+
+
+def recording_corruption(tmp: Path, recording: Path, how: str) -> dict:
+    root = tmp / "damaged"
+    shutil.copytree(recording, root)
+    name = recording_damage()[how](root)
+    out = tmp / "out"
+    done = _run(["report", "sim2real", str(root), "--out", str(out), "--spp", "1", "--steps", "10"])
+    return {**_refused(done, name, out), "damage": how, "reader": "report sim2real"}
 
 
 def concurrent_writers(tmp: Path) -> dict:
@@ -179,6 +326,92 @@ def concurrent_writers(tmp: Path) -> dict:
     }
 
 
+class _TinyDisk:
+    """A real tmpfs of ``size_bytes`` at ``mnt`` (root only), grown by :meth:`grow`."""
+
+    def __init__(self, mnt: Path, size_bytes: int) -> None:
+        self.mnt = mnt
+        mnt.mkdir()
+        size = f"size={max(4096, size_bytes // 4096 * 4096)}"
+        r = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", size, "tmpfs", str(mnt)],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+        if r.returncode != 0:
+            raise PermissionError(r.stderr.strip() or "mount failed")
+
+    def grow(self) -> None:
+        subprocess.run(["mount", "-o", "remount,size=256m", str(self.mnt)], check=True, timeout=20)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        subprocess.run(["umount", str(self.mnt)], capture_output=True, timeout=20)
+
+
+def _size(root: Path) -> int:
+    return sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+
+
+def _no_space(done: subprocess.CompletedProcess) -> bool:
+    lines = [ln for ln in done.stderr.splitlines() if ln.startswith("Error:")]
+    return done.returncode == 1 and len(lines) == 1 and "No space left" in lines[0]
+
+
+def disk_full_render(tmp: Path, reference: Path) -> dict:
+    from mincam_render.data import dataset as ds
+
+    with _TinyDisk(tmp / "mnt", _size(reference) // 2) as disk:
+        out = disk.mnt / "ds"
+        first = _run([*RENDER, "--out", str(out)])
+        manifest = (
+            json.loads((out / ds.MANIFEST_NAME).read_text())
+            if (out / ds.MANIFEST_NAME).exists()
+            else None
+        )
+        finished = [i for i, r in enumerate((manifest or {}).get("shards", [])) if r]
+        intact = all(ds.verify_shard(out, i, manifest["shards"][i])[0] for i in finished)
+        before = {i: ds.shard_paths(out, i)[0].stat().st_mtime_ns for i in finished}
+        disk.grow()
+        done = _run([*RENDER, "--out", str(out)])
+        rewritten = [
+            i for i, t in before.items() if ds.shard_paths(out, i)[0].stat().st_mtime_ns != t
+        ]
+        ok = (
+            _no_space(first)
+            and intact
+            and done.returncode == 0
+            and _files(out) == _files(reference)
+        )
+        return {
+            "survived": ok and not rewritten,
+            "lost": len(rewritten),
+            "what": "render",
+            "finished_before_full": len(finished),
+            "first_exit_code": first.returncode,
+        }
+
+
+def disk_full_train(tmp: Path, dataset: Path, finished_run: Path) -> dict:
+    with _TinyDisk(tmp / "mnt", _size(finished_run) // 2) as disk:
+        out = disk.mnt / "run"
+        first = _run(["train", str(dataset), "--out", str(out), *TRAIN])
+        disk.grow()
+        done = _run(["train", str(dataset), "--out", str(out), *TRAIN])
+        steps = [json.loads(ln)["step"] for ln in (out / "history.jsonl").read_text().splitlines()]
+        unique = len(steps) == len(set(steps)) and steps == sorted(steps)
+        ok = _no_space(first) and done.returncode == 0 and unique
+        return {
+            "survived": ok,
+            "lost": len(steps) - len(set(steps)),
+            "what": "train",
+            "first_exit_code": first.returncode,
+        }
+
+
 def _summary(trials: list[dict]) -> dict:
     return {
         "trials": len(trials),
@@ -189,38 +422,76 @@ def _summary(trials: list[dict]) -> dict:
     }
 
 
+def _trial(classes: dict, name: str, base: Path, trial) -> None:
+    tmp = Path(tempfile.mkdtemp(dir=base))
+    classes.setdefault(name, []).append(trial(tmp))
+    print(name, classes[name][-1], flush=True)
+
+
+def _fixtures(base: Path) -> tuple[Path, Path, Path]:
+    """The intact dataset, a finished training run on it, and a SURROGATE recording."""
+    reference, run, s2r = base / "reference", base / "run", base / "s2r"
+    assert _run([*RENDER, "--out", str(reference)]).returncode == 0
+    assert _run(["train", str(reference), "--out", str(run), *TRAIN]).returncode == 0
+    surrogate = ["report", "sim2real", "--surrogate", "patches", "--frames", "20"]
+    assert _run([*surrogate, "--spp", "1", "--steps", "10", "--out", str(s2r)]).returncode == 0
+    return reference, run, s2r / "surrogate_input"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=3, help="trials per kill/writer class")
+    parser.add_argument("--trials", type=int, default=10, help="trials per kill/writer class")
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    classes: dict[str, list[dict]] = {
-        k: [] for k in ("render_kill", "train_kill", "corruption", "concurrent_writers")
-    }
+    classes: dict[str, list[dict]] = {}
+    started, host = time.monotonic(), machine()  # the tree as it was when the run began
     with tempfile.TemporaryDirectory() as base:
         base = Path(base)
         os.environ["MINCAM_RENDER_PLAN_CACHE"] = str(base / "plans")
-        reference = base / "reference"
-        assert _run([*RENDER, "--out", str(reference)]).returncode == 0
-        for i in range(args.trials):
-            for name, trial in (
-                ("render_kill", lambda t: render_kill(t, reference, rng)),
-                ("train_kill", lambda t: train_kill(t, reference, rng)),
-                ("concurrent_writers", concurrent_writers),
-            ):
-                tmp = Path(tempfile.mkdtemp(dir=base))
-                classes[name].append(trial(tmp))
-                print(name, i, classes[name][-1], flush=True)
-        for how in DAMAGE:
-            for reader in ("train", "export-exr"):
-                tmp = Path(tempfile.mkdtemp(dir=base))
-                classes["corruption"].append(corruption(tmp, reference, how, reader))
-                print("corruption", classes["corruption"][-1], flush=True)
+        reference, run, recording = _fixtures(base)
+        for _ in range(args.trials):
+            _trial(classes, "render_kill", base, lambda t: render_kill(t, reference, rng))
+            _trial(classes, "train_kill", base, lambda t: train_kill(t, reference, rng))
+            _trial(classes, "concurrent_writers", base, concurrent_writers)
+        for how in dataset_damage():
+            for reader in ("train", "sweep", "prune", "export-exr"):
+                _trial(
+                    classes,
+                    "corruption",
+                    base,
+                    partial(corruption, dataset=reference, run=run, how=how, reader=reader),
+                )
+        for how in recording_damage():
+            _trial(
+                classes,
+                "recording_corruption",
+                base,
+                partial(recording_corruption, recording=recording, how=how),
+            )
+        try:
+            _trial(classes, "disk_full", base, lambda t: disk_full_render(t, reference))
+            _trial(classes, "disk_full", base, lambda t: disk_full_train(t, reference, run))
+        except PermissionError as err:  # not root: no tmpfs
+            classes["disk_full"] = []
+            print(f"disk_full skipped: {err}")
     result = {name: _summary(trials) for name, trials in classes.items()}
+    result["corruption_kinds"] = {
+        "dataset": list(dataset_damage()),
+        "dataset_readers": ["train", "sweep", "prune", "export-exr"],
+        "recording": list(recording_damage()),
+        "recording_readers": ["report sim2real"],
+    }
+    result["silent_uses_of_corrupt_data"] = sum(
+        t["used_corrupt_data"] for k in ("corruption", "recording_corruption") for t in classes[k]
+    )
+    result["machine"] = host
+    result["wall_time_s"] = time.monotonic() - started
     path = REPO / "benchmarks" / "results" / "faults.json"
     path.write_text(json.dumps(result, indent=2) + "\n")
     for name, s in result.items():
-        print(f"{name}: {s['survived']}/{s['trials']} survived, data lost {s['data_lost']}")
+        if isinstance(s, dict) and "trials" in s:
+            print(f"{name}: {s['survived']}/{s['trials']} survived, data lost {s['data_lost']}")
+    print(f"silent uses of corrupt data: {result['silent_uses_of_corrupt_data']}")
     print(f"wrote {path}")
 
 

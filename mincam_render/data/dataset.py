@@ -649,9 +649,11 @@ class TransportDataset:
         bad = self.verify(wanted - verified)
         if bad:
             shard, reason = bad[0]
-            name = shard_paths(self.path, shard)[0].name
+            if reason == "missing":
+                npy, meta = shard_paths(self.path, shard)
+                reason = f"{npy.name} or {meta.name} is missing"
             raise DatasetError(
-                f"{self.path}: {name} (shard {shard}) {reason} ({len(bad)} damaged shard(s) "
+                f"{self.path}: shard {shard}: {reason} ({len(bad)} damaged shard(s) "
                 "among those checked); "
                 f"re-run the same `mincam-render render ... --out {self.path}` to re-render "
                 "them"
