@@ -100,8 +100,10 @@ def render_kill(tmp: Path, reference: Path, rng) -> dict:
     time.sleep(float(rng.uniform(0.0, 2.0)))
     os.killpg(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
-    shards = sorted((out / "shards").glob("shard-*.npy")) if (out / "shards").exists() else []
-    before = {s.name: s.stat().st_mtime_ns for s in shards}
+    # finished = its .json written (after its .npy); an .npy alone is unfinished work
+    shards = sorted((out / "shards").glob("shard-*.json")) if (out / "shards").exists() else []
+    npys = [s.with_suffix(".npy") for s in shards]
+    before = {s.name: s.stat().st_mtime_ns for s in npys}
     done = _run([*RENDER, "--out", str(out)])
     rewritten = [n for n, t in before.items() if (out / "shards" / n).stat().st_mtime_ns != t]
     ok = done.returncode == 0 and _files(out) == _files(reference) and not rewritten
