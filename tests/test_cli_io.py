@@ -1,11 +1,16 @@
+import dataclasses
 import json
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from mincam_render.analysis.comparison_config import ComparisonConfig
+from mincam_render.analysis.fidelity_bench import FidelityBenchConfig
 from mincam_render.cli.main import main
 from mincam_render.data.exr import read_transport_exr, write_transport_exr
+from mincam_render.data.render_job import RenderRequest
+from mincam_render.learn.train_config import TrainConfig
 
 
 def test_exr_round_trip_is_exact(tmp_path, rng):
@@ -174,3 +179,38 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["prune.json", "prune.png"]
     records = json.loads((out / "prune.json").read_text())
     assert [r["pixels"] for r in records] == sorted((r["pixels"] for r in records), reverse=True)
+
+
+@pytest.mark.parametrize(
+    ("names", "args", "config", "count"),
+    [
+        (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
+        (("train",), [], TrainConfig, 7),
+        (("sweep",), [], TrainConfig, 7),
+        (("prune",), ["--run", "r"], TrainConfig, 7),
+        (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
+        (("pipeline",), [], ComparisonConfig, 9),
+        (("study",), ["--out", "o"], ComparisonConfig, 9),
+    ],
+)
+def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(
+    names, args, config, count
+):
+    """One source of truth: an option filling a field is named like it and takes its default."""
+    command = main
+    for name in names:
+        command = command.commands[name]
+    params = command.make_context(names[-1], list(args)).params
+    fields = {f.name: f for f in dataclasses.fields(config)}
+    filled = {name: value for name, value in params.items() if name in fields}
+    assert len(filled) == count, sorted(filled)
+    no_default = dataclasses.MISSING
+    required = {
+        name: value
+        for name, value in filled.items()
+        if fields[name].default is no_default and fields[name].default_factory is no_default
+    }
+    for name, value in filled.items():
+        if name in required or value == {}:  # --set: nothing to override
+            continue
+        assert config(**required, **{name: value}) == config(**required), name

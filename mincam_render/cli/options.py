@@ -1,0 +1,118 @@
+"""Option types, callbacks and decorators shared by the commands.
+
+Nothing here creates files or imports torch or Mitsuba: options are parsed (and
+``--help`` shown) before any of that.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import click
+
+
+class FiniteFloat(click.FloatRange):
+    """A float range that also refuses NaN and infinities (click's FloatRange passes NaN)."""
+
+    name = "finite float"
+
+    def convert(self, value, param, ctx):
+        """The float, or a usage error naming the option."""
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
+
+
+def vec3(ctx, param, value):
+    """Callback: ``"x,y,z"`` (metres) -> a tuple of three floats; None stays None."""
+    if value is None:
+        return None
+    try:
+        parts = [float(p) for p in value.split(",")]
+    except ValueError:
+        raise click.BadParameter(
+            f"{value!r} is not three comma-separated numbers, e.g. 0,0,1"
+        ) from None
+    if len(parts) != 3:
+        raise click.BadParameter(f"{value!r} has {len(parts)} numbers; expected x,y,z (metres)")
+    return tuple(parts)
+
+
+def grid(ctx, param, value):
+    """Callback: ``"ROWSxCOLS"`` -> ``(rows, cols)``, each in [1, 64]."""
+    try:
+        r, c = (int(p) for p in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not ROWSxCOLS, e.g. 4x6") from None
+    if not (1 <= r <= 64 and 1 <= c <= 64):
+        raise click.BadParameter(f"{value!r}: rows and columns must each be in [1, 64], e.g. 4x6")
+    return (r, c)
+
+
+def optional_grid(ctx, param, value):
+    """Callback: like :func:`grid`, and None stays None."""
+    return None if value is None else grid(ctx, param, value)
+
+
+def int_list(ctx, param, value):
+    """Callback: ``"1,2,4"`` -> ``[1, 2, 4]`` (each >= 1); None (the default) stays None."""
+    if value is None:  # the option's default: decided by the command
+        return None
+    try:
+        out = [int(v) for v in value.split(",") if v.strip()]
+    except ValueError:
+        raise click.BadParameter(
+            f"{value!r} is not comma-separated integers, e.g. 1,2,4,8"
+        ) from None
+    if not out or min(out) < 1:
+        raise click.BadParameter(f"{value!r}: need integers >= 1")
+    return out
+
+
+def grid_list(ctx, param, value):
+    """Callback: ``"2x2,4x4"`` -> ``[(2, 2), (4, 4)]``."""
+    try:
+        return [grid(ctx, param, v.strip()) for v in value.split(",") if v.strip()]
+    except click.BadParameter:
+        raise click.BadParameter(f"{value!r} is not a list of ROWSxCOLS, e.g. 2x2,4x4") from None
+
+
+def out_option(help_text: str, default: str | None = None) -> Callable:
+    """``--out DIRECTORY``: with a default shown in the help, or required without one.
+
+    The directory is only a path here; the command creates it when it writes.
+    """
+    given = {"required": True} if default is None else {"default": Path(default)}
+    return click.option(
+        "--out",
+        type=click.Path(file_okay=False, path_type=Path),
+        show_default=default is not None or None,
+        help=help_text,
+        **given,
+    )
+
+
+def apply_options(options: Sequence[Callable]) -> Callable:
+    """A decorator applying click ``options`` so that ``--help`` lists them in this order."""
+
+    def decorate(f: Callable) -> Callable:
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorate
+
+
+def field_default(cls: type, name: str) -> Any:
+    """The default of dataclass ``cls``'s field ``name``: an option filling it shows this."""
+    field = {f.name: f for f in dataclasses.fields(cls)}[name]
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    if field.default is dataclasses.MISSING:
+        raise ValueError(f"{cls.__name__}.{name} has no default")
+    return field.default

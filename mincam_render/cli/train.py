@@ -1,0 +1,403 @@
+"""``train``, ``sweep``, ``prune`` and ``export-masks``: learning cameras and printing masks.
+
+The training options fill :class:`~mincam_render.learn.train_config.TrainConfig`:
+each option's parameter name is the field's name and its default the field's
+default, so the recipe has one source of truth.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from pathlib import Path
+
+import click
+
+from mincam_render.learn.train_config import TrainConfig
+
+from . import __name__ as _pkg
+from .errors import InputError, user_error
+from .options import (
+    FiniteFloat,
+    apply_options,
+    field_default,
+    grid_list,
+    int_list,
+    optional_grid,
+    out_option,
+)
+
+log = logging.getLogger(_pkg)
+
+# OSError: a full disk or an unreadable file; ImportError: a missing extra (the
+# traffic family needs SUMO), whose message names the extra
+_TRAIN_ERRORS = (ValueError, KeyError, RuntimeError, OSError, ImportError)
+
+#: Where the training data come from: a dataset directory or an in-memory render.
+_DATA_OPTIONS = [
+    click.argument("dataset", required=False, type=click.Path(file_okay=False, path_type=Path)),
+    click.option(
+        "--family",
+        default=None,
+        help="Without DATASET: render this scene family in memory (name or .toml).",
+    ),
+    click.option(
+        "--frames",
+        type=click.IntRange(10),
+        default=2000,
+        show_default=True,
+        help="With --family: frames rendered (split 70/10/20 in time).",
+    ),
+    click.option(
+        "--spp",
+        type=click.IntRange(1, 1 << 20),
+        default=4,
+        show_default=True,
+        help="With --family: samples per texel.",
+    ),
+]
+
+#: TrainConfig field -> (flag, type, help) of the option filling it (default: the field's).
+_RECIPE_OPTIONS = {
+    "max_steps": (
+        "--steps",
+        click.IntRange(1),
+        "Maximum training steps (early stopping may end sooner).",
+    ),
+    "batch_size": ("--batch-size", click.IntRange(2), None),
+    "lr": (
+        "--lr",
+        FiniteFloat(0, 1, min_open=True, max_open=True),
+        "Head learning rate [default: 1e-3*min(1,sqrt(16/inputs))].",
+    ),
+    "mask_lr": ("--mask-lr", FiniteFloat(0, 10), "Adam learning rate of the mask logits."),
+    "eval_every": ("--eval-every", click.IntRange(1), None),
+    "patience": (
+        "--patience",
+        click.IntRange(1),
+        "Evaluations without validation improvement before stopping.",
+    ),
+    "seed": ("--seed", click.IntRange(0), None),
+}
+
+
+def _recipe_option(name: str):
+    """The option filling ``TrainConfig.<name>``, with the field's default."""
+    flag, type_, help_text = _RECIPE_OPTIONS[name]
+    default = field_default(TrainConfig, name)
+    return click.option(
+        flag, name, type=type_, default=default, show_default=default is not None, help=help_text
+    )
+
+
+#: Options shared by train, sweep and prune (the paper's recipe as defaults), the
+#: recipe's in the order of TrainConfig's fields.
+training_options = apply_options(
+    _DATA_OPTIONS
+    + [_recipe_option(f.name) for f in dataclasses.fields(TrainConfig) if f.name in _RECIPE_OPTIONS]
+)
+
+
+def _splits(dataset, family, frames, spp, seed):
+    """(train, val, test) TrainingData from a dataset directory or an in-memory render."""
+    from mincam_render.learn.train import TrainingData
+
+    if dataset is not None:
+        from mincam_render.data.dataset import open_dataset
+
+        ds = open_dataset(dataset)
+        sizes = {name: stop - start for name, (start, stop) in ds.splits.items()}
+        empty = [name for name in ("train", "val") if sizes.get(name, 0) == 0]
+        if empty:
+            raise InputError(
+                f"{dataset} has no {' and no '.join(empty)} frames (split sizes {sizes}): "
+                "training needs both; render it with e.g. --splits 0.7,0.1,0.2"
+            )
+        return tuple(TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
+    if family is None:
+        raise InputError("give a DATASET directory (mincam-render render) or --family")
+    from mincam_render.scenes import load_family
+
+    fam = load_family(family, seed=seed, num_frames=frames)
+    log.info("rendering %d frames of %s in memory (%d spp)", frames, fam.name, spp)
+    data = TrainingData.render(fam, range(frames), spp=spp, seed=seed, progress=True)
+    return data.split((0.7, 0.1, 0.2))
+
+
+@click.command("train")
+@training_options
+@out_option(
+    "Run directory (created; an existing checkpoint there is resumed).", default="runs/train"
+)
+@click.option(
+    "--pixels",
+    type=click.IntRange(1, 4096),
+    default=None,
+    help="Freeform pixels of the minimalist camera (default: one per rendered detector; "
+    "at most that many).",
+)
+@click.option(
+    "--baseline",
+    "baseline",
+    default=None,
+    callback=optional_grid,
+    help="Train a ROWSxCOLS baseline camera instead.",
+)
+@click.option(
+    "--no-sensor-model",
+    is_flag=True,
+    help="Train without noise/saturation (supplement A's ablation).",
+)
+@click.option(
+    "--on-the-fly", is_flag=True, help="With --family: render fresh training frames every batch."
+)
+@click.option(
+    "--export-masks",
+    "export_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="After training, export printable masks into this directory.",
+)
+@click.option("--no-resume", is_flag=True, help="Start afresh even if a checkpoint exists.")
+def train_cmd(
+    dataset,
+    family,
+    frames,
+    spp,
+    out,
+    pixels,
+    baseline,
+    no_sensor_model,
+    on_the_fly,
+    export_dir,
+    no_resume,
+    **recipe,
+):
+    """Train a minimalist (or baseline) camera end to end; metrics on the test split.
+
+    Reads a dataset written by `mincam-render render`, or renders --frames of a
+    scene family in memory. Writes checkpoint.pt (resumable), TensorBoard event
+    files, history.jsonl, mask_evolution.png, run.json and metrics.json
+    (test RMSE/accuracy after rounding and median filtering) into --out.
+
+    \b
+    Example:
+      mincam-render train --family patches --frames 300 --pixels 4 --steps 200 \\
+          --out runs/patches4
+    """
+    from mincam_render.learn.train import train_run
+
+    try:
+        config = TrainConfig(**recipe)
+        if no_resume and (out / "checkpoint.pt").exists():
+            (out / "checkpoint.pt").unlink()
+        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        metrics = train_run(
+            train,
+            val,
+            test,
+            out,
+            pixels=pixels,
+            baseline_grid=baseline,
+            sensor_model=not no_sensor_model,
+            config=config,
+            on_the_fly=_fresh_batches(family, spp, config, train) if on_the_fly else None,
+            resume=not no_resume,
+            progress=True,
+        )
+        if export_dir is not None and baseline is None:
+            _export_run_masks(out, export_dir, train)
+    except _TRAIN_ERRORS as err:
+        raise user_error(err) from None
+    t = metrics["test"]
+    click.echo(
+        f"{metrics['model']['kind']} {metrics['model']['pixels']} px: test "
+        f"{t['error_name']} = {t['error']:.4f} after {metrics['steps']} steps "
+        f"({metrics['train_wall_time_s']:.1f} s); wrote {out / 'metrics.json'}"
+    )
+
+
+def _fresh_batches(family, spp, config: TrainConfig, train):
+    """--on-the-fly: training batches of frames rendered afresh (from the next seed)."""
+    from mincam_render.learn.train import RenderedBatches
+    from mincam_render.scenes import load_family
+
+    if family is None:
+        raise InputError("--on-the-fly needs --family (frames are rendered)")
+    seed = config.seed + 1
+    n = config.max_steps * config.batch_size * train.history
+    return RenderedBatches(
+        load_family(family, seed=seed, num_frames=n), config.batch_size, spp=spp, seed=seed
+    )
+
+
+def _export_run_masks(run_dir: Path, export_dir: Path, train) -> None:
+    """--export-masks: the printable masks of a finished run."""
+    from mincam_render.export.masks import export_masks
+    from mincam_render.learn.train import run_masks
+
+    m, camera, run = run_masks(run_dir)
+    export_masks(
+        m,
+        camera,
+        export_dir,
+        task=str(train.source.get("family", "")),
+        provenance={"run": str(run_dir), "data": run["data"]},
+    )
+
+
+@click.command("sweep")
+@training_options
+@out_option("Output directory (created).", default="runs/sweep")
+@click.option(
+    "--pixels",
+    "pixel_counts",
+    default=None,
+    callback=int_list,
+    help="Minimalist-camera pixel counts (default: 1, 2, 4, ... up to the rendered detectors).",
+)
+@click.option(
+    "--baselines",
+    default="1x1,2x2,4x4,8x8,16x16",
+    show_default=True,
+    callback=grid_list,
+    help="Baseline resolutions ROWSxCOLS.",
+)
+def sweep_cmd(dataset, family, frames, spp, out, pixel_counts, baselines, **recipe):
+    """Task error against pixel count: minimalist cameras vs baselines (log axis).
+
+    Every camera gets the same training budget. Writes sweep.png, sweep.md,
+    sweep.json and one resumable run directory per camera into --out.
+
+    \b
+    Example:
+      mincam-render sweep --family patches --frames 300 --steps 100 --pixels 1,4 \\
+          --baselines 2x2,8x8 --out runs/sweep_patches
+    """
+    from mincam_render.learn.train import sweep, sweep_table
+
+    try:
+        config = TrainConfig(**recipe)
+        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        rows = sweep(
+            train,
+            val,
+            test,
+            pixel_counts=pixel_counts,
+            baseline_grids=baselines,
+            config=config,
+            out_dir=out,
+            progress=True,
+        )
+    except _TRAIN_ERRORS as err:
+        raise user_error(err) from None
+    click.echo(sweep_table(rows))
+    click.echo(f"wrote {out / 'sweep.png'}, sweep.md, sweep.json")
+
+
+@click.command("prune")
+@training_options
+@click.option(
+    "--run",
+    "run_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="A minimalist-camera run directory from `mincam-render train`.",
+)
+@out_option("Output directory (created).", default="runs/prune")
+def prune_cmd(dataset, family, frames, spp, run_dir, out, **recipe):
+    """Greedy pruning (supplement C): drop the least useful pixel, retrain the head, repeat.
+
+    Use the same data as the run. Writes prune.json and prune.png (test error
+    against pixel count) into --out.
+
+    \b
+    Example:
+      mincam-render prune --family patches --frames 300 --steps 100 \\
+          --run runs/patches4 --out runs/patches4_prune
+    """
+    from mincam_render.learn.train import greedy_prune, load_run, plot_sweep
+
+    try:
+        config = TrainConfig(**recipe)
+        run, state = load_run(run_dir)
+        if run["model"]["kind"] != "mincam":
+            raise ValueError(f"{run_dir}: only minimalist-camera runs can be pruned")
+        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        model = _restored_mincam(run, state, train)
+        records = greedy_prune(model, train, val, test, config, progress=True)
+    except _TRAIN_ERRORS as err:
+        raise user_error(err) from None
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "prune.json").write_text(json.dumps(records, indent=2, default=str))
+    rows = [
+        {
+            "kind": "mincam",
+            "pixels": r["pixels"],
+            "error": r["test"]["error"],
+            "error_name": r["test"]["error_name"],
+        }
+        for r in records
+    ]
+    plot_sweep(rows, out / "prune.png", title="greedy pruning")
+    for r in records:
+        click.echo(
+            f"{r['pixels']:3d} px  removed {r['removed']}  "
+            f"test {r['test']['error_name']} = {r['test']['error']:.4f}"
+        )
+    click.echo(f"wrote {out / 'prune.json'}, prune.png")
+
+
+def _restored_mincam(run: dict, state: dict, train):
+    """The minimalist camera of a run (its description and weights), for ``train``'s data."""
+    from mincam_render.learn.models import CountLoss
+    from mincam_render.learn.train import build_mincam
+
+    # the run's own count loss (its description lists count_classes when classified)
+    loss = CountLoss.CROSS_ENTROPY if "count_classes" in run["model"] else CountLoss.MSE
+    model = build_mincam(
+        train,
+        detectors=run["model"]["detectors"],
+        sensor_model=run["model"]["sensor_model"],
+        count_loss=loss,
+    )
+    model.load_state_dict(state)
+    return model
+
+
+@click.command("export-masks")
+@click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--task", default=None, help="Task name [default: the run's scene family].")
+@out_option("Masks go into OUT/<task>/.", default="masks")
+@click.option("--no-pdf", is_flag=True, help="Skip the PDF print sheet.")
+def export_masks_cmd(run_dir, task, out, no_pdf):
+    """Export a trained camera's masks for printing.
+
+    Writes into OUT/<task>/: mask_NN.png (16-bit transmittance), masks.exr,
+    print_sheet.svg/.pdf at true size with cut marks and labels, masks.json.
+
+    \b
+    Example:
+      mincam-render export-masks runs/patches4 --task patches --out masks
+    """
+    from mincam_render.export.masks import export_masks
+    from mincam_render.learn.train import run_masks
+
+    try:
+        m, camera, run = run_masks(run_dir)
+        task = task or str(run["data"]["train"].get("family") or "task")
+        paths = export_masks(
+            m,
+            camera,
+            out / task,
+            task=task,
+            pdf=not no_pdf,
+            provenance={"run": str(run_dir), "data": run["data"]},
+        )
+    except _TRAIN_ERRORS as err:
+        raise user_error(err) from None
+    click.echo(
+        f"wrote {len(paths['png'])} masks to {out / task} "
+        f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
+    )
