@@ -349,7 +349,8 @@ def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
     overrides = {"fps": 2.0, "camera": {"mask_resolution": 8, "detectors": 2}}
     request = RenderRequest(family="workspace", num_frames=600, overrides=overrides)
     fam = load_family("workspace", seed=0, num_frames=600, overrides=overrides)
-    settings, decisions = decide_fidelity(fam, fam.camera(), request)
+    plan = decide_fidelity(fam, fam.camera(), request)
+    settings, decisions = plan.settings(), plan.decisions
     d = decisions["differential"]
     assert d["source"] == "auto"
     assert d["backgrounds"] == len({fam.background_key(i, 60.0) for i in range(600)})
@@ -379,11 +380,11 @@ def test_ray_renders_differential_datasets_byte_identically(differential_dataset
 
 def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
     """x^2 + y^2 + biases^2 = target^2, and no other split of the noises costs less."""
-    from mincam_render.render.fidelity import PILOT_SPP, _split_noise_budget
+    from mincam_render.render.fidelity import PILOT_SPP, split_noise_budget
 
     target, biases = 0.01, {"depth": 0.004, "interp": 0.003}
     diff, bg = (0.0075, 4.0, None), (0.0975, 0.15, None)
-    b = _split_noise_budget(target, biases, diff, bg)
+    b = split_noise_budget(target, biases, diff, bg)
     x, y = b["difference_noise"], b["background_noise"]
     assert x**2 + y**2 + 0.004**2 + 0.003**2 == pytest.approx(target**2)
 
@@ -395,11 +396,11 @@ def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
     assert cost(x) <= cost(grid).min() * (1 + 1e-6)
     assert not b["biases_exceed_target"]
     # a flag fixes one noise; the other takes the rest
-    fixed = _split_noise_budget(target, biases, (0.0075, 4.0, 16), bg)
+    fixed = split_noise_budget(target, biases, (0.0075, 4.0, 16), bg)
     assert fixed["difference_noise"] == pytest.approx(0.0075 * np.sqrt(PILOT_SPP / 16))
     assert fixed["difference_noise"] ** 2 + fixed["background_noise"] ** 2 == pytest.approx(
         target**2 - 0.004**2 - 0.003**2
     )
     # biases beyond the target are reported, and the noises still get a floor
-    over = _split_noise_budget(target, {"depth": 0.02}, diff, bg)
+    over = split_noise_budget(target, {"depth": 0.02}, diff, bg)
     assert over["biases_exceed_target"] and over["difference_noise"] > 0

@@ -405,8 +405,9 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
         request = RenderRequest(
             family=family_name, num_frames=family.num_frames, seed=cfg.seed, differential=False
         )
-        settings, decisions = decide_fidelity(family, camera, request)
-        auto = {"settings": settings, "decisions": decisions}
+        plan = decide_fidelity(family, camera, request)
+        settings = plan.settings()
+        auto = {"settings": settings, "decisions": plan.decisions}
         # 0 = the scene's integrator
         depth = settings["max_depth"] or (
             scene_depth if scene_depth and scene_depth > 0 else base_depth

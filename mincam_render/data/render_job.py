@@ -44,7 +44,7 @@ from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
 from mincam_render.data.writer_lock import LOCK_NAME, exclusive_writer
 from mincam_render.render import precision
-from mincam_render.render.fidelity import Fidelity
+from mincam_render.render.fidelity import Fidelity, FidelityPlan
 
 log = logging.getLogger(__name__)
 
@@ -608,7 +608,7 @@ def plan_render(
         base_camera = dataclasses.replace(
             base_camera, mask_resolution=(request.mask_res, request.mask_res)
         )
-    settings, decisions = _fidelity_plan(
+    plan = _fidelity_plan(
         request, family.name, identity, base_camera, use_cache and not ship, ship, progress
     )
     camera = base_camera
@@ -627,17 +627,17 @@ def plan_render(
         "shard_frames": request.shard_frames,
         "camera": ds.camera_to_dict(camera),
         "render": {
-            "spp": settings["spp"],
-            "max_depth": settings["max_depth"],
-            "shared_render": settings["shared_render"],
-            "mask_resolution": settings["mask_resolution"],
-            "dtype": settings["dtype"],
-            "background": settings["background"],
+            "spp": plan.spp,
+            "max_depth": plan.max_depth,
+            "shared_render": plan.shared_render,
+            "mask_resolution": plan.mask_resolution,
+            "dtype": plan.dtype,
+            "background": plan.background,
         },
     }
     backgrounds = components = None
-    if settings["background"] is not None:
-        parts = background_parts(family, job["num_frames"], settings["background"]["interval_s"])
+    if plan.background is not None:
+        parts = background_parts(family, job["num_frames"], plan.background["interval_s"])
         job["backgrounds"] = list(parts)
         job["background_parts"] = parts
         job["background_components"] = list(dict.fromkeys(c for p in parts.values() for c in p))
@@ -662,13 +662,13 @@ def plan_render(
         },
         "camera": job["camera"],
         "label_specs": [ds.label_spec_to_dict(s) for s in family.labels],
-        "fidelity": decisions,
+        "fidelity": plan.decisions,
         "job": job,
         "transport": {
             "units": "W per unit transmittance",
             "axes": "T[frame, detector, row, col]; row 0 = up side of the view, col 0 = left",
             "stored_as": "stored * scale = T, scale a per-frame power of two (frames[i].scale)",
-            "dtype": settings["dtype"],
+            "dtype": plan.dtype,
         },
         "frame_seed": "splitmix64(splitmix64(seed) ^ index) & (2^63 - 1)",
         "variant": info["variant"],
@@ -688,8 +688,8 @@ def _fidelity_plan(
     use_cache: bool,
     ship: bool,
     progress: bool,
-) -> tuple[dict, dict]:
-    """``(settings, decisions)`` of a request: kept, or measured on the planning episode."""
+) -> FidelityPlan:
+    """The fidelity plan of a request: kept, or measured on the planning episode."""
     from mincam_render.data import plan_cache
     from mincam_render.render import backend
     from mincam_render.render.fidelity import decide_fidelity
@@ -702,17 +702,20 @@ def _fidelity_plan(
     if found is not None:
         plan, where = found
         log.info("fidelity plan %s (%s)", plan_cache.plan_key(fields)[:12], where)
-        return plan["settings"], plan["decisions"]
+        return FidelityPlan.from_dict(plan["settings"], plan["decisions"])
     t0 = time.perf_counter()
     plan_request = dataclasses.replace(request, seed=plan_cache.PLAN_SEED)
     family, _, _ = _describe_family(plan_request)
-    settings, decisions = decide_fidelity(family, camera, plan_request, progress=progress)
+    measured = decide_fidelity(family, camera, plan_request, progress=progress)
+    decisions = measured.decisions
     decisions["planning_episode"] = {"seed": plan_cache.PLAN_SEED, "frames": request.num_frames}
     # measured figures are reported to 6 significant digits: last-bit differences
     # of floating-point sums between two planning runs must not change the bytes
     # of otherwise identical manifests; the JSON round trip makes a fresh plan
     # equal to a kept one
-    plan = json.loads(json.dumps({"settings": settings, "decisions": _rounded(decisions)}))
+    plan = json.loads(
+        json.dumps({"settings": measured.settings(), "decisions": _rounded(decisions)})
+    )
     seconds = time.perf_counter() - t0
     log.info("fidelity planned in %.1f s", seconds)
     if use_cache or ship:
@@ -720,7 +723,7 @@ def _fidelity_plan(
             plan_cache.store_plan(fields, plan, seconds, plan_cache.SHIPPED_DIR if ship else None)
         except OSError as err:
             log.warning("could not keep the fidelity plan in %s: %s", plan_cache.cache_dir(), err)
-    return plan["settings"], plan["decisions"]
+    return FidelityPlan.from_dict(plan["settings"], plan["decisions"])
 
 
 def _identity_diff(old: dict, new: dict, prefix: str = "") -> list[str]:

@@ -1,0 +1,221 @@
+"""The plan against a high-spp reference: the error it achieves, raised spp where it missed.
+
+The reference's own Monte Carlo error is part of the figure and is taken out in
+quadrature. A plan that misses its target logs a warning naming the knobs
+(flags) whose part of the error exceeds it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mincam_render.render.fidelity.budget import round_up_spp, spp_for
+from mincam_render.render.fidelity.constants import (
+    MAX_AUTO_SPP,
+    MAX_BACKGROUND_SPP,
+    MAX_REFERENCE_SPP,
+    MAX_SPP_RAISES,
+    PILOT_SPP,
+    PLAN_ERROR_SHARE,
+    REFERENCE_NOISE_SHARE,
+    REFERENCE_SPP_FACTOR,
+)
+from mincam_render.render.fidelity.probes import Probes
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Draft:
+    """The plan while it is decided (mutable, inside :func:`decide_fidelity` only).
+
+    Attributes:
+        shared: one render from the board centre for all detectors.
+        render_cam: the camera probes are rendered with (the centre camera when shared).
+        max_depth: path depth of frames (0 = the scene's integrator).
+        spp: samples per texel of frames.
+        e_pilot: relative error at ``PILOT_SPP`` (None unless auto).
+        background: the differential background settings, or None (plain renders).
+    """
+
+    shared: bool
+    render_cam: Any
+    max_depth: int = 0
+    spp: int = 1
+    e_pilot: float | None = None
+    background: dict[str, Any] | None = None
+
+
+def render_plan(p: Probes, draft: Draft, seed_offset: int = 2) -> np.ndarray:
+    """The probes as the plan renders them: ``T[probe, detector, row, col]`` (W)."""
+    if draft.background is None:
+        return p.render(
+            draft.render_cam,
+            spp=draft.spp,
+            seed_offset=seed_offset,
+            max_depth=draft.max_depth,
+            shared=draft.shared,
+        )
+    return np.stack([_differential_probe(p, draft, i) for i in p.indices])
+
+
+def _differential_probe(p: Probes, draft: Draft, index: int) -> np.ndarray:
+    """``B + X - C`` of probe frame ``index`` (as a dataset would store it)."""
+    from mincam_render.render.differential import (
+        BackgroundSettings,
+        render_background,
+        render_frame,
+    )
+
+    depth = draft.max_depth or None
+    bg = render_background(
+        p.family,
+        p.scene,
+        draft.render_cam,
+        index,
+        BackgroundSettings.from_dict(draft.background),
+        dataset_seed=p.request.seed,
+        spp=draft.spp,
+        max_depth=depth,
+    )
+    t, _ = render_frame(
+        p.family, p.scene, draft.render_cam, index, bg, spp=draft.spp, max_depth=depth
+    )
+    return np.repeat(t, p.k, axis=0) if draft.shared else t
+
+
+def check_against_reference(
+    p: Probes, auto: bool, decisions: dict[str, dict], draft: Draft
+) -> np.ndarray:
+    """Render the plan and, when auto, measure it against a reference; the plan's probes.
+
+    Records the check in the spp (plain) or differential decision and adds
+    ``decisions["achieved"]``; a differential plan that misses its target has its
+    spp raised (at most ``MAX_SPP_RAISES`` times), in ``draft`` and the records.
+    """
+    chosen = render_plan(p, draft)
+    if not auto:
+        return chosen
+    ref_spp, ref_depth = _reference_settings(p, draft)
+    ref = p.render(
+        draft.render_cam, spp=ref_spp, seed_offset=3, max_depth=ref_depth, shared=draft.shared
+    )
+    error = p.error(chosen, ref)
+    # the reference's own Monte Carlo error is part of the figure
+    ref_noise = draft.e_pilot * math.sqrt(PILOT_SPP / ref_spp) if draft.e_pilot is not None else 0.0
+    check = {"error_vs_reference": error, "reference_spp": ref_spp}
+    if draft.e_pilot is not None:
+        check["reference_noise_rms"] = ref_noise
+    if draft.background is not None:
+        chosen = _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen)
+    (decisions["differential"] if draft.background is not None else decisions["spp"]).update(check)
+    decisions["achieved"] = achieved(check, ref_noise, decisions, p.request, draft.spp)
+    decisions["achieved"]["per_detector_error_rms"] = _per_detector_error(p, chosen, ref, ref_noise)
+    return chosen
+
+
+def _reference_settings(p: Probes, draft: Draft) -> tuple[int, int]:
+    """``(spp, depth)`` of the reference the plan is checked against."""
+    if draft.background is None:
+        return min(draft.spp * REFERENCE_SPP_FACTOR, MAX_REFERENCE_SPP), draft.max_depth
+    # as many samples as keep the reference's own noise at a small share of
+    # the target (it is subtracted in quadrature): 4096 spp took 70 % of
+    # planning the lighting family and bought nothing the figure uses
+    ref_spp = (
+        MAX_REFERENCE_SPP
+        if draft.e_pilot is None
+        else spp_for(
+            draft.e_pilot, REFERENCE_NOISE_SHARE * p.request.target_error, MAX_REFERENCE_SPP
+        )
+    )
+    return ref_spp, draft.background["max_depth"]
+
+
+def _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen) -> np.ndarray:
+    """Raise the differential spp the request left to us while the check misses the target."""
+    request, diff, background = p.request, decisions["differential"], draft.background
+    raises = []
+    own_spp = request.spp is None, request.background_spp is None
+    error = check["error_vs_reference"]
+    for _ in range(MAX_SPP_RAISES if any(own_spp) else 0):
+        found = math.sqrt(max(error["rms"] ** 2 - ref_noise**2, 0.0))
+        if found <= request.target_error:
+            break
+        factor = (found / (PLAN_ERROR_SHARE * request.target_error)) ** 2
+        if own_spp[0]:
+            draft.spp = round_up_spp(draft.spp * factor, MAX_AUTO_SPP)
+        if own_spp[1]:
+            background["spp"] = round_up_spp(background["spp"] * factor, MAX_BACKGROUND_SPP)
+        raises.append(
+            {"error_found_rms": found, "frame_spp": draft.spp, "background_spp": background["spp"]}
+        )
+        chosen = render_plan(p, draft)
+        error = p.error(chosen, ref)
+    if raises:
+        check["spp_raised"] = raises
+        check["error_vs_reference"] = error
+        diff["frame_spp"] = decisions["spp"]["value"] = draft.spp
+        diff["background_spp"] = background["spp"]
+        diff["reason"] += (
+            f"; raised to {draft.spp} spp (backgrounds {background['spp']}) after the check "
+            "against the reference missed the target"
+        )
+    return chosen
+
+
+def _per_detector_error(p: Probes, chosen, ref, ref_noise: float) -> list[float]:
+    """Each detector's measurement error vs the reference (its noise out in quadrature)."""
+    errors = []
+    for k in range(chosen.shape[1]):
+        rms = p.error(chosen[:, k : k + 1], ref[:, k : k + 1])["rms"]
+        errors.append(math.sqrt(max(rms**2 - ref_noise**2, 0.0)))
+    worst = int(np.argmax(errors))
+    log.info("fidelity: worst detector %d: %.3g rms against the reference", worst, errors[worst])
+    return errors
+
+
+def achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
+    """The plan's error against the reference vs the target; a warning naming the knob if missed.
+
+    The reference's own Monte Carlo error is taken out in quadrature. The
+    advice names every knob whose part of the error exceeds the target (else
+    the largest): the measured biases of sharing and path depth, and the
+    Monte Carlo rest with the spp that brings it to the target.
+    """
+    found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
+    record = {"error_rms": found, "target_error": request.target_error}
+    record["met"] = found <= request.target_error
+    if record["met"]:
+        return record
+    knobs = _knobs_to_turn(found, decisions, request, spp)
+    record["advice"] = "pass " + " and ".join(f"{k} (now {v:.3g} rms of it)" for k, v in knobs)
+    if request.spp is not None and any(k.startswith("--spp") for k, _ in knobs):
+        record["advice"] += "; or drop --spp to let auto fidelity choose"
+    log.warning(
+        "fidelity: measurements are %.3g rms off the reference, target %g: %s",
+        found,
+        request.target_error,
+        record["advice"],
+    )
+    return record
+
+
+def _knobs_to_turn(found, decisions, request, spp) -> list[tuple[str, float]]:
+    """``[(flag, its part of the error)]``: those above the target, else the largest."""
+    shared = decisions["shared_render"]
+    parts = {}
+    if shared["value"] and "error_shared_vs_per_detector" in shared:
+        parts["--per-detector"] = shared["error_shared_vs_per_detector"]["rms"]
+    depth = decisions["max_depth"]
+    kept = depth.get("change_vs_reference", {}).get(str(depth.get("plain_value", depth["value"])))
+    if kept is not None:
+        parts[f"--max-depth {int(depth['value']) + 1}"] = kept["rms"]
+    noise = math.sqrt(max(found**2 - sum(b * b for b in parts.values()), 0.0))
+    parts[f"--spp {round_up_spp(spp * (noise / request.target_error) ** 2, 1 << 24)}"] = noise
+    ranked = sorted(parts.items(), key=lambda kv: -kv[1])
+    return [kv for kv in ranked if kv[1] > request.target_error] or ranked[:1]

@@ -1,0 +1,319 @@
+"""Differential rendering or not (``B + X - C``), with the spp of its frames and backgrounds.
+
+Measured on the probe frames with common random numbers (``X`` and ``C`` with one
+seed): the parallax of sharing ``X - C`` from the board centre, the noise of
+``X - C`` from two seeds, the backgrounds' noise and their daylight
+interpolation; the error budget then gives the spp of frames and backgrounds,
+and the cost per frame of both estimators (paths traced, backgrounds amortized
+over the dataset) decides. ``X - C`` is traced at the plain depth.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from mincam_render.core.seeds import frame_seed
+from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
+from mincam_render.render.fidelity.constants import (
+    BACKGROUND_PILOT_SPP,
+    DIFFERENCE_BASE_SPP,
+    DIFFERENCE_PILOT_SPP,
+    INTERPOLATION_SPP,
+    MAX_AUTO_SPP,
+    MAX_BACKGROUND_SPP,
+    PILOT_SPP,
+    PLAN_ERROR_SHARE,
+    SHARED_DIFFERENCE_SPP,
+    SHARED_ERROR_SHARE,
+)
+from mincam_render.render.fidelity.probes import Probes
+
+
+def decide_differential(
+    p: Probes, auto: bool, render_cam, max_depth: int, plain_spp: int
+) -> dict[str, Any]:
+    """The decision record of differential rendering (see the module doc).
+
+    Raises:
+        ValueError: ``--differential`` for a family without a static background.
+    """
+    from mincam_render.render.differential import background_parts
+
+    record: dict[str, Any] = {"background_interval_s": p.request.background_interval_s}
+    settled = _settled_without_measuring(p, auto, record)
+    if settled is not None:
+        return settled
+    parts = background_parts(p.family, p.family.num_frames, p.request.background_interval_s)
+    components = {c for part in parts.values() for c in part}
+    record["backgrounds"] = len(parts)
+    record["converged_renders"] = len(components)
+    pilots = _pilots(p, render_cam, max_depth or None, record)
+    record.update(_settings_and_cost(p, pilots, len(parts), len(components), plain_spp))
+    if p.request.differential:
+        value, source, reason = True, "flag", "set by --differential"
+    else:
+        value, source = record["cost_per_frame"] < record["plain_cost_per_frame"], "auto"
+        reason = _reason(record, pilots, plain_spp)
+    return {"value": value, "source": source, "reason": reason, **record}
+
+
+def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str, Any] | None:
+    """The decision when a flag, full fidelity or the family settles it; else None."""
+    family, request = p.family, p.request
+    available = bool(getattr(family, "has_background", False))
+    if request.differential is not None:
+        if request.differential and not available:
+            raise ValueError(
+                f"family {family.name!r} has no static background: differential rendering "
+                "is unavailable (drop --differential)"
+            )
+        if not request.differential:
+            return {
+                "value": False,
+                "source": "flag",
+                "reason": "set by --no-differential",
+                **record,
+            }
+    elif not auto:
+        reason = "full fidelity renders frames whole"
+        return {"value": False, "source": "full", "reason": reason, **record}
+    elif not available:
+        reason = f"family {family.name!r} has no static background"
+        return {"value": False, "source": "auto", "reason": reason, **record}
+    return None
+
+
+def _difference_pair(p: Probes, depth, seed_offset: int, spp: int, camera):
+    """``(X, C)`` per probe with one seed each (common random numbers)."""
+    interval = p.request.background_interval_s
+    xs, cs = [], []
+    for i in p.indices:
+        seed = p.seed(i, seed_offset + 11)
+        p.family.set_frame_in_window(p.scene, i, interval)
+        xs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
+        p.family.set_background(p.scene, i, interval)
+        cs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
+    return np.stack(xs), np.stack(cs)
+
+
+def _pilots(p: Probes, render_cam, deep, record: dict) -> dict[str, Any]:
+    """Noises and biases of the differential estimator on the probes (see the module doc).
+
+    Adds ``record["shared_difference"]`` where there is more than one detector.
+    """
+    from mincam_render.render.differential import difference_camera
+
+    # X - C is traced as deep as the backgrounds: truncating it would bias the
+    # movers' change and save little, since a path costs about the same at any
+    # depth once Russian roulette and escapes through the window set in
+    # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12).
+    x_ref = _frames_in_window(p, render_cam, deep)
+    shared_difference = _shared_difference(p, render_cam, deep, x_ref, record)
+    diff_cam = difference_camera(render_cam, True) if shared_difference else render_cam
+    x1, c1 = _difference_pair(p, deep, 1, DIFFERENCE_PILOT_SPP, diff_cam)
+    x2, c2 = _difference_pair(p, deep, 2, DIFFERENCE_PILOT_SPP, diff_cam)
+    # [N, 1, R, C] differences broadcast over the detectors when shared; the
+    # noise is reported at PILOT_SPP like the others
+    e_diff = (
+        p.error(x_ref + x1 - c1, x_ref + x2 - c2)["rms"]
+        / math.sqrt(2.0)
+        * math.sqrt(DIFFERENCE_PILOT_SPP / PILOT_SPP)
+    )
+    parallax = record.get("shared_difference", {}).get("parallax_error_rms", 0.0)
+    return {
+        "deep": deep,
+        "rendered_detectors": render_cam.num_detectors,
+        "shared_difference": shared_difference,
+        "frame_paths": diff_cam.num_detectors,
+        "difference": e_diff,
+        "background": _background_noise(p, render_cam, deep),
+        "interpolation": _interpolation_error(p, render_cam, deep),
+        "parallax": parallax if shared_difference else 0.0,
+    }
+
+
+def _frames_in_window(p: Probes, render_cam, deep) -> np.ndarray:
+    """The probes' ``X`` that relative errors of ``X - C`` are taken against."""
+    x_ref = []
+    for i in p.indices:
+        p.family.set_frame_in_window(p.scene, i, p.request.background_interval_s)
+        x_ref.append(
+            p.family.render_transport(
+                p.scene,
+                render_cam,
+                spp=DIFFERENCE_BASE_SPP,
+                seed=frame_seed(p.request.seed, i),
+                max_depth=deep,
+            )
+        )
+    return np.stack(x_ref)
+
+
+def _shared_difference(p: Probes, render_cam, deep, x_ref, record: dict) -> bool:
+    """One render of ``X - C`` from the board centre for all detectors?
+
+    Its parallax error ``p`` is measured against the noise of independent seeds:
+    ``e_shared^2 ~ noise^2 + p^2`` and ``e_noise^2 ~ noise^2`` (same spp).
+    """
+    from mincam_render.render.differential import difference_camera
+
+    k = render_cam.num_detectors
+    if k > 1 and p.request.shared_difference is not None:
+        record["shared_difference"] = {"value": p.request.shared_difference, "source": "flag"}
+        return p.request.shared_difference
+    if k <= 1:
+        return False
+    xa, ca = _difference_pair(p, deep, 3, SHARED_DIFFERENCE_SPP, render_cam)
+    xb, cb = _difference_pair(p, deep, 4, SHARED_DIFFERENCE_SPP, render_cam)
+    centre_cam = difference_camera(render_cam, True)
+    xc, cc = _difference_pair(p, deep, 5, SHARED_DIFFERENCE_SPP, centre_cam)
+    e_shared = p.error(xa + (xc - cc) - (xa - ca), xa)["rms"]
+    e_noise = p.error(xa + (xb - cb) - (xa - ca), xa)["rms"]
+    parallax_error = math.sqrt(max(e_shared**2 - e_noise**2, 0.0))
+    bound = SHARED_ERROR_SHARE * p.request.target_error
+    record["shared_difference"] = {
+        "value": parallax_error < bound,
+        "source": "auto",
+        "parallax_error_rms": parallax_error,
+        "shared_vs_per_detector_rms": e_shared,
+        "two_seeds_rms": e_noise,
+        "probe_spp": SHARED_DIFFERENCE_SPP,
+        "bound": bound,
+    }
+    return parallax_error < bound
+
+
+def _background_noise(p: Probes, camera, depth) -> float:
+    """Monte Carlo error of the probes' backgrounds, piloted at BACKGROUND_PILOT_SPP.
+
+    Two seeds per probe; reported at PILOT_SPP (times sqrt(BACKGROUND_PILOT_SPP /
+    PILOT_SPP)) like the other noises. Stratified samples converge faster than
+    1/sqrt(spp) (:mod:`mincam_render.render.transport`), so extrapolating from a pilot
+    nearer the backgrounds' spp wastes fewer samples than one at PILOT_SPP.
+    A whole background is piloted: its components, rendered apart and summed,
+    are no noisier (their weights' squares sum to at most 1 per light).
+    """
+    renders = {0: [], 1: []}
+    for i in p.indices:
+        p.family.set_background(p.scene, i, p.request.background_interval_s)
+        for s in renders:
+            renders[s].append(
+                p.family.render_transport(
+                    p.scene,
+                    camera,
+                    spp=BACKGROUND_PILOT_SPP,
+                    seed=p.seed(i, s + 31),
+                    max_depth=depth,
+                )
+            )
+    a, b = (np.stack(r) for r in renders.values())
+    error = p.error(a, b)["rms"] / math.sqrt(2.0)
+    return error * math.sqrt(BACKGROUND_PILOT_SPP / PILOT_SPP)
+
+
+def _interpolation_error(p: Probes, camera, depth) -> dict[str, Any]:
+    """Error of the background halfway through the probes' windows, interpolated from its ends.
+
+    ``B`` at the start, the middle and the end of each probe frame's window with
+    one seed (common random numbers, so the figure is the interpolation's, not
+    noise), at ``INTERPOLATION_SPP``.
+    """
+    spp = INTERPOLATION_SPP
+    ends, middles = [], []
+    for i in p.indices:
+        renders = []
+        for at in (0.0, 0.5, 1.0):
+            p.family.set_background(p.scene, i, p.request.background_interval_s, at=at)
+            renders.append(
+                p.family.render_transport(
+                    p.scene, camera, spp=spp, seed=frame_seed(i, 17), max_depth=depth
+                )
+            )
+        ends.append(0.5 * (renders[0] + renders[2]))
+        middles.append(renders[1])
+    return {"error": p.error(np.stack(ends), np.stack(middles)), "probe_spp": spp, "at": 0.5}
+
+
+def _settings_and_cost(
+    p: Probes, pilots: dict, backgrounds: int, components: int, plain_spp: int
+) -> dict[str, Any]:
+    """Frame and background spp from the error budget, and both estimators' cost per frame.
+
+    The biases measured on the probes are fixed; the two noises share what is
+    left, split to minimize the cost per frame (:func:`split_noise_budget`). Cost
+    is paths traced per frame (samples x detectors rendered, backgrounds
+    amortized): a deterministic stand-in for time (wall-clock figures would make
+    two plans of one request differ). Paths, not path segments: measured on the
+    workspace, a path costs about the same at depth 4 as at depth 12 (Russian
+    roulette, escapes through the window, per-path camera and light sampling).
+    """
+    # detectors rendered: 1 when the plain render is shared from the board centre
+    request, k, frames = p.request, pilots["rendered_detectors"], p.family.num_frames
+    biases = {
+        "shared_difference_parallax": pilots["parallax"],
+        "daylight_interpolation": pilots["interpolation"]["error"]["rms"],
+    }
+    e_diff, e_bg, frame_paths = pilots["difference"], pilots["background"], pilots["frame_paths"]
+    background_paths = k * components / frames
+    planned_error = PLAN_ERROR_SHARE * request.target_error
+    budget = split_noise_budget(
+        planned_error,
+        biases,
+        (e_diff, frame_paths, request.spp),
+        (e_bg, background_paths, request.background_spp),
+    )
+    frame_spp = (
+        request.spp
+        if request.spp is not None
+        else spp_for(e_diff, budget["difference_noise"], MAX_AUTO_SPP, 4)
+    )
+    # the background takes what the frame's rounded-up spp left
+    budget = split_noise_budget(
+        planned_error,
+        biases,
+        (e_diff, frame_paths, frame_spp),
+        (e_bg, background_paths, request.background_spp),
+    )
+    background_spp = (
+        request.background_spp
+        if request.background_spp is not None
+        else spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
+    )
+    frame_cost = frame_spp * frame_paths
+    background_cost = components * background_spp * k + backgrounds * frame_cost
+    deep = pilots["deep"]
+    return {
+        "frame_max_depth": 0 if deep is None else deep,
+        "frame_spp": frame_spp,
+        "background_spp": background_spp,
+        "difference_pilot_error_rms": e_diff,
+        "background_pilot_error_rms": e_bg,
+        "background_pilot_spp": BACKGROUND_PILOT_SPP,
+        "daylight_interpolation": pilots["interpolation"],
+        "error_budget": budget,
+        "predicted_error_rms": math.hypot(
+            e_diff * math.sqrt(PILOT_SPP / frame_spp),
+            e_bg * math.sqrt(PILOT_SPP / background_spp),
+            *biases.values(),
+        ),
+        "cost_per_frame": frame_cost + background_cost / frames,
+        "plain_cost_per_frame": plain_spp * k,
+        "cost_unit": "paths per texel (samples x detectors rendered), backgrounds amortized",
+    }
+
+
+def _reason(record: dict, pilots: dict, plain_spp: int) -> str:
+    shared = " from the board centre" if pilots["shared_difference"] else ""
+    interval = record["background_interval_s"]
+    return (
+        f"B + X - C: X at depth {record['frame_max_depth']} x {record['frame_spp']} spp"
+        f"{shared} (difference noise {pilots['difference']:.3g} at {PILOT_SPP} spp), "
+        f"{record['backgrounds']} background(s) from {record['converged_renders']} converged "
+        f"components at {record['background_spp']} spp, daylight interpolated within "
+        f"{interval:g} s windows (error {pilots['interpolation']['error']['rms']:.3g} rms "
+        f"halfway): cost {record['cost_per_frame']:.4g} vs plain {plain_spp} spp "
+        f"{record['plain_cost_per_frame']:.4g} (paths per texel)"
+    )

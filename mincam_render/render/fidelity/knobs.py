@@ -1,0 +1,250 @@
+"""One decision per render knob, each from a measured error: sharing, path depth, spp, dtype.
+
+Every decision is a JSON-ready record ``{"value", "source", "reason", **measured}``:
+``source`` is ``flag`` (set by the request), ``full`` (full fidelity: no
+shortcut) or ``auto`` (measured on the probe frames), and the measured figures
+are the errors the choice was made from.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from mincam_render.render.fidelity.budget import spp_for
+from mincam_render.render.fidelity.constants import (
+    CANDIDATE_DEPTHS,
+    DEEP_REFERENCE_DEPTH,
+    FULL_SPP,
+    MAX_AUTO_SPP,
+    PILOT_SPP,
+    SHARED_ERROR_SHARE,
+)
+from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.precision import decode_transport, encode_transport
+
+
+def decide_shared_render(p: Probes, auto: bool) -> dict[str, Any]:
+    """One render at the board centre for all detectors, or one per detector."""
+    request = p.request
+    measured = _parallax(p)
+    if p.k > 1 and request.shared_render is None and auto:
+        measured.update(_sharing_change(p))
+    if request.shared_render is not None:
+        value, source = bool(request.shared_render), "flag"
+        reason = "set by --shared-render/--per-detector"
+    elif not auto:
+        value, source, reason = False, "full", "full fidelity renders every detector"
+    elif p.k == 1:
+        value, source, reason = False, "auto", "one detector: nothing to share"
+    else:
+        value, reason = shared_render_choice(
+            measured["parallax_texels"], request.parallax_fraction, measured
+        )
+        z_min, z_max = measured["depth_range_m"]
+        source, reason = "auto", f"{reason} (depths {z_min:.3g}-{z_max:.3g} m)"
+    return {"value": value, "source": source, "reason": reason, **measured}
+
+
+def _parallax(p: Probes) -> dict[str, Any]:
+    """The largest parallax on the mask plane (texels) from the nearest depth seen."""
+    camera = p.camera
+    rows, cols = camera.mask_resolution
+    baseline = float(np.linalg.norm(np.asarray(camera.layout.positions_m), axis=1).max())
+    texel_m = camera.mask_size_m / max(rows, cols)
+    depth = p.depth_range_m()
+    z_min, z_max = depth["min"], depth["max"]
+    parallax = (
+        0.0 if not math.isfinite(z_min) else baseline * camera.mask_distance_m / z_min / texel_m
+    )
+    return {
+        "parallax_texels": parallax,
+        "depth_range_m": [z_min, z_max],
+        "largest_detector_offset_m": baseline,
+        "bound_texels": p.request.parallax_fraction,
+    }
+
+
+def _sharing_change(p: Probes) -> dict[str, Any]:
+    """How much sharing changes measurements, against the noise of two seeds."""
+    # common random numbers: the same samples with every detector moved to the
+    # board centre, so the difference is the parallax alone, not noise
+    per_det = p.render(p.camera, spp=PILOT_SPP)
+    no_parallax = p.render(p.camera, spp=PILOT_SPP, parallax=False)
+    other = p.render(p.camera, spp=PILOT_SPP, seed_offset=1)
+    return {
+        "error_shared_vs_per_detector": p.error(no_parallax, per_det),
+        "noise_floor_two_seeds": p.error(other, per_det),
+        "probe_spp": PILOT_SPP,
+        "error_bound": SHARED_ERROR_SHARE * p.request.target_error,
+    }
+
+
+def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tuple[bool, str]:
+    """Share one centre render? ``(choice, reason)`` from the measured change it makes.
+
+    The change (common random numbers, so the parallax alone plus the noise of
+    rays that land elsewhere) decides; only where it is within the noise of two
+    independent renders does the geometric parallax estimate decide instead.
+    """
+    err = measured["error_shared_vs_per_detector"]["rms"]
+    noise = measured["noise_floor_two_seeds"]["rms"]
+    bound = measured["error_bound"]
+    geometry = (
+        f"parallax {parallax:.3g} texel ({'<' if parallax < fraction else '>='} {fraction:g})"
+    )
+    change = f"sharing changes measurements by {err:.3g} rms"
+    if err < bound:
+        return True, f"{change} < bound {bound:.3g} (a share of the target error); {geometry}"
+    if parallax < fraction and err <= noise:
+        return True, (
+            f"{geometry}; {change} >= bound {bound:.3g} but within the noise of two seeds "
+            f"({noise:.3g} rms at {measured['probe_spp']} spp), so the geometry decides"
+        )
+    return False, f"{change} >= bound {bound:.3g} (a share of the target error); {geometry}"
+
+
+def decide_max_depth(p: Probes, auto: bool, render_cam, shared: bool) -> dict[str, Any]:
+    """The shallowest path depth whose missing bounces change measurements < the bound."""
+    from mincam_render.render.transport import scene_max_depth
+
+    request = p.request
+    scene_depth = scene_max_depth(p.scene)
+    measured = {"scene_integrator_max_depth": scene_depth, "bound": request.indirect_fraction}
+    if request.max_depth is not None:
+        reason = "set by --max-depth"
+        return {"value": request.max_depth, "source": "flag", "reason": reason, **measured}
+    if not auto:
+        reason = "full fidelity uses the scene's integrator"
+        return {"value": 0, "source": "full", "reason": reason, **measured}
+    if scene_depth is not None and 1 <= scene_depth <= 2:
+        reason = f"the scene's integrator is already direct-only (max_depth = {scene_depth})"
+        measured["indirect_change"] = {"rms": 0.0, "max": 0.0}
+        return {"value": 0, "source": "auto", "reason": reason, **measured}
+    max_depth, changes = _depth_changes(p, render_cam, shared, scene_depth)
+    measured.update(
+        {
+            "change_vs_reference": {str(d): c for d, c in sorted(changes.items())},
+            "indirect_change": changes[2],
+            "reference_depth": DEEP_REFERENCE_DEPTH,
+        }
+    )
+    kept = changes.get(max_depth, {"rms": 0.0})["rms"]
+    reason = (
+        f"depth {max_depth} changes measurements by {kept:.3g} (rms) vs depth "
+        f"{DEEP_REFERENCE_DEPTH}, < bound {request.indirect_fraction:g}; direct light "
+        f"only (depth 2) would change them by {changes[2]['rms']:.3g}"
+    )
+    if scene_depth is not None and scene_depth in changes:
+        reason += f", the scene's own depth {scene_depth} by {changes[scene_depth]['rms']:.3g}"
+    return {"value": max_depth, "source": "auto", "reason": reason, **measured}
+
+
+def _depth_changes(p: Probes, render_cam, shared: bool, scene_depth) -> tuple[int, dict]:
+    """``(chosen depth, {depth: change vs a deep reference})`` with common random numbers.
+
+    Same seeds: paths agree up to the truncation, so each difference is the light
+    of the bounces left out, not noise. The scene's own depth is an author's
+    default, not the truth: it is measured like any other candidate.
+    """
+    bound = p.request.indirect_fraction
+    deep = p.render(render_cam, spp=PILOT_SPP, max_depth=DEEP_REFERENCE_DEPTH, shared=shared)
+    changes = {}
+    max_depth = DEEP_REFERENCE_DEPTH
+    for depth in CANDIDATE_DEPTHS:
+        trial = p.render(render_cam, spp=PILOT_SPP, max_depth=depth, shared=shared)
+        changes[depth] = p.error(trial, deep)
+        if changes[depth]["rms"] < bound:
+            max_depth = depth
+            break
+    if scene_depth is not None and scene_depth > 0 and scene_depth not in changes:
+        trial = p.render(render_cam, spp=PILOT_SPP, max_depth=scene_depth, shared=shared)
+        changes[scene_depth] = p.error(trial, deep)
+    return max_depth, changes
+
+
+def decide_spp(
+    p: Probes, auto: bool, render_cam, max_depth: int, shared: bool
+) -> tuple[dict[str, Any], float | None]:
+    """Samples per texel for the target error (plain estimator); also the pilot error.
+
+    Returns:
+        ``(decision, pilot error)``: the pilot's relative error at ``PILOT_SPP``
+        (None unless auto), from two renders with different seeds.
+    """
+    request = p.request
+    measured: dict[str, Any] = {"target_error": request.target_error}
+    e_pilot = None
+    if auto:
+        a = p.render(render_cam, spp=PILOT_SPP, max_depth=max_depth, shared=shared)
+        b = p.render(render_cam, spp=PILOT_SPP, seed_offset=1, max_depth=max_depth, shared=shared)
+        # the difference of two independent renders has twice the variance of one
+        e_pilot = p.error(a, b)["rms"] / math.sqrt(2.0)
+        measured.update({"pilot_spp": PILOT_SPP, "pilot_error_rms": e_pilot})
+    if request.spp is not None:
+        decision = {"value": request.spp, "source": "flag", "reason": "set by --spp"}
+    elif not auto:
+        reason = f"full fidelity default {FULL_SPP} spp"
+        decision = {"value": FULL_SPP, "source": "full", "reason": reason}
+    else:
+        spp = spp_for(e_pilot, request.target_error, MAX_AUTO_SPP)
+        predicted = measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
+        verdict = (
+            f"{spp} spp meets target {request.target_error:g}"
+            if predicted <= request.target_error
+            else f"capped at {spp} spp: predicted {predicted:.3g} > target {request.target_error:g}"
+        )
+        reason = (
+            f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); {verdict}"
+        )
+        decision = {"value": spp, "source": "auto", "reason": reason}
+    return {**decision, **measured}, e_pilot
+
+
+def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
+    """float16 storage when the error it adds to ``chosen``'s measurements stays < the bound."""
+    request = p.request
+    stored, scales = encode_transport(chosen, "float16")
+    f16_err = p.error(decode_transport(stored, scales), chosen)
+    measured = {"float16_error": f16_err, "bound": request.dtype_error_bound}
+    if request.dtype is not None:
+        dtype, source, reason = request.dtype, "flag", "set by --dtype"
+    elif not auto:
+        dtype, source, reason = "float32", "full", "full fidelity stores float32"
+    else:
+        dtype = "float16" if f16_err["max"] < request.dtype_error_bound else "float32"
+        source = "auto"
+        reason = (
+            f"float16 changes measurements by at most {f16_err['max']:.3g} "
+            f"{'<' if dtype == 'float16' else '>='} bound {request.dtype_error_bound:g}"
+        )
+    return {"value": dtype, "source": source, "reason": reason, **measured}
+
+
+def recorded_decisions(p: Probes) -> dict[str, dict[str, Any]]:
+    """Choices with nothing to measure: mask resolution, variant, temporal history."""
+    from mincam_render.render import backend
+
+    history = bool(p.family.needs_history)
+    return {
+        "mask_resolution": {
+            "value": p.camera.mask_resolution[0],
+            "source": "flag" if p.request.mask_res is not None else "camera",
+            "reason": "a coarser transport image is exact for masks of that resolution (block "
+            "sums), so resolution is a mask design choice, not reduced automatically",
+        },
+        "variant": {
+            "value": backend.describe()["variant"],
+            "source": "auto",
+            "reason": "photodiodes are single-channel: monochrome variant",
+        },
+        "temporal_history": {
+            "value": history,
+            "source": "auto",
+            "reason": "the family's task needs a time history"
+            if history
+            else "static task: frames are used without history",
+        },
+    }

@@ -1,0 +1,214 @@
+"""Leaving out what a scene does not need, each choice decided from a measured error.
+
+:func:`decide_fidelity` renders a few probe frames of a family (spread over the
+sequence, at fixed seeds; :mod:`.probes`) and decides, one function per knob
+(:mod:`.knobs`, :mod:`.differential_choice`), each recording the error it was
+decided from:
+
+- **shared render**: one render at the board centre replicated to all detectors,
+  when the largest parallax between a detector and the board centre,
+  ``|b| d / z_min`` on the mask plane, stays below ``parallax_fraction`` of a
+  texel (``b`` the detector offset, ``d`` the mask distance, ``z_min`` the
+  nearest scene depth from a grid of rays cast from the board centre), or when
+  the parallax changes measurements by less than ``SHARED_ERROR_SHARE`` of the
+  target error (measured with common random numbers: the same samples with every
+  detector moved to the board centre, so noise cancels);
+- **bounce depth**: the shallowest of ``CANDIDATE_DEPTHS`` (2 = direct light
+  only) whose measurements differ from a depth-``DEEP_REFERENCE_DEPTH`` render
+  by less than ``indirect_fraction``; probes use common random numbers, so the
+  difference is the light of the bounces left out, not noise. The scene's own
+  integrator depth is measured and recorded too, not trusted;
+- **samples per texel** from the target measurement error: the Monte Carlo
+  error of measurements, estimated from two renders with different seeds at a
+  pilot sample count, falls as ``1/sqrt(spp)``; the choice is then checked
+  against a reference at 8x the samples;
+- **differential rendering** (families with a static background, see
+  :mod:`mincam_render.render.differential`) when its cost per frame, counted in paths
+  traced with the backgrounds amortized, is lower than the plain
+  render's. Its settings come from an error budget of ``PLAN_ERROR_SHARE`` of
+  the target: the biases are measured first (sharing ``X - C`` from the board
+  centre, interpolating the daylight within a window), and the noises of
+  ``X - C`` and of the backgrounds share what is left in the cheapest split
+  (:func:`.budget.split_noise_budget`); ``X - C`` is traced as deep as the
+  backgrounds; the choice is checked against a plain reference whose predicted
+  noise is ``REFERENCE_NOISE_SHARE`` of the target (subtracted in quadrature);
+- **storage float16** when the relative measurement error it adds (per-frame
+  power-of-two scaling, see :mod:`mincam_render.render.precision`) stays below
+  ``dtype_error_bound`` for random printable masks, else float32;
+- **mask resolution**: kept at the camera's. A transport image at a coarser
+  resolution gives *exact* measurements for masks of that resolution (its
+  texels are sums of the finer ones), so resolution is a design choice of the
+  mask (swept in training), not an accuracy knob of the render;
+- **monochrome variant** (photodiodes are single-channel) and **no temporal
+  history** unless the family ``needs_history``: recorded, nothing to measure.
+
+Errors are relative errors of measurements ``P = sum T M`` for random printable
+masks (:func:`mincam_render.render.precision.measurement_relative_error`), RMS and max
+over probe frames, detectors and masks. Every decision records its value, its
+source (``flag``, ``auto`` or ``full``), the bound and the measured figures.
+The plan is then checked against a high-spp reference (:mod:`.check`) and
+returned as a frozen :class:`FidelityPlan`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import logging
+from typing import Any
+
+from mincam_render.render.fidelity.check import Draft, check_against_reference
+from mincam_render.render.fidelity.differential_choice import decide_differential
+from mincam_render.render.fidelity.knobs import (
+    decide_dtype,
+    decide_max_depth,
+    decide_shared_render,
+    decide_spp,
+    recorded_decisions,
+)
+from mincam_render.render.fidelity.probes import Probes, Stages
+from mincam_render.render.precision import DTYPES
+
+log = logging.getLogger(__name__)
+
+
+class Fidelity(enum.Enum):
+    """How render settings not given explicitly are chosen."""
+
+    AUTO = "auto"  # measured from scene and camera (mincam_render.render.fidelity)
+    FULL = "full"  # no shortcuts: per-detector renders, scene integrator, float32
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FidelityPlan:
+    """Render settings of a family seen by a camera, with the decision behind each.
+
+    Args:
+        spp: samples per texel of each frame (>= 1).
+        max_depth: path depth of frames; 0 = the scene's own integrator.
+        shared_render: one render from the board centre copied to every detector.
+        mask_resolution: texels per side of the transport images (>= 1).
+        dtype: storage type, ``float16`` or ``float32``.
+        background: differential rendering's background settings
+            (``{"interval_s", "spp", "max_depth", "shared_difference"}``), or None
+            for plain renders.
+        decisions: per knob ``{"value", "source", "reason", **measured}``, plus
+            ``achieved`` (error against the reference) and ``probe_frames``;
+            JSON-ready, written to the manifest as it is.
+
+    Raises:
+        ValueError: a setting outside its range, naming it.
+    """
+
+    spp: int
+    max_depth: int
+    shared_render: bool
+    mask_resolution: int
+    dtype: str
+    background: dict[str, Any] | None
+    decisions: dict[str, Any]
+
+    def __post_init__(self) -> None:
+        for name, low in (("spp", 1), ("max_depth", 0), ("mask_resolution", 1)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                raise ValueError(f"{name} = {value!r}: allowed an integer >= {low}")
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype = {self.dtype!r}: allowed one of {DTYPES}")
+
+    def settings(self) -> dict[str, Any]:
+        """The settings as the manifest's ``job.render`` and the plan cache hold them."""
+        return {
+            "spp": self.spp,
+            "max_depth": self.max_depth,
+            "shared_render": self.shared_render,
+            "mask_resolution": self.mask_resolution,
+            "dtype": self.dtype,
+            "background": self.background,
+        }
+
+    @classmethod
+    def from_dict(cls, settings: dict[str, Any], decisions: dict[str, Any]) -> FidelityPlan:
+        """A plan read back from :meth:`settings` and its decisions (a kept plan)."""
+        return cls(**settings, decisions=decisions)
+
+
+def decide_fidelity(family, camera, request, *, progress: bool = False) -> FidelityPlan:
+    """Choose render settings for ``family`` seen by ``camera`` (see the module doc).
+
+    Args:
+        family: a :class:`~mincam_render.scenes.base.SceneFamily`.
+        camera: the camera to render (mask resolution already final).
+        request: a :class:`~mincam_render.data.render_job.RenderRequest`; its explicit
+            settings win, its bounds drive the automatic choices.
+        progress: show a progress bar naming what is being measured (stderr).
+
+    Raises:
+        ValueError: ``--differential`` for a family without a static background.
+    """
+    auto = request.fidelity is Fidelity.AUTO
+    p = Probes(family, camera, request)
+    stages = Stages(_PLAN_STAGES, enabled=progress)
+    decisions: dict[str, Any] = {}
+    stages.start("parallax: one shared render vs one per detector")
+    decisions["shared_render"] = shared = decide_shared_render(p, auto)
+    draft = Draft(shared["value"], camera.centre_camera() if shared["value"] else camera)
+    stages.start("path depth vs a deep reference")
+    decisions["max_depth"] = decide_max_depth(p, auto, draft.render_cam, draft.shared)
+    draft.max_depth = decisions["max_depth"]["value"]
+    stages.start("Monte Carlo error at the pilot spp")
+    decisions["spp"], draft.e_pilot = decide_spp(
+        p, auto, draft.render_cam, draft.max_depth, draft.shared
+    )
+    draft.spp = decisions["spp"]["value"]
+    stages.start("differential rendering: background and difference")
+    decisions["differential"] = decide_differential(
+        p, auto, draft.render_cam, draft.max_depth, draft.spp
+    )
+    _adopt_differential(decisions, draft, request)
+    stages.start("the plan against a high-spp reference")
+    chosen = check_against_reference(p, auto, decisions, draft)
+    stages.start("float16 storage error")
+    decisions["dtype"] = decide_dtype(p, auto, chosen)
+    decisions.update(recorded_decisions(p))
+    decisions["probe_frames"] = p.indices
+    stages.close()
+    log.info("fidelity: %s", {k: v["value"] for k, v in decisions.items() if "value" in v})
+    return FidelityPlan(
+        spp=draft.spp,
+        max_depth=draft.max_depth,
+        shared_render=draft.shared,
+        mask_resolution=camera.mask_resolution[0],
+        dtype=decisions["dtype"]["value"],
+        background=draft.background,
+        decisions=decisions,
+    )
+
+
+#: Measurements of a plan (the progress bar's steps): sharing, depth, spp, differential,
+#: the check against a reference, storage.
+_PLAN_STAGES = 6
+
+
+def _adopt_differential(decisions: dict[str, Any], draft: Draft, request) -> None:
+    """With differential rendering, frames take its spp and depth; backgrounds get settings."""
+    diff = decisions["differential"]
+    if not diff["value"]:
+        return
+    draft.background = {
+        "interval_s": request.background_interval_s,
+        "spp": diff["background_spp"],
+        "max_depth": draft.max_depth,
+        "shared_difference": diff.get("shared_difference", {}).get("value", False),
+    }
+    for name, value, in_background in (
+        ("spp", diff["frame_spp"], diff["background_spp"]),
+        ("max_depth", diff["frame_max_depth"], draft.max_depth),
+    ):
+        decisions[name]["plain_value"] = decisions[name]["value"]
+        decisions[name]["value"] = value
+        decisions[name]["reason"] += (
+            f"; differential rendering renders frames with {name} {value} and backgrounds "
+            f"with {in_background} (see 'differential')"
+        )
+    draft.spp, draft.max_depth = diff["frame_spp"], diff["frame_max_depth"]

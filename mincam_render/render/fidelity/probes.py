@@ -1,0 +1,123 @@
+"""The planning episode's probe frames, rendered as the planner's knobs ask (numpy, W)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from mincam_render.core.seeds import frame_seed
+from mincam_render.render.fidelity.constants import DEPTH_GRID, PROBE_FRAMES
+from mincam_render.render.precision import measurement_relative_error
+
+
+def probe_indices(num_frames: int) -> list[int]:
+    """``PROBE_FRAMES`` frame indices spread evenly over the sequence."""
+    n = min(PROBE_FRAMES, num_frames)
+    return sorted({int(round(x)) for x in np.linspace(0, num_frames - 1, n)})
+
+
+class Probes:
+    """A family's probe frames and renders of them at fixed seeds.
+
+    Attributes:
+        family: the scene family; ``scene`` its built Mitsuba scene.
+        camera: the camera the plan is for; ``k`` its detectors.
+        request: the render request (seed, bounds, explicit settings).
+        indices: the probe frames.
+        lo_hi: printable transmittance range of the masks errors are measured with.
+    """
+
+    def __init__(self, family, camera, request) -> None:
+        self.family, self.camera, self.request = family, camera, request
+        self.scene = family.build_scene()
+        self.indices = probe_indices(family.num_frames)
+        self.k = camera.num_detectors
+        self.lo_hi = camera.transmittance_range
+
+    def seed(self, index: int, offset: int) -> int:
+        """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own)."""
+        return (frame_seed(self.request.seed, index) + 7919 * offset) % 2**63
+
+    def render(
+        self, cam, *, spp, seed_offset=0, max_depth=None, shared=False, parallax=True
+    ) -> np.ndarray:
+        """``T[probe, detector, row, col]`` (W); ``shared``: one render copied to every detector."""
+        out = []
+        for i in self.indices:
+            self.family.set_frame(self.scene, i)
+            t = self.family.render_transport(
+                self.scene,
+                cam,
+                spp=spp,
+                seed=self.seed(i, seed_offset),
+                max_depth=max_depth or None,
+                parallax=parallax,
+            )
+            out.append(np.repeat(t, self.k, axis=0) if shared else t)
+        return np.stack(out)
+
+    def error(self, a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+        """Relative measurement error of ``a`` against ``b`` for random printable masks."""
+        return measurement_relative_error(a, b, self.lo_hi)
+
+    def depth_range_m(self) -> dict[str, Any]:
+        """Nearest and farthest depth (m) seen from the board centre over the probe frames."""
+        depths = []
+        for i in self.indices:
+            self.family.set_frame(self.scene, i)
+            depths.append(nearest_depth_m(self.scene, self.camera))
+        return {"min": min(d["min"] for d in depths), "max": max(d["max"] for d in depths)}
+
+
+def nearest_depth_m(scene, camera) -> dict[str, float]:
+    """Nearest and farthest scene depth (m, along the board normal) seen from the board centre.
+
+    Casts a ``DEPTH_GRID^2`` grid of rays from the board centre through the mask's
+    field of view. Misses count as infinitely far.
+    """
+    import mitsuba as mi
+
+    right, up, fwd = camera.frame
+    n = DEPTH_GRID
+    s = ((np.arange(n) + 0.5) / n - 0.5) * camera.mask_size_m
+    ss, tt = np.meshgrid(s, -s)
+    dirs = ss.reshape(-1, 1) * right + tt.reshape(-1, 1) * up + camera.mask_distance_m * fwd
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    origin = np.broadcast_to(np.asarray(camera.position), dirs.shape)
+    ray = mi.Ray3f(
+        mi.Point3f(*[mi.Float(origin[:, i]) for i in range(3)]),
+        mi.Vector3f(*[mi.Float(dirs[:, i]) for i in range(3)]),
+    )
+    si = scene.ray_intersect(ray)
+    t = np.asarray(si.t.numpy(), dtype=np.float64)
+    valid = np.isfinite(t) & (t < 1e30)
+    depth = t[valid] * (dirs[valid] @ fwd)
+    if depth.size == 0:
+        return {"min": math.inf, "max": math.inf}
+    return {"min": float(depth.min()), "max": float(depth.max())}
+
+
+class Stages:
+    """A progress bar over the planner's measurements, naming the one under way."""
+
+    def __init__(self, total: int, *, enabled: bool) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(
+            total=total, desc="fidelity plan", unit="step", disable=not enabled, leave=False
+        )
+        self._started = False
+
+    def start(self, what: str) -> None:
+        """Count the previous step done and name this one."""
+        if self._started:
+            self._bar.update(1)
+        self._started = True
+        self._bar.set_postfix_str(f"measuring {what}")
+
+    def close(self) -> None:
+        """Count the last step done and remove the bar."""
+        self._bar.update(1)
+        self._bar.close()
