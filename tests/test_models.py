@@ -227,13 +227,19 @@ def test_torch_and_drjit_mask_planes_give_the_same_measurements_and_gradients(
     t = torch.from_numpy(rng.uniform(0, 2e-9, (16, 3, 8, 8)).astype(np.float32))
     gain = torch.from_numpy(rng.uniform(0.8, 1.2, 16).astype(np.float32))
     labels = _labels(16, rng)
-    v_torch, g_torch = _grads_of(model, t, labels, gain=gain)
+    # noiseless: Dr.Jit's parallel sums differ from torch's in the last bits, and the
+    # ADC's quantization can turn that into a whole LSB; the noise is the same code
+    # on both paths
+    v_torch, g_torch = _grads_of(model, t, labels, gain=gain, noise=False)
     model.mask_plane = MaskPlaneBackend.DRJIT
-    v_drjit, g_drjit = _grads_of(model, t, labels, gain=gain)
+    v_drjit, g_drjit = _grads_of(model, t, labels, gain=gain, noise=False)
     torch.testing.assert_close(v_torch, v_drjit, rtol=1e-5, atol=1e-7)
     assert set(g_torch) == set(g_drjit) and "logits" in g_torch
     for name, g in g_torch.items():
-        torch.testing.assert_close(g, g_drjit[name], rtol=1e-4, atol=1e-6 * g.abs().max(), msg=name)
+        # float32 sums in another order (Dr.Jit's vary run to run): at most 4.3e-6 of the
+        # largest element over 30 runs; 2e-5 keeps a 5x margin (1e-6 failed 1 run in 4)
+        scale = g.abs().max()
+        torch.testing.assert_close(g, g_drjit[name], rtol=1e-4, atol=2e-5 * scale, msg=name)
     assert g_torch["logits"].abs().max() > 0
 
 
