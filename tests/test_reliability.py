@@ -79,6 +79,17 @@ def test_malformed_scene_files_name_file_and_field(tmp_path, family, text, field
     assert msg.startswith(str(path)) and field in msg and "\n" not in msg, msg
 
 
+def test_a_bad_field_of_an_optional_table_is_named(tmp_path):
+    """``window`` may be absent (None) or a table; a bad field in it is a ConfigError too.
+
+    It was a ``TypeError`` (a string raised as an exception), found by mypy.
+    """
+    path = tmp_path / "workspace.toml"
+    path.write_text('family = "workspace"\n[window]\nwall = "north"\nwidth_m = "wide"\n')
+    with pytest.raises(ConfigError, match=r"window\.width_m = 'wide'"):
+        load_family(path, seed=0, num_frames=2)
+
+
 def test_scene_file_without_family_or_with_an_unknown_one(tmp_path):
     path = tmp_path / "x.toml"
     path.write_text("fps = 30.0\n")

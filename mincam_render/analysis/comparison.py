@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -198,7 +198,7 @@ def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeE
     )
 
 
-def training_state(convergence: list[Mapping[str, Any]]) -> str:
+def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     """``converged`` (every run: last doubling of steps < 2 % better); else why not.
 
     ``early-stopped, not converged``: validation stopped improving for the

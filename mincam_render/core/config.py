@@ -10,6 +10,7 @@ rejects unknown keys, wrong types and out-of-range values with a
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 import os
 import tomllib
@@ -59,16 +60,16 @@ def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
-        errors = []
+        errors: list[ConfigError] = []
         for a in args:
             if a is type(None):
                 continue
             try:
                 return _convert(source, path, a, value, md)
             except ConfigError as err:
-                errors.append(str(err))
+                errors.append(err)
         raise errors[-1] if len(errors) == 1 else _fail(source, path, value, "no allowed type fits")
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise _fail(source, path, value, f"expected a table of {tp.__name__} fields")
         return parse(tp, value, source=source, path=path)
@@ -105,7 +106,7 @@ def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
         if not isinstance(value, str):
             raise _fail(source, path, value, "expected a string")
         return value
-    if isinstance(tp, type) and issubclass(tp, __import__("enum").Enum):
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
         try:
             return tp(value)
         except ValueError:
@@ -126,7 +127,7 @@ def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") 
             a ``ValueError`` raised by the class's own ``__post_init__``.
     """
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    fields = {f.name: f for f in dataclasses.fields(typing.cast(Any, cls)) if f.init}
     prefix = f"{path}." if path else ""
     unknown = sorted(set(table) - set(fields))
     if unknown:

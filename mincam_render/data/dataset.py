@@ -201,13 +201,14 @@ def camera_to_dict(camera: FreeformCamera) -> dict:
 def camera_from_dict(d: dict) -> FreeformCamera:
     """Rebuild a :class:`FreeformCamera` from :func:`camera_to_dict` (or ``to_dict``) output."""
     resp = d.get("directional_response")
+    rows, cols = d["mask_resolution"]
     return FreeformCamera(
         detector_size_m=float(d["detector_size_m"]),
         mask_size_m=float(d["mask_size_m"]),
         mask_distance_m=float(d["mask_distance_m"]),
-        mask_resolution=tuple(int(v) for v in d["mask_resolution"]),
+        mask_resolution=(int(rows), int(cols)),
         layout=DetectorLayout(
-            positions_m=tuple(tuple(float(c) for c in p) for p in d["layout"]["positions_m"])
+            positions_m=tuple((float(x), float(y)) for x, y in d["layout"]["positions_m"])
         ),
         position=tuple(d["position"]),
         look_at=tuple(d["look_at"]),

@@ -182,7 +182,7 @@ def run_tasks(
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name} = {value!r}: allowed an integer >= 1")
     watch = StallWatch(stall_factor, stall_floor_s)
-    ctx = mp.get_context(context)
+    ctx: Any = mp.get_context(context)  # BaseContext's stub has no Process
     queued = deque(tasks)
     pool: list[_Worker] = []
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def _g(u: np.ndarray, v: np.ndarray, z: float) -> np.ndarray:
+def _g(u: float, v: float, z: float) -> float:
     su = np.sqrt(u * u + z * z)
     sv = np.sqrt(v * v + z * z)
     return (
@@ -69,5 +69,5 @@ def parallel_rectangles_coupling(
             for k, xi in enumerate((k1, k2)):
                 for m, eta in enumerate((l1, l2)):
                     sign = -1.0 if (i + j + k + m) % 2 else 1.0
-                    total += sign * _g(np.float64(x - xi), np.float64(y - eta), distance_m)
+                    total += sign * float(_g(np.float64(x - xi), np.float64(y - eta), distance_m))
     return 0.5 * float(total)

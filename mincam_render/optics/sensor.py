@@ -24,6 +24,8 @@ is the straight-through surrogate gradient of rounding to the LSB (an actual
 
 from __future__ import annotations
 
+from typing import Any
+
 import torch
 
 from mincam_render.optics.camera import DetectorElectronics
@@ -70,7 +72,11 @@ def detector_voltage(
     # V = G (R P + I_dark), the constants folded in float64 once
     voltage_v = torch.add(power_w * (g * e.responsivity_a_per_w), g * e.dark_current_a)
     if noise:
-        kw = {"dtype": power_w.dtype, "device": power_w.device, "generator": generator}
+        kw: dict[str, Any] = {
+            "dtype": power_w.dtype,
+            "device": power_w.device,
+            "generator": generator,
+        }
         # shot variance G^2 q I / t = (G q / t) V, folded in float64: q I alone
         # underflows float32 for I < ~1e-20 A
         variance = torch.add(

@@ -73,10 +73,13 @@ def rescale_scene(scene: mi.Scene, factor: float) -> mi.Scene:
             params[key] = params[key] * factor
     params.update()
     after = _bbox_corners(scene)
-    if before is not None and not np.allclose(after, before * factor, rtol=1e-4, atol=1e-6):
+    if before is not None and (
+        after is None or not np.allclose(after, before * factor, rtol=1e-4, atol=1e-6)
+    ):
         raise SceneError(
             f"--scene-scale {factor:g}: some shapes of the scene cannot be rescaled (bounds "
-            f"{before.tolist()} became {after.tolist()}): rescale the scene file itself"
+            f"{before.tolist()} became {None if after is None else after.tolist()}): rescale "
+            "the scene file itself"
         )
     return scene
 
@@ -121,17 +124,18 @@ def sensor_pose(scene: mi.Scene, sensor_id: str | None = None) -> Pose:
     position = _vector(to_world @ mi.Point3f(0.0, 0.0, 0.0))
     forward = _unit(_vector(to_world @ mi.Vector3f(0.0, 0.0, 1.0)))
     up = _unit(_vector(to_world @ mi.Vector3f(0.0, 1.0, 0.0)))
-    look_at = tuple(float(p + f) for p, f in zip(position, forward, strict=True))
+    look_at = (position[0] + forward[0], position[1] + forward[1], position[2] + forward[2])
     return Pose(position=position, look_at=look_at, up=up)
 
 
 def _vector(value) -> tuple[float, float, float]:
-    return tuple(float(dr.ravel(c)[0]) for c in (value.x, value.y, value.z))
+    x, y, z = (float(np.asarray(dr.ravel(c))[0]) for c in (value.x, value.y, value.z))
+    return x, y, z
 
 
 def _unit(v: tuple[float, float, float]) -> tuple[float, float, float]:
     norm = math.sqrt(sum(c * c for c in v))
-    return tuple(c / norm for c in v)
+    return v[0] / norm, v[1] / norm, v[2] / norm
 
 
 def check_scene(scene: mi.Scene, camera: FreeformCamera, *, require_emitter: bool) -> list[str]:

@@ -132,7 +132,7 @@ class PatchesFamily(SceneFamily):
         count = int(rng.integers(0, c.max_patches + 1))
         patches = []
         for _ in range(count):
-            w, h = rng.uniform(*c.patch_size, size=2)
+            w, h = rng.uniform(c.patch_size[0], c.patch_size[1], size=2)
             cx, cy = rng.uniform(0.0, 1.0, size=2)
             level = rng.uniform(*c.patch_radiance_w_m2_sr)
             cols_in = np.abs(xs - cx) <= w / 2

@@ -6,6 +6,7 @@ import importlib
 import os
 import tomllib
 from pathlib import Path
+from typing import Any
 
 from mincam_render.core.config import ConfigError, merge, parse
 from mincam_render.scenes.base import SceneFamily
@@ -64,5 +65,5 @@ def load_family(
             f'{path}: missing top-level key family = "<name>" ({", ".join(FAMILY_NAMES)})'
         )
     cls = family_class(family)
-    config = parse(cls.config_type, merge(table, overrides or {}), source=str(path))
+    config: Any = parse(cls.config_type, merge(table, overrides or {}), source=str(path))
     return cls(config, seed=seed, num_frames=num_frames)

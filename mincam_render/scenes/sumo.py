@@ -398,5 +398,5 @@ def simulate(
         speed_m_s=cat(rows_speed, np.float32),
         vehicle_type=np.asarray(vtype, dtype=np.int32),
         direction=np.asarray(direction, dtype=np.int8),
-        sumo_id=sorted(index_of, key=index_of.get),
+        sumo_id=sorted(index_of, key=index_of.__getitem__),
     )

@@ -563,7 +563,8 @@ def vehicle_vertices(
         for side in (-1.0, 1.0):
             c = np.array([ax * L, side * (W / 2 - _WHEEL_WIDTH_M / 2 - 0.01), r])
             wheels.append(c + cv * np.array([r, _WHEEL_WIDTH_M, r]))
-    trim = np.concatenate([box(*lay["glass"], proud=_GLASS_PROUD_M), *wheels])
+    x0, x1, hw, z0, z1 = lay["glass"]
+    trim = np.concatenate([box(x0, x1, hw, z0, z1, proud=_GLASS_PROUD_M), *wheels])
     return body, trim
 
 

@@ -61,10 +61,10 @@ def render_plan(p: Probes, draft: Draft, seed_offset: int = 2) -> np.ndarray:
             max_depth=draft.max_depth,
             shared=draft.shared,
         )
-    return np.stack([_differential_probe(p, draft, i) for i in p.indices])
+    return np.stack([_differential_probe(p, draft, draft.background, i) for i in p.indices])
 
 
-def _differential_probe(p: Probes, draft: Draft, index: int) -> np.ndarray:
+def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -> np.ndarray:
     """``B + X - C`` of probe frame ``index`` (as a dataset would store it)."""
     from mincam_render.render.differential import (
         BackgroundSettings,
@@ -78,7 +78,7 @@ def _differential_probe(p: Probes, draft: Draft, index: int) -> np.ndarray:
         p.scene,
         draft.render_cam,
         index,
-        BackgroundSettings.from_dict(draft.background),
+        BackgroundSettings.from_dict(background),
         dataset_seed=p.request.seed,
         spp=draft.spp,
         max_depth=depth,

@@ -196,7 +196,7 @@ def _background_noise(p: Probes, camera, depth) -> float:
     A whole background is piloted: its components, rendered apart and summed,
     are no noisier (their weights' squares sum to at most 1 per light).
     """
-    renders = {0: [], 1: []}
+    renders: dict[int, list[np.ndarray]] = {0: [], 1: []}
     for i in p.indices:
         p.family.set_background(p.scene, i, p.request.background_interval_s)
         for s in renders:

@@ -185,7 +185,7 @@ def decide_spp(
         measured.update({"pilot_spp": PILOT_SPP, "pilot_error_rms": e_pilot})
     if request.spp is not None:
         decision = {"value": request.spp, "source": "flag", "reason": "set by --spp"}
-    elif not auto:
+    elif e_pilot is None:  # not auto
         reason = f"full fidelity default {FULL_SPP} spp"
         decision = {"value": FULL_SPP, "source": "full", "reason": reason}
     else:

@@ -64,7 +64,7 @@ def wall_with_holes(room: RoomConfig, wall: Wall, holes) -> tuple[np.ndarray, np
                     origin + s * t + zz * np.array([0, 0, 1.0])
                     for s, zz in ((s0, z), (s1, z), (s1, z0), (s0, z0))
                 ]
-                quads.append(quad(*p, n))
+                quads.append(quad(p[0], p[1], p[2], p[3], n))
             z = max(z, z1)
     return merge_meshes(quads)
 

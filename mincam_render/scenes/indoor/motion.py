@@ -80,7 +80,7 @@ class NavGrid:
         """Waypoints from ``a`` to ``b`` (x, y), around obstacles (A*, 8-connected, smoothed)."""
         a, b = np.asarray(a, float), np.asarray(b, float)
         s, g = self.nearest_free(a), self.nearest_free(b)
-        came = {s: None}
+        came: dict[tuple[int, int], tuple[int, int] | None] = {s: None}
         cost = {s: 0.0}
         heap = [(0.0, s)]
         while heap:
@@ -100,10 +100,10 @@ class NavGrid:
                         came[nb] = cur
                         heapq.heappush(heap, (nc + math.hypot(nb[0] - g[0], nb[1] - g[1]), nb))
         cells = []
-        cur = g if g in came else s
-        while cur is not None:
-            cells.append(cur)
-            cur = came[cur]
+        at: tuple[int, int] | None = g if g in came else s
+        while at is not None:
+            cells.append(at)
+            at = came[at]
         pts = [self.point(c) for c in reversed(cells)]
         # string-pulling: keep a point only when the straight line would cross an obstacle
         smooth = [pts[0]]
@@ -272,6 +272,8 @@ class _PeopleSimulation:
 
     def arrive(self, probability: float) -> None:
         """With ``probability``, someone enters from the corridor into the first free slot."""
+        if self.entrance is None:  # no door: nobody enters
+            return
         if self.rng.random() < probability:
             free_slots = [k for k in range(len(self.agents)) if self.agents[k] is None]
             if free_slots:
@@ -378,6 +380,8 @@ class _PeopleSimulation:
 
     def move_door(self, t: float, dt: float) -> None:
         """One step of the door at time ``t`` (s): open while someone passes or it is propped."""
+        if self.door is None:
+            return
         door_cfg = self.door.config
         for ag in self.agents:
             if (

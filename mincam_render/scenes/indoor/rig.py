@@ -11,6 +11,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -203,7 +204,7 @@ class _SceneCache:
     """
 
     scene: object
-    params: object  # mi.SceneParameters
+    params: Any  # mi.SceneParameters
     applied: dict[str, object]
     people_vertices: np.ndarray  # (slots V, 3) float32, m
     people_albedo: np.ndarray  # (slots V,) float32
@@ -300,6 +301,8 @@ class IndoorRig:
     def window_rectangle(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The window opening ``(corner, edge_u, edge_v)`` (m, world), edge_u x edge_v outward."""
         w = self.window
+        if w is None:
+            raise ValueError("the room has no window")
         origin, t, inward = wall_frame(self.room, w.wall)
         corner = origin + (w.center_m - w.width_m / 2) * t + w.sill_height_m * np.array([0, 0, 1.0])
         edge_u, edge_v = w.width_m * t, w.height_m * np.array([0, 0, 1.0])
@@ -376,10 +379,10 @@ class IndoorRig:
             )
         if self.window is not None and "daylight" in todo:
             day = self.sky(state.daylight_time_s)
-            on = 1.0 if state.daylight else 0.0
-            params[SUN_IRRADIANCE_PARAM] = dr.opaque(mi.Float, on * day.sun_irradiance_w_m2)
+            sun_on = 1.0 if state.daylight else 0.0
+            params[SUN_IRRADIANCE_PARAM] = dr.opaque(mi.Float, sun_on * day.sun_irradiance_w_m2)
             params[SUN_TO_WORLD_PARAM] = ms.directional_light_to_world(-day.sun_direction)
-            sky = np.maximum(on * day.sky_radiance_w_m2_sr, 1e-6)
+            sky = np.maximum(sun_on * day.sky_radiance_w_m2_sr, 1e-6)
             params[SKY_DATA_PARAM] = (
                 ms.portal_sky_data(sky)
                 if self.sky_sampling is SkySampling.PORTAL
