@@ -63,6 +63,12 @@ def test_ruff_finds_nothing():
     assert run.returncode == 0, run.stdout[-3000:]
 
 
+def test_mypy_finds_nothing():
+    """The package type-checks (settings in pyproject.toml's [tool.mypy])."""
+    run = subprocess.run([_tool("mypy")], cwd=REPO, capture_output=True, text=True, check=False)
+    assert run.returncode == 0, run.stdout[-3000:]
+
+
 def test_the_command_line_starts_without_torch_or_mitsuba():
     """Regression: every command, --help included, took ~7 s importing torch first."""
     code = (
