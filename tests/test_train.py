@@ -392,3 +392,52 @@ def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):
     steps = [json.loads(line)["step"] for line in (tmp_path / "history.jsonl").open()]
     assert steps == [10, 20, 30, 40] == [h["step"] for h in res.history]
     assert 9.0 not in [json.loads(line)["val_loss"] for line in (tmp_path / "history.jsonl").open()]
+
+
+def _trained_state(data: tr.TrainingData, step, steps: int = 4):
+    """Model and optimiser state after ``steps`` of ``step(model, source, opt, g)``."""
+    model = tr.build_mincam(data, data.camera.num_detectors)
+    opt = tr._optimizer(model, tr.TrainConfig())
+    src, g = tr.DatasetBatches(data, 8), torch.Generator().manual_seed(0)
+    for _ in range(steps):
+        step(model, src, opt, g)
+    return model.state_dict(), opt.state_dict()
+
+
+def _reference_step(model, src, opt, g):
+    """train_step with torch's own ``opt.step()`` and a fresh tensor per batch."""
+    idx = torch.randint(0, len(src.data), (src.batch_size,), generator=g)
+    batch = src.data.sample(idx)
+    gain = torch.empty(len(batch)).uniform_(0.8, 1.2, generator=g)
+    out = model(**batch.inputs(), gain=gain, generator=g)
+    loss, _ = tr.task_loss(model.head, out, batch.labels)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    model.project_logits_()
+
+
+@pytest.mark.parametrize("history", [1, 3])
+def test_train_step_equals_torch_adam_and_fresh_batches_bit_for_bit(history):
+    data = replace(linear_task(40, k=2), history=history)
+    got_model, got_opt = _trained_state(
+        data, lambda m, s, o, g: tr.train_step(m, s, o, g, (0.8, 1.2))
+    )
+    ref_model, ref_opt = _trained_state(data, _reference_step)
+    for k, v in ref_model.items():
+        assert torch.equal(got_model[k], v), k
+    for p, st in ref_opt["state"].items():
+        for k, v in st.items():
+            assert torch.equal(got_opt["state"][p][k], v), (p, k)
+
+
+def test_gather_buffer_is_reused_and_a_stale_batch_fails_loudly():
+    data = linear_task(40, k=2)
+    model = tr.build_mincam(data, 2)
+    src, g = tr.DatasetBatches(data, 8), torch.Generator().manual_seed(0)
+    first = src.next(g)
+    loss = model(**first.inputs(), noise=False)["count"].sum()
+    second = src.next(g)  # overwrites the first batch's frames
+    assert second.transport.data_ptr() == first.transport.data_ptr()
+    with pytest.raises(RuntimeError, match="modified by an inplace operation"):
+        loss.backward()

@@ -54,6 +54,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch.optim.adam import adam
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.models import BaselineCamera, CountLoss, Head, MincamCamera, task_loss
@@ -63,6 +64,10 @@ from mincam_render.optics.camera import FreeformCamera
 log = logging.getLogger(__name__)
 
 Model = MincamCamera | BaselineCamera
+
+#: Float16 transport is widened once to float32 in RAM up to this size (bytes of
+#: the float32 copy, 2 GiB): 10,000 frames of 8 detectors at 64x64 take 1.3 GB.
+WIDEN_MAX_BYTES = 2 * 2**30
 
 
 # ---------------------------------------------------------------------------------------
@@ -123,12 +128,18 @@ class TrainingData:
         return {k: v for k, v in self.__dict__.items() if k != "_torch"}
 
     def _tensors(self) -> tuple[torch.Tensor, torch.Tensor | None, dict[str, torch.Tensor]]:
-        """Torch views (no copy of float32/float16 arrays): stored frames, scales, labels."""
+        """Torch tensors of the stored frames, scales and labels, made once.
+
+        Float32 frames are a view (no copy). Float16 frames are widened once to a
+        float32 copy in RAM when it takes at most :data:`WIDEN_MAX_BYTES`: every
+        batch is then one float32 gather, not a gather and a conversion pass.
+        Larger float16 data stays a view of its memory map.
+        """
         cached = self.__dict__.get("_torch")
         if cached is None:
             t = np.asarray(self.transport)
-            if t.dtype not in (np.float16, np.float32):
-                t = t.astype(np.float32)
+            if t.dtype != np.float32 and (t.dtype != np.float16 or t.size * 4 <= WIDEN_MAX_BYTES):
+                t = t.astype(np.float32)  # exact: every float16 is a float32
             with warnings.catch_warnings():  # read-only memory maps: never written to
                 warnings.filterwarnings("ignore", "The given NumPy array is not writable")
                 frames = torch.from_numpy(np.ascontiguousarray(t))
@@ -314,12 +325,19 @@ class TrainingData:
         t = t.index_select(0, b.windows.reshape(-1))
         return t.reshape(*b.windows.shape, *t.shape[1:]), b.labels
 
-    def sample(self, index: torch.Tensor) -> Batch:
+    def sample(self, index: torch.Tensor, buffer: GatherBuffer | None = None) -> Batch:
         """Samples ``index`` (torch long ``[b]``) as a :class:`Batch`, without per-sample Python.
 
         Static data: the ``b`` frames (one gather). Temporal data: the sorted union
         of the frames of all windows and ``windows[b, history]`` indices into it,
         so every frame is gathered (and later measured) once per batch.
+
+        Args:
+            index: ``[b]`` first frame of each sample (torch long).
+            buffer: gather the frames into this reused float32 buffer (the
+                batch's transport is then valid until the buffer's next use);
+                None: a new tensor.
+
         """
         stored, scales, labels = self._tensors()
         last = index + (self.history - 1)
@@ -328,11 +346,44 @@ class TrainingData:
         if self.history > 1:
             frames = index[:, None] + torch.arange(self.history)
             index, windows = torch.unique(frames, sorted=True, return_inverse=True)
-        t = stored.index_select(0, index)
-        if t.dtype != torch.float32:
-            t = t.float()
+        t = _gather(stored, index, buffer)
         s = None if scales is None else scales.index_select(0, index)
         return Batch(t, windows, y, s)
+
+
+def _gather(stored: torch.Tensor, index: torch.Tensor, buffer: GatherBuffer | None) -> torch.Tensor:
+    """``stored[index]`` as float32 ``T[i, detector, row, col]``: one gather (torch)."""
+    if buffer is None:
+        t = stored.index_select(0, index)
+        return t if t.dtype == torch.float32 else t.float()
+    out = buffer.rows(len(index), stored.shape[1:], stored.device)
+    if stored.dtype == torch.float32:
+        return torch.index_select(stored, 0, index, out=out)
+    return out.copy_(stored.index_select(0, index))
+
+
+class GatherBuffer:
+    """A float32 buffer ``T[row, detector, row, col]`` that batches are gathered into, reused.
+
+    A new batch-sized tensor at every step costs more than filling it once it
+    reaches glibc's largest mmap threshold (32 MiB: 8 detectors, 64x64 masks,
+    batch 256): the kernel hands out fresh zeroed pages, one fault per 4 KiB,
+    and takes them back when the batch is freed (measured: 31 ms of a 31 ms step
+    against 8 ms). Reusing one buffer keeps the
+    pages. A batch gathered into it is overwritten by the next gather; a graph
+    that still holds the old one fails loudly in backward (autograd's version
+    counter), never silently.
+    """
+
+    def __init__(self) -> None:
+        self._t: torch.Tensor | None = None
+
+    def rows(self, n: int, shape: torch.Size, device: torch.device) -> torch.Tensor:
+        """The first ``n`` rows, ``[n, *shape]`` float32, contiguous (grown when needed)."""
+        t = self._t
+        if t is None or len(t) < n or t.shape[1:] != shape or t.device != device:
+            t = self._t = torch.empty((n, *shape), dtype=torch.float32, device=device)
+        return t if len(t) == n else t[:n]
 
 
 @dataclass(frozen=True)
@@ -541,11 +592,16 @@ class DatasetBatches:
     def __init__(self, data: TrainingData, batch_size: int) -> None:
         self.data = data
         self.batch_size = batch_size
+        self._buffer = GatherBuffer()
 
     def next(self, generator: torch.Generator) -> Batch:
-        """One :class:`Batch` (torch): one random draw and one gather, no per-sample Python."""
+        """One :class:`Batch` (torch): one random draw and one gather, no per-sample Python.
+
+        The batch's transport lives in a buffer reused by the next call (see
+        :class:`GatherBuffer`): use a batch before drawing the next one.
+        """
         idx = torch.randint(0, len(self.data), (self.batch_size,), generator=generator)
-        return self.data.sample(idx)
+        return self.data.sample(idx, self._buffer)
 
     def state(self) -> dict[str, Any]:
         """Resumable state (none: batches depend only on the generator)."""
@@ -782,6 +838,47 @@ def _optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
         return torch.optim.Adam(groups)
 
 
+def _adam_step(opt: torch.optim.Optimizer) -> None:
+    """``opt.step()``; for a plain fused Adam, torch's functional ``adam`` without the wrapper.
+
+    ``Optimizer.step`` spends ~0.1 ms of Python per call (hooks, profiler
+    record, lazy state checks) around one fused kernel per parameter group;
+    calling :func:`torch.optim.adam.adam` (public, functional) with the optimiser's own state
+    tensors runs the same kernel on the same tensors (bit-identical, state
+    and ``state_dict`` unchanged). Anything else -- other optimisers or
+    options, a parameter without a gradient or without state yet (the first
+    step) -- goes through ``opt.step()``. Step hooks are not called.
+    """
+    groups = opt.param_groups
+    if type(opt) is not torch.optim.Adam or not all(map(_plain_fused, groups)):
+        opt.step()
+        return
+    state = opt.state
+    grads = [[p.grad for p in g["params"]] for g in groups]
+    if any(p not in state for g in groups for p in g["params"]) or any(
+        x is None for gs in grads for x in gs
+    ):
+        opt.step()
+        return
+    with torch.no_grad():
+        for g, gs in zip(groups, grads, strict=True):
+            st = [state[p] for p in g["params"]]
+            beta1, beta2 = g["betas"]
+            adam(
+                g["params"], gs, [s["exp_avg"] for s in st], [s["exp_avg_sq"] for s in st], [],
+                [s["step"] for s in st], fused=True, amsgrad=False, beta1=beta1, beta2=beta2,
+                lr=g["lr"], weight_decay=0.0, eps=g["eps"], maximize=False,
+            )  # fmt: skip
+
+
+def _plain_fused(group: Mapping[str, Any]) -> bool:
+    """A fused Adam group without amsgrad, weight decay, maximize, capture or differentiation."""
+    return bool(group["fused"]) and not (
+        group["amsgrad"] or group["weight_decay"] or group["maximize"]
+        or group["capturable"] or group["differentiable"] or group["decoupled_weight_decay"]
+    )  # fmt: skip
+
+
 def train_step(
     model: Model,
     source: DatasetBatches | RenderedBatches,
@@ -803,7 +900,7 @@ def train_step(
         for p in group["params"]:
             p.grad = None
     loss.backward()
-    opt.step()
+    _adam_step(opt)
     if isinstance(model, MincamCamera):
         model.project_logits_()
     return loss.detach()
