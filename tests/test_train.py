@@ -441,3 +441,24 @@ def test_gather_buffer_is_reused_and_a_stale_batch_fails_loudly():
     assert second.transport.data_ptr() == first.transport.data_ptr()
     with pytest.raises(RuntimeError, match="modified by an inplace operation"):
         loss.backward()
+
+
+def test_temporal_batch_over_all_frames_equals_the_gathered_union():
+    data = replace(linear_task(40, k=2), history=5)
+    model = tr.build_mincam(data, 2)
+    idx = torch.tensor([0, 7, 3, 30, 7])
+    grads = []
+    for batch in (data.sample(idx), data.sample_all_frames(idx)):
+        g = torch.Generator().manual_seed(0)
+        v = model.measure(**batch.inputs(), gain=torch.full((5,), 1.1), generator=g)
+        (logits,) = torch.autograd.grad((v * v).sum(), [model.logits])
+        grads.append((v, logits))
+    assert len(data.sample_all_frames(idx).transport) == 40  # the stored frames, not a copy
+    torch.testing.assert_close(grads[1][0], grads[0][0], rtol=1e-6, atol=0)
+    torch.testing.assert_close(grads[1][1], grads[0][1], rtol=1e-5, atol=0)
+
+
+@pytest.mark.parametrize(("frames", "batch", "expected"), [(40, 8, True), (2000, 8, False)])
+def test_batches_use_all_frames_when_windows_cover_most_of_them(frames, batch, expected):
+    data = replace(linear_task(frames, k=1, res=2), history=5)
+    assert tr.DatasetBatches(data, batch)._all_frames is expected

@@ -26,9 +26,12 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
 The training step (:func:`train_step`) is plain torch when the transport is a
 torch tensor (every dataset on disk): one ``index_select`` of the batch's
 frames from the (memory-mapped, float16) stored transport with its per-frame
-scale applied in the same pass, the mask plane as one batched matrix product,
-the electronics as a handful of fused ops, fused Adam. Temporal samples measure
-every frame of the batch's union once (:meth:`TrainingData.sample`).
+scale applied to the power, the mask plane as one batched matrix product,
+the electronics as a handful of fused ops, fused Adam. Batches are gathered into
+one reused buffer (:class:`GatherBuffer`); float16 data that fits in RAM is
+widened to float32 once. Temporal samples measure every frame of the batch's
+union once (:meth:`TrainingData.sample`), or, when a batch's windows cover most
+frames, every stored frame in place (:meth:`TrainingData.sample_all_frames`).
 
 Evaluation applies the paper's post-processing in time order over a split:
 counts are rounded (and clipped at 0), states thresholded at 0.5, then every
@@ -350,6 +353,21 @@ class TrainingData:
         s = None if scales is None else scales.index_select(0, index)
         return Batch(t, windows, y, s)
 
+    def sample_all_frames(self, index: torch.Tensor) -> Batch:
+        """Temporal samples ``index`` over every stored frame: no union, no gather.
+
+        The batch's transport is the stored float32 frames themselves (a view)
+        and ``windows[b, history]`` index them directly, so the camera measures
+        each frame once, in place. Worth it when a batch's windows cover most
+        frames (:class:`DatasetBatches` decides); needs float32 storage.
+        """
+        stored, scales, labels = self._tensors()
+        if stored.dtype != torch.float32 or self.history == 1:
+            return self.sample(index)
+        y = {k: v.index_select(0, index + (self.history - 1)) for k, v in labels.items()}
+        windows = index[:, None] + torch.arange(self.history)
+        return Batch(stored, windows, y, scales)
+
 
 def _gather(stored: torch.Tensor, index: torch.Tensor, buffer: GatherBuffer | None) -> torch.Tensor:
     """``stored[index]`` as float32 ``T[i, detector, row, col]``: one gather (torch)."""
@@ -593,14 +611,19 @@ class DatasetBatches:
         self.data = data
         self.batch_size = batch_size
         self._buffer = GatherBuffer()
+        self._all_frames = _windows_cover_most_frames(data, batch_size)
 
     def next(self, generator: torch.Generator) -> Batch:
         """One :class:`Batch` (torch): one random draw and one gather, no per-sample Python.
 
         The batch's transport lives in a buffer reused by the next call (see
-        :class:`GatherBuffer`): use a batch before drawing the next one.
+        :class:`GatherBuffer`): use a batch before drawing the next one. When a
+        temporal batch's windows are expected to cover most frames, it is
+        measured over all stored frames instead (:meth:`TrainingData.sample_all_frames`).
         """
         idx = torch.randint(0, len(self.data), (self.batch_size,), generator=generator)
+        if self._all_frames:
+            return self.data.sample_all_frames(idx)
         return self.data.sample(idx, self._buffer)
 
     def state(self) -> dict[str, Any]:
@@ -609,6 +632,21 @@ class DatasetBatches:
 
     def load_state(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`state`."""
+
+
+def _windows_cover_most_frames(data: TrainingData, batch_size: int) -> bool:
+    """Whether ``batch_size`` random windows are expected to cover over half the stored frames.
+
+    Measuring all ``F`` stored frames in place reads them twice (the mask
+    product and its gradient); gathering the union of ``U`` frames first reads
+    and writes ``U`` and then reads it twice: in place wins when ``U > F / 2``.
+    A frame lies in ``history`` of the ``n`` windows, so one random window
+    misses it with probability ``1 - history / n``.
+    """
+    if data.history == 1:
+        return False
+    n = len(data)
+    return 1.0 - (1.0 - min(data.history, n) / n) ** batch_size > 0.5
 
 
 class RenderedBatches:
