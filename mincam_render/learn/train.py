@@ -343,7 +343,7 @@ class TrainingData:
 
         """
         stored, scales, labels = self._tensors()
-        last = index + (self.history - 1)
+        last = index if self.history == 1 else index + (self.history - 1)
         y = {k: v.index_select(0, last) for k, v in labels.items()}
         windows = None
         if self.history > 1:
