@@ -5,7 +5,9 @@ Side by side, in the same run, on the same data, one row per configuration:
 * ours: :func:`mincam_render.learn.train.train_step` -- the exact step ``train_model``
   runs (batch from :class:`~mincam_render.learn.train.DatasetBatches`, random gain,
   :class:`~mincam_render.learn.models.MincamCamera` with sensor noise, the task loss,
-  backward, Adam, the logit projection);
+  backward, Adam, the logit projection; batches gathered into a reused buffer,
+  temporal batches whose windows cover most frames measured over the stored
+  frames in place);
 * peer: a plain-torch step written here for speed, independently of the
   package's camera: the transport held in its own ``(K, F, N)`` float32 layout,
   the batch gathered with one ``index_select``, the masks applied by ``bmm``,
