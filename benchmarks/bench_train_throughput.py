@@ -5,7 +5,9 @@ Side by side, in the same run, on the same data, one row per configuration:
 * ours: :func:`mincam_render.learn.train.train_step` -- the exact step ``train_model``
   runs (batch from :class:`~mincam_render.learn.train.DatasetBatches`, random gain,
   :class:`~mincam_render.learn.models.MincamCamera` with sensor noise, the task loss,
-  backward, Adam, the logit projection);
+  backward, Adam, the logit projection; batches gathered into a reused buffer,
+  temporal batches whose windows cover most frames measured over the stored
+  frames in place);
 * peer: a plain-torch step written here for speed, independently of the
   package's camera: the transport held in its own ``(K, F, N)`` float32 layout,
   the batch gathered with one ``index_select``, the masks applied by ``bmm``,
@@ -15,9 +17,10 @@ Side by side, in the same run, on the same data, one row per configuration:
   the same shared-frame trick (each frame of the batch's union measured once).
 
 Both are checked to give the same noiseless measurements before timing; each
-is warmed up, then the two are timed in alternation over several repeats
-(median, all repeats kept). Rows: K in {1, 8, 16} x batch in {64, 256} x mask
-32^2, 64^2 on random frames in memory; one row training from an on-disk
+is warmed up, then the two are timed over several repeats (median, all
+repeats kept), alternating every ``steps / CHUNKS`` steps within a repeat.
+Rows: K in {1, 8, 16} x batch in {64, 256} x mask 32^2, 64^2 on random
+frames in memory; one row training from an on-disk
 workspace dataset (float16, memory-mapped); one temporal traffic row (history
 30, forward differences). Also the evaluation share of training wall time at
 the default settings. Writes ``benchmarks/results/train_throughput.json``
@@ -54,6 +57,11 @@ from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.models import task_loss, temporal_features  # noqa: E402
 from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera  # noqa: E402
 from mincam_render.optics.sensor import ELEMENTARY_CHARGE_C  # noqa: E402
+
+#: Each repeat alternates ours and the peer this many times (``steps / CHUNKS``
+#: steps each): with whole repeats alternated (200 steps, 0.25 s at 1 px), the
+#: other core's bursts of load moved single rows by +-25 % from repeat to repeat.
+CHUNKS = 10
 
 #: Floors of issue 15.
 MIN_RATIO = 1.0
@@ -166,11 +174,16 @@ def measure_row(data, pixels, batch, steps, repeats, config) -> dict:
     run_ours(10)  # warm-up: allocator, first-touch of the memory map
     run_peer(10)
     r_ours, r_peer = [], []
-    for _ in range(repeats):  # alternate, so a burst of load hits both
-        for run, rates in ((run_ours, r_ours), (run_peer, r_peer)):
-            t0 = time.perf_counter()
-            run(steps)
-            rates.append(steps * batch / (time.perf_counter() - t0))
+    chunk = max(1, steps // CHUNKS)
+    for _ in range(repeats):
+        seconds = {run_ours: 0.0, run_peer: 0.0}
+        for _ in range(CHUNKS):  # interleaved finely, so a burst of load hits both
+            for run in seconds:
+                t0 = time.perf_counter()
+                run(chunk)
+                seconds[run] += time.perf_counter() - t0
+        r_ours.append(CHUNKS * chunk * batch / seconds[run_ours])
+        r_peer.append(CHUNKS * chunk * batch / seconds[run_peer])
     m_ours, m_peer = statistics.median(r_ours), statistics.median(r_peer)
     return {
         "pixels": pixels,
@@ -257,6 +270,7 @@ def main() -> None:
         "torch_threads": a.threads,
         "steps_per_repeat": a.steps,
         "repeats": a.repeats,
+        "alternations_per_repeat": CHUNKS,
         "rows": rows,
         "min_ratio_ours_over_peer": min_ratio,
         "on_disk_8px_32_batch64_samples_per_s": disk["ours_samples_per_s"]["median"],

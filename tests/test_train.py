@@ -392,3 +392,73 @@ def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):
     steps = [json.loads(line)["step"] for line in (tmp_path / "history.jsonl").open()]
     assert steps == [10, 20, 30, 40] == [h["step"] for h in res.history]
     assert 9.0 not in [json.loads(line)["val_loss"] for line in (tmp_path / "history.jsonl").open()]
+
+
+def _trained_state(data: tr.TrainingData, step, steps: int = 4):
+    """Model and optimiser state after ``steps`` of ``step(model, source, opt, g)``."""
+    model = tr.build_mincam(data, data.camera.num_detectors)
+    opt = tr._optimizer(model, tr.TrainConfig())
+    src, g = tr.DatasetBatches(data, 8), torch.Generator().manual_seed(0)
+    for _ in range(steps):
+        step(model, src, opt, g)
+    return model.state_dict(), opt.state_dict()
+
+
+def _reference_step(model, src, opt, g):
+    """train_step with torch's own ``opt.step()`` and a fresh tensor per batch."""
+    idx = torch.randint(0, len(src.data), (src.batch_size,), generator=g)
+    batch = src.data.sample(idx)
+    gain = torch.empty(len(batch)).uniform_(0.8, 1.2, generator=g)
+    out = model(**batch.inputs(), gain=gain, generator=g)
+    loss, _ = tr.task_loss(model.head, out, batch.labels)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    model.project_logits_()
+
+
+@pytest.mark.parametrize("history", [1, 3])
+def test_train_step_equals_torch_adam_and_fresh_batches_bit_for_bit(history):
+    data = replace(linear_task(40, k=2), history=history)
+    got_model, got_opt = _trained_state(
+        data, lambda m, s, o, g: tr.train_step(m, s, o, g, (0.8, 1.2))
+    )
+    ref_model, ref_opt = _trained_state(data, _reference_step)
+    for k, v in ref_model.items():
+        assert torch.equal(got_model[k], v), k
+    for p, st in ref_opt["state"].items():
+        for k, v in st.items():
+            assert torch.equal(got_opt["state"][p][k], v), (p, k)
+
+
+def test_gather_buffer_is_reused_and_a_stale_batch_fails_loudly():
+    data = linear_task(40, k=2)
+    model = tr.build_mincam(data, 2)
+    src, g = tr.DatasetBatches(data, 8), torch.Generator().manual_seed(0)
+    first = src.next(g)
+    loss = model(**first.inputs(), noise=False)["count"].sum()
+    second = src.next(g)  # overwrites the first batch's frames
+    assert second.transport.data_ptr() == first.transport.data_ptr()
+    with pytest.raises(RuntimeError, match="modified by an inplace operation"):
+        loss.backward()
+
+
+def test_temporal_batch_over_all_frames_equals_the_gathered_union():
+    data = replace(linear_task(40, k=2), history=5)
+    model = tr.build_mincam(data, 2)
+    idx = torch.tensor([0, 7, 3, 30, 7])
+    grads = []
+    for batch in (data.sample(idx), data.sample_all_frames(idx)):
+        g = torch.Generator().manual_seed(0)
+        v = model.measure(**batch.inputs(), gain=torch.full((5,), 1.1), generator=g)
+        (logits,) = torch.autograd.grad((v * v).sum(), [model.logits])
+        grads.append((v, logits))
+    assert len(data.sample_all_frames(idx).transport) == 40  # the stored frames, not a copy
+    torch.testing.assert_close(grads[1][0], grads[0][0], rtol=1e-6, atol=0)
+    torch.testing.assert_close(grads[1][1], grads[0][1], rtol=1e-5, atol=0)
+
+
+@pytest.mark.parametrize(("frames", "batch", "expected"), [(40, 8, True), (2000, 8, False)])
+def test_batches_use_all_frames_when_windows_cover_most_of_them(frames, batch, expected):
+    data = replace(linear_task(frames, k=1, res=2), history=5)
+    assert tr.DatasetBatches(data, batch)._all_frames is expected
