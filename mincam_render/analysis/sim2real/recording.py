@@ -73,9 +73,6 @@ class Recording:
         return bool(self.meta.get("surrogate", False))
 
 
-# ---- CSV ---------------------------------------------------------------------------------
-
-
 def _label_columns(specs) -> list[str]:
     cols = []
     for s in specs:
@@ -118,9 +115,6 @@ def _read_csv(path: Path) -> tuple[list[str], np.ndarray]:
     if not rows:
         raise Sim2RealError(f"{path}: no data rows")
     return header, np.asarray(rows, dtype=np.float64)
-
-
-# ---- reading -----------------------------------------------------------------------------
 
 
 def load_recording(path: str | Path) -> Recording:
@@ -283,9 +277,6 @@ def _read_injected(root: Path) -> dict | None:
         raise Sim2RealError(f"{path}: not valid JSON: {err}") from None
 
 
-# ---- checksums ---------------------------------------------------------------------------
-
-
 def _verify_checksums(root: Path, meta: dict) -> None:
     """Check the files listed in ``recording.json``'s ``sha256`` field (written by our tools).
 
@@ -322,9 +313,6 @@ def recording_checksums(root: str | Path) -> dict[str, str]:
 
     names = (RECORDING_NAME, MEASUREMENTS_NAME, LABELS_NAME, MASKS_NAME, INJECTED_NAME)
     return {n: sha256_file(Path(root) / n) for n in names if (Path(root) / n).is_file()}
-
-
-# ---- writing -----------------------------------------------------------------------------
 
 
 def write_recording(

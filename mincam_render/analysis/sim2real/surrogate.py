@@ -105,9 +105,6 @@ class SurrogatePerturbations:
         )
 
 
-# ---- masks and board as built ------------------------------------------------------------
-
-
 def print_masks(
     masks: np.ndarray,
     transmittance_range: tuple[float, float],
@@ -224,9 +221,6 @@ def _misplace_board(
     return real_cam, board
 
 
-# ---- electronics -------------------------------------------------------------------------
-
-
 def _measure(
     power: np.ndarray,
     power_design: np.ndarray,
@@ -275,9 +269,6 @@ def _saturate(volts: np.ndarray, e) -> np.ndarray:
     from mincam_render.optics.sensor import leaky_saturation
 
     return leaky_saturation(torch.from_numpy(volts), e.full_scale_v, e.saturation_slope).numpy()
-
-
-# ---- the recording -----------------------------------------------------------------------
 
 
 def make_surrogate(
