@@ -247,217 +247,289 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
         ConfigError: unknown family.
     """
     from mincam_render.render import backend
-    from mincam_render.render.precision import decode_transport, encode_transport
-    from mincam_render.render.transport import render_transport, scene_max_depth
-    from mincam_render.scenes import load_family
 
     cfg = config or FidelityBenchConfig()
     backend.use_variant()
-    family = load_family(family_name, seed=cfg.seed, num_frames=cfg.sequence_frames)
-    camera = family.camera()
-    if cfg.mask_resolution is not None:
-        camera = dataclasses.replace(
-            camera, mask_resolution=(cfg.mask_resolution, cfg.mask_resolution)
+    bench = _Bench.of(family_name, cfg)
+    reference = bench.measure_reference()
+    base_error = _bench_spp(bench)
+    _bench_knobs(bench)
+    auto = _bench_auto(bench, family_name) if cfg.include_auto else None
+    return _result(bench, reference, base_error, auto)
+
+
+@dataclasses.dataclass
+class _Bench:
+    """One family's benchmark: its scene and frames, the masks, the reference, the rows.
+
+    Transport images are numpy ``T[frame, detector, row, col]`` (W); measurements are
+    compared as ``P[frame, mask, detector]`` (:func:`measurements`).
+    """
+
+    cfg: FidelityBenchConfig
+    family: Any
+    camera: Any
+    scene: Any
+    frames: list[int]
+    scene_depth: int | None
+    masks_random: np.ndarray
+    masks_trained: np.ndarray
+    base_settings: dict[str, Any]
+    #: reference measurements of the random and trained-like masks (set by the reference)
+    p_ref: tuple[np.ndarray, np.ndarray] | None = None
+    rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
+
+    @classmethod
+    def of(cls, family_name: str, cfg: FidelityBenchConfig) -> _Bench:
+        """The family at its default camera (or ``cfg.mask_resolution``), bench frames, masks."""
+        from mincam_render.render.transport import scene_max_depth
+        from mincam_render.scenes import load_family
+
+        family = load_family(family_name, seed=cfg.seed, num_frames=cfg.sequence_frames)
+        camera = family.camera()
+        if cfg.mask_resolution is not None:
+            camera = dataclasses.replace(
+                camera, mask_resolution=(cfg.mask_resolution, cfg.mask_resolution)
+            )
+        scene = family.build_scene()
+        frames = np.linspace(0, family.num_frames - 1, cfg.num_frames)
+        shape = (camera.num_detectors, *camera.mask_resolution)
+        lo_hi = camera.transmittance_range
+        return cls(
+            cfg=cfg,
+            family=family,
+            camera=camera,
+            scene=scene,
+            frames=sorted({int(round(x)) for x in frames}),
+            scene_depth=scene_max_depth(scene),
+            masks_random=random_masks(cfg.num_masks, shape, lo_hi, cfg.seed),
+            masks_trained=smooth_masks(cfg.num_masks, shape, lo_hi, cfg.seed + 1),
+            base_settings={
+                "spp": cfg.base_spp,
+                "mask_res": camera.mask_resolution[0],
+                # full depth: each knob's effect is then measured alone, not on top of the
+                # scene integrator's truncation (which is a level of the max_depth knob)
+                "max_depth": REFERENCE_DEPTH,
+                "render": "per_detector",
+                "detector": "area",
+                "storage": "float32",
+            },
         )
-    scene = family.build_scene()
-    frames = sorted({int(round(x)) for x in np.linspace(0, family.num_frames - 1, cfg.num_frames)})
-    k = camera.num_detectors
-    rows, cols = camera.mask_resolution
-    lo_hi = camera.transmittance_range
-    scene_depth = scene_max_depth(scene)
 
     def render(
-        cam, *, spp, max_depth=None, shared=False, seed_offset=0, point=False, warm_up=False
-    ):
+        self, cam, *, spp, max_depth=None, shared=False, seed_offset=0, point=False, warm_up=False
+    ) -> np.ndarray:
+        """``T[frame, detector, row, col]`` (float32, W) of the bench frames through ``cam``.
+
+        Args:
+            cam: the camera rendered (its centre camera when ``shared``).
+            spp: samples per texel.
+            max_depth: path depth, None = the scene's integrator.
+            shared: replicate the one render to every detector of the bench's camera.
+            seed_offset: render seed stream.
+            point: ``cam`` has a point detector: rescale to the real diode's area.
+            warm_up: render one frame only (enough to compile the kernels).
+        """
+        from mincam_render.render.transport import render_transport
+
+        k = self.camera.num_detectors
         out = []
-        # the warm-up renders one frame: enough to compile the kernels
-        for i in frames[:1] if warm_up else frames:
-            family.set_frame(scene, i)
-            seed = (cfg.seed * 1_000_003 + i * 7919 + seed_offset * 104_729) % 2**63
-            t = render_transport(scene, cam, spp=spp, seed=seed, max_depth=max_depth)
+        for i in self.frames[:1] if warm_up else self.frames:
+            self.family.set_frame(self.scene, i)
+            seed = (self.cfg.seed * 1_000_003 + i * 7919 + seed_offset * 104_729) % 2**63
+            t = render_transport(self.scene, cam, spp=spp, seed=seed, max_depth=max_depth)
             if point:
                 # power scales with detector area: rescale to the real diode's
-                t = t * np.float32((camera.detector_size_m / POINT_DETECTOR_SIZE_M) ** 2)
+                t = t * np.float32((self.camera.detector_size_m / POINT_DETECTOR_SIZE_M) ** 2)
             out.append(np.repeat(t, k, axis=0) if shared else t)
         return np.stack(out)
 
-    centre_cam = camera.centre_camera()
-    point_cam = dataclasses.replace(camera, detector_size_m=POINT_DETECTOR_SIZE_M)
-    paper_cam = dataclasses.replace(centre_cam, detector_size_m=POINT_DETECTOR_SIZE_M)
+    def measure_reference(self) -> dict[str, Any]:
+        """Render the reference in two independent halves; its settings, time and own noise."""
+        half = self.cfg.reference_spp // 2
+        t0 = time.perf_counter()
+        ref_a = self.render(self.camera, spp=half, max_depth=REFERENCE_DEPTH, seed_offset=101)
+        ref_b = self.render(self.camera, spp=half, max_depth=REFERENCE_DEPTH, seed_offset=102)
+        ref_seconds = (time.perf_counter() - t0) / len(self.frames)
+        ref = 0.5 * (ref_a.astype(np.float64) + ref_b.astype(np.float64))
+        self.p_ref = (measurements(ref, self.masks_random), measurements(ref, self.masks_trained))
+        # halves differ by twice the variance of their mean
+        half_r = relative_rms(
+            measurements(ref_a, self.masks_random), measurements(ref_b, self.masks_random)
+        )
+        half_t = relative_rms(
+            measurements(ref_a, self.masks_trained), measurements(ref_b, self.masks_trained)
+        )
+        return {
+            "spp": self.cfg.reference_spp,
+            "max_depth": REFERENCE_DEPTH,
+            "render": "per_detector",
+            "detector": "area",
+            "storage": "float32",
+            "seconds": ref_seconds,
+            "reference_noise": max(half_r, half_t) / 2.0,
+        }
 
-    masks_random = random_masks(cfg.num_masks, (k, rows, cols), lo_hi, cfg.seed)
-    masks_trained = smooth_masks(cfg.num_masks, (k, rows, cols), lo_hi, cfg.seed + 1)
-
-    # ---- reference: two independent halves ------------------------------------------------
-    half = cfg.reference_spp // 2
-    t0 = time.perf_counter()
-    ref_a = render(camera, spp=half, max_depth=REFERENCE_DEPTH, seed_offset=101)
-    ref_b = render(camera, spp=half, max_depth=REFERENCE_DEPTH, seed_offset=102)
-    ref_seconds = (time.perf_counter() - t0) / len(frames)
-    ref = 0.5 * (ref_a.astype(np.float64) + ref_b.astype(np.float64))
-    p_ref_r = measurements(ref, masks_random)
-    p_ref_t = measurements(ref, masks_trained)
-
-    def errors(t: np.ndarray) -> dict[str, float]:
-        er = relative_rms(measurements(t, masks_random), p_ref_r)
-        et = relative_rms(measurements(t, masks_trained), p_ref_t)
+    def errors(self, t: np.ndarray) -> dict[str, float]:
+        """Relative RMS errors of ``T`` against the reference, per mask kind and the larger."""
+        p_ref_r, p_ref_t = self.p_ref
+        er = relative_rms(measurements(t, self.masks_random), p_ref_r)
+        et = relative_rms(measurements(t, self.masks_trained), p_ref_t)
         return {"error_random": er, "error_trained": et, "error": max(er, et)}
 
-    # halves differ by twice the variance of their mean
-    half_r = relative_rms(measurements(ref_a, masks_random), measurements(ref_b, masks_random))
-    half_t = relative_rms(measurements(ref_a, masks_trained), measurements(ref_b, masks_trained))
-    reference = {
-        "spp": cfg.reference_spp,
-        "max_depth": REFERENCE_DEPTH,
-        "render": "per_detector",
-        "detector": "area",
-        "storage": "float32",
-        "seconds": ref_seconds,
-        "reference_noise": max(half_r, half_t) / 2.0,
-    }
+    def setting(self, cam, *, spp=None, max_depth=None, shared=False, point=False, float16=False):
+        """A render of all bench frames under one setting; ``warm_up`` renders one frame.
 
-    rows_out: list[dict[str, Any]] = []
-    base_settings = {
-        "spp": cfg.base_spp,
-        "mask_res": rows,
-        # full depth: each knob's effect is then measured alone, not on top of the
-        # scene integrator's truncation (which is a level of the max_depth knob)
-        "max_depth": REFERENCE_DEPTH,
-        "render": "per_detector",
-        "detector": "area",
-        "storage": "float32",
-    }
+        ``spp`` and ``max_depth`` default (None) to the base setting's.
+        """
+        from mincam_render.render.precision import decode_transport, encode_transport
 
-    def add(knob: str, level: Any, fn, **changed) -> np.ndarray:
-        t, sec, spread = _median_time(fn, cfg.repeats)
-        e = errors(t)
-        settings = {**base_settings, **changed}
-        rows_out.append(
-            {
-                "family": family.name,
-                "knob": knob,
-                "level": level,
-                **e,
-                "seconds": sec / len(frames),
-                "seconds_spread": spread / len(frames),
-                "settings": settings,
-            }
-        )
-        log.info(
-            "fidelity bench %s %s=%s: error %.3g, %.3g s/frame",
-            family.name,
-            knob,
-            level,
-            e["error"],
-            sec / len(frames),
-        )
-        return t
-
-    base_depth = base_settings["max_depth"]
-
-    def setting(
-        cam, *, spp=cfg.base_spp, max_depth=base_depth, shared=False, point=False, float16=False
-    ):
-        """A render of all bench frames under one setting; ``warm_up`` renders one frame."""
+        spp = self.cfg.base_spp if spp is None else spp
+        max_depth = self.base_settings["max_depth"] if max_depth is None else max_depth
 
         def run(warm_up: bool = False) -> np.ndarray:
-            t = render(
+            t = self.render(
                 cam, spp=spp, max_depth=max_depth, shared=shared, point=point, warm_up=warm_up
             )
             return decode_transport(*encode_transport(t, "float16")) if float16 else t
 
         return run
 
+    def add(self, knob: str, level: Any, fn, **changed) -> np.ndarray:
+        """Time ``fn`` (a :meth:`setting`), add its row; returns its transport."""
+        t, sec, spread = _median_time(fn, self.cfg.repeats)
+        e = self.errors(t)
+        name, n = self.family.name, len(self.frames)
+        self.rows.append(
+            {
+                "family": name,
+                "knob": knob,
+                "level": level,
+                **e,
+                "seconds": sec / n,
+                "seconds_spread": spread / n,
+                "settings": {**self.base_settings, **changed},
+            }
+        )
+        log.info(
+            "fidelity bench %s %s=%s: error %.3g, %.3g s/frame",
+            name,
+            knob,
+            level,
+            e["error"],
+            sec / n,
+        )
+        return t
+
+
+def _bench_spp(bench: _Bench) -> float:
+    """Rows of the ``spp`` knob; returns the base setting's error."""
+    cfg = bench.cfg
     for spp in cfg.spp_levels:
-        t = add("spp", spp, setting(camera, spp=spp), spp=spp)
+        t = bench.add("spp", spp, bench.setting(bench.camera, spp=spp), spp=spp)
         if spp == cfg.base_spp:
             base_t = t
     if cfg.base_spp not in cfg.spp_levels:
-        base_t = setting(camera)()
-    base_error = errors(base_t)["error"]
+        base_t = bench.setting(bench.camera)()
+    return bench.errors(base_t)["error"]
 
+
+def _bench_knobs(bench: _Bench) -> None:
+    """Rows of the knobs mask_res, max_depth, render, detector, storage and paper."""
+    cfg, camera, scene_depth = bench.cfg, bench.camera, bench.scene_depth
+    rows, cols = camera.mask_resolution
     for res in cfg.mask_res_levels:
         if res >= rows or rows % res or cols % res or rows != cols:
             continue
         cam_lo = dataclasses.replace(camera, mask_resolution=(res, res))
-        add("mask_res", res, setting(cam_lo), mask_res=res)
+        bench.add("mask_res", res, bench.setting(cam_lo), mask_res=res)
+    base_depth = bench.base_settings["max_depth"]
     scene_levels = {scene_depth} if scene_depth and 0 < scene_depth < base_depth else set()
     for depth in sorted({*cfg.depth_levels, *scene_levels} - {base_depth}):
-        add("max_depth", depth, setting(camera, max_depth=depth), max_depth=depth)
-    add("render", "shared", setting(centre_cam, shared=True), render="shared")
-    add("detector", "point", setting(point_cam, point=True), detector="point")
-    add("storage", "float16", setting(camera, float16=True), storage="float16")
-    add(
+        bench.add("max_depth", depth, bench.setting(camera, max_depth=depth), max_depth=depth)
+    centre_cam = camera.centre_camera()
+    point_cam = dataclasses.replace(camera, detector_size_m=POINT_DETECTOR_SIZE_M)
+    paper_cam = dataclasses.replace(centre_cam, detector_size_m=POINT_DETECTOR_SIZE_M)
+    bench.add("render", "shared", bench.setting(centre_cam, shared=True), render="shared")
+    bench.add("detector", "point", bench.setting(point_cam, point=True), detector="point")
+    bench.add("storage", "float16", bench.setting(camera, float16=True), storage="float16")
+    bench.add(
         "paper",
         "centre pinhole",
-        setting(paper_cam, shared=True, point=True),
+        bench.setting(paper_cam, shared=True, point=True),
         render="shared",
         detector="point",
     )
 
-    auto = None
-    if cfg.include_auto:
-        from mincam_render.data.render_job import RenderRequest
-        from mincam_render.render.fidelity import decide_fidelity
 
-        # the knobs here are those of plain renders; differential rendering
-        # (backgrounds + frames) is measured by benchmarks/bench_render.py
-        request = RenderRequest(
-            family=family_name, num_frames=family.num_frames, seed=cfg.seed, differential=False
-        )
-        plan = decide_fidelity(family, camera, request)
-        settings = plan.settings()
-        auto = {"settings": settings, "decisions": plan.decisions}
-        # 0 = the scene's integrator
-        depth = settings["max_depth"] or (
-            scene_depth if scene_depth and scene_depth > 0 else base_depth
-        )
+def _bench_auto(bench: _Bench, family_name: str) -> dict[str, Any]:
+    """The row of the automatic fidelity decision; ``{"settings", "decisions"}``."""
+    from mincam_render.data.render_job import RenderRequest
+    from mincam_render.render.fidelity import decide_fidelity
 
-        auto_render = setting(
-            centre_cam if settings["shared_render"] else camera,
-            spp=settings["spp"],
-            max_depth=depth,
-            shared=settings["shared_render"],
-            float16=settings["dtype"] == "float16",
-        )
-        add(
-            "auto",
-            f"{settings['spp']} spp, depth {depth}, "
-            f"{'shared' if settings['shared_render'] else 'per-detector'}, {settings['dtype']}",
-            auto_render,
-            spp=settings["spp"],
-            max_depth=depth,
-            render="shared" if settings["shared_render"] else "per_detector",
-            storage=settings["dtype"],
-        )
+    # the knobs here are those of plain renders; differential rendering
+    # (backgrounds + frames) is measured by benchmarks/bench_render.py
+    request = RenderRequest(
+        family=family_name,
+        num_frames=bench.family.num_frames,
+        seed=bench.cfg.seed,
+        differential=False,
+    )
+    plan = decide_fidelity(bench.family, bench.camera, request)
+    settings = plan.settings()
+    # 0 = the scene's integrator
+    scene_depth = bench.scene_depth
+    depth = settings["max_depth"] or (
+        scene_depth if scene_depth and scene_depth > 0 else bench.base_settings["max_depth"]
+    )
+    shared = settings["shared_render"]
+    auto_render = bench.setting(
+        bench.camera.centre_camera() if shared else bench.camera,
+        spp=settings["spp"],
+        max_depth=depth,
+        shared=shared,
+        float16=settings["dtype"] == "float16",
+    )
+    bench.add(
+        "auto",
+        f"{settings['spp']} spp, depth {depth}, "
+        f"{'shared' if shared else 'per-detector'}, {settings['dtype']}",
+        auto_render,
+        spp=settings["spp"],
+        max_depth=depth,
+        render="shared" if shared else "per_detector",
+        storage=settings["dtype"],
+    )
+    return {"settings": settings, "decisions": plan.decisions}
 
+
+def _result(bench: _Bench, reference: dict, base_error: float, auto: dict | None) -> dict[str, Any]:
+    """The JSON-ready result: rows with their ``effect``, base, reference, statements, machine."""
+    from mincam_render.render import backend
+
+    rows_out, camera = bench.rows, bench.camera
     for r in rows_out:
         r["effect"] = math.sqrt(max(r["error"] ** 2 - base_error**2, 0.0))
     base_row = next(
-        (r for r in rows_out if r["knob"] == "spp" and r["level"] == cfg.base_spp), None
+        (r for r in rows_out if r["knob"] == "spp" and r["level"] == bench.cfg.base_spp), None
     )
     base_seconds = base_row["seconds"] if base_row else None
+    name = bench.family.name
     return {
-        "family": family.name,
-        "frames": frames,
+        "family": name,
+        "frames": bench.frames,
         "camera": {
-            "detectors": k,
-            "mask_resolution": [rows, cols],
+            "detectors": camera.num_detectors,
+            "mask_resolution": list(camera.mask_resolution),
             "detector_size_m": camera.detector_size_m,
         },
-        "config": dataclasses.asdict(cfg),
-        "scene_max_depth": scene_depth,
-        "base": {
-            **base_settings,
-            "error": base_error,
-            "seconds": base_row["seconds"] if base_row else None,
-        },
+        "config": dataclasses.asdict(bench.cfg),
+        "scene_max_depth": bench.scene_depth,
+        "base": {**bench.base_settings, "error": base_error, "seconds": base_seconds},
         "reference": reference,
         "rows": rows_out,
         "auto": auto,
-        "statements": fidelity_statements(
-            family.name, rows_out, base_error, base_seconds, reference
-        ),
+        "statements": fidelity_statements(name, rows_out, base_error, base_seconds, reference),
         "machine": {
             "platform": platform.platform(),
             "processor": platform.processor() or platform.machine(),

@@ -246,34 +246,9 @@ def export_masks(
         ValueError: wrong shape or non-finite values.
 
     """
-    import OpenEXR
-
-    m = np.asarray(transmittance, dtype=np.float64)
-    if m.ndim != 3:
-        raise ValueError(f"transmittance has shape {m.shape}: expected (pixel, row, col)")
-    if not np.all(np.isfinite(m)):
-        raise ValueError("transmittance contains NaN or inf")
-    layout_cam = camera
-    if m.shape[0] != camera.num_detectors:
-        from dataclasses import replace
-
-        from mincam_render.optics.camera import DetectorLayout
-
-        if m.shape[0] < camera.num_detectors:
-            layout = DetectorLayout(positions_m=camera.layout.positions_m[: m.shape[0]])
-        else:
-            # more pixels than rendered detectors (pixels reusing a detector's transport):
-            # lay them out on a 2-row grid with the mask size + 4 mm pitch
-            k = m.shape[0]
-            rows = 1 if k < 4 else 2
-            grid = DetectorLayout.grid(
-                rows=rows, cols=-(-k // rows), pitch_m=camera.mask_size_m + 4 * MM
-            )
-            layout = DetectorLayout(positions_m=grid.positions_m[:k])
-        layout_cam = replace(camera, layout=layout)
-    lo, hi = camera.transmittance_range
-    clipped = np.clip(m, lo, hi)
-    n_clipped = int(np.count_nonzero(clipped != m))
+    m = _checked_transmittance(transmittance)
+    layout_cam = _layout_camera(camera, m.shape[0])
+    clipped = np.clip(m, *camera.transmittance_range)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     # Every file is written atomically and masks.json, which marks a finished
@@ -284,6 +259,55 @@ def export_masks(
         p = out / f"mask_{k:02d}.png"
         _atomic_write(p, _png16(clipped[k]))
         paths["png"].append(p)
+    paths["exr"] = _write_exr(m, out / "masks.exr")
+    title = f"mincam_render masks: {task}" if task else "mincam_render masks"
+    paths["svg"] = out / "print_sheet.svg"
+    _atomic_write(paths["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
+    if pdf:
+        paths["pdf"] = print_sheet_pdf(clipped, layout_cam, out / "print_sheet.pdf", title=title)
+    sidecar = _sidecar(m, clipped, layout_cam, task=task, provenance=provenance, paths=paths)
+    paths["json"] = out / "masks.json"
+    _atomic_write(paths["json"], json.dumps(sidecar, indent=2, default=str).encode())
+    return paths
+
+
+def _checked_transmittance(transmittance: np.ndarray) -> np.ndarray:
+    """``M[pixel, row, col]`` as float64; raises ValueError for another shape or NaN/inf."""
+    m = np.asarray(transmittance, dtype=np.float64)
+    if m.ndim != 3:
+        raise ValueError(f"transmittance has shape {m.shape}: expected (pixel, row, col)")
+    if not np.all(np.isfinite(m)):
+        raise ValueError("transmittance contains NaN or inf")
+    return m
+
+
+def _layout_camera(camera: FreeformCamera, num_masks: int) -> FreeformCamera:
+    """The camera with one board position per mask.
+
+    With fewer masks than detectors, the first positions; with more (pixels reusing a
+    detector's transport), a 1-row (fewer than 4) or 2-row grid at the mask size + 4 mm pitch.
+    """
+    if num_masks == camera.num_detectors:
+        return camera
+    from dataclasses import replace
+
+    from mincam_render.optics.camera import DetectorLayout
+
+    if num_masks < camera.num_detectors:
+        layout = DetectorLayout(positions_m=camera.layout.positions_m[:num_masks])
+    else:
+        rows = 1 if num_masks < 4 else 2
+        grid = DetectorLayout.grid(
+            rows=rows, cols=-(-num_masks // rows), pitch_m=camera.mask_size_m + 4 * MM
+        )
+        layout = DetectorLayout(positions_m=grid.positions_m[:num_masks])
+    return replace(camera, layout=layout)
+
+
+def _write_exr(m: np.ndarray, path: Path) -> Path:
+    """``M[pixel, row, col]`` as float32 channels ``maskKKKK`` of an EXR at ``path`` (atomic)."""
+    import OpenEXR
+
     channels = {
         f"mask{k:04d}": np.ascontiguousarray(m[k].astype(np.float32)) for k in range(m.shape[0])
     }
@@ -292,20 +316,28 @@ def export_masks(
         "type": OpenEXR.scanlineimage,
         "mincam_units": "transmittance (0-1), unclipped",
     }
-    paths["exr"] = out / "masks.exr"
-    tmp_exr = out / f".masks.exr.{os.getpid()}.tmp.exr"
+    tmp_exr = path.parent / f".{path.name}.{os.getpid()}.tmp.exr"
     try:
         OpenEXR.File(header, channels).write(str(tmp_exr))
-        _atomic_write(paths["exr"], tmp_exr.read_bytes())
+        _atomic_write(path, tmp_exr.read_bytes())
     finally:
         tmp_exr.unlink(missing_ok=True)
-    title = f"mincam_render masks: {task}" if task else "mincam_render masks"
-    paths["svg"] = out / "print_sheet.svg"
-    _atomic_write(paths["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
-    if pdf:
-        paths["pdf"] = print_sheet_pdf(clipped, layout_cam, out / "print_sheet.pdf", title=title)
+    return path
+
+
+def _sidecar(
+    m: np.ndarray,
+    clipped: np.ndarray,
+    layout_cam: FreeformCamera,
+    *,
+    task: str,
+    provenance: Mapping[str, Any] | None,
+    paths: dict[str, Any],
+) -> dict[str, Any]:
+    """``masks.json``'s content: geometry (SI units, sheet in mm), range, files, provenance."""
+    lo, hi = layout_cam.transmittance_range
     w, h, corners = sheet_layout(layout_cam)
-    sidecar = {
+    return {
         "task": task,
         "masks": m.shape[0],
         "mask_resolution": list(m.shape[1:]),
@@ -318,7 +350,7 @@ def export_masks(
         "orientation": "row 0 = up side of the view, col 0 = left, seen from the detector "
         "looking out (mirror left-right when viewed from the scene side)",
         "printable_transmittance_range": [lo, hi],
-        "texels_clipped_to_printable_range": n_clipped,
+        "texels_clipped_to_printable_range": int(np.count_nonzero(clipped != m)),
         "transmittance_min_max": [float(m.min()), float(m.max())],
         "sheet_size_mm": [w, h],
         "mask_corners_on_sheet_mm": corners.tolist(),
@@ -328,9 +360,6 @@ def export_masks(
             "png": [p.name for p in paths["png"]],
             "exr": "masks.exr",
             "svg": "print_sheet.svg",
-            "pdf": "print_sheet.pdf" if pdf else None,
+            "pdf": "print_sheet.pdf" if "pdf" in paths else None,
         },
     }
-    paths["json"] = out / "masks.json"
-    _atomic_write(paths["json"], json.dumps(sidecar, indent=2, default=str).encode())
-    return paths

@@ -1,0 +1,52 @@
+"""The scene twin of a recording rendered through a camera: noiseless simulated voltages.
+
+Arrays are numpy float64; powers in watts, voltages in volts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _frame_seed(seed: int, index: int, stream: int) -> int:
+    return (seed * 1_000_003 + index * 7919 + stream * 104_729) % 2**63
+
+
+def simulate_volts(
+    family,
+    camera,
+    frame_index: np.ndarray,
+    masks: np.ndarray,
+    pixels: np.ndarray,
+    *,
+    spp: int,
+    seed: int,
+    stream: int = 0,
+    progress: str | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Noiseless simulated voltages ``V[N, P]`` and powers ``P[N, P]`` (W) of a recording.
+
+    Renders the family at each frame index with ``camera`` (one transport per
+    distinct frame), applies ``masks[P, row, col]`` to detectors ``pixels``, and
+    the electronics without noise (leaky saturation kept). ``progress``: the
+    label of a progress bar over the frames, or None for none.
+    """
+    import torch
+    from tqdm import tqdm
+
+    from mincam_render.optics.sensor import detector_voltage
+    from mincam_render.render.transport import render_transport
+
+    scene = family.build_scene()
+    cache: dict[int, np.ndarray] = {}
+    power = np.zeros((len(frame_index), len(pixels)))
+    frames = tqdm(frame_index, desc=progress, unit="frame", disable=progress is None)
+    for n, i in enumerate(frames):
+        i = int(i)
+        if i not in cache:
+            family.set_frame(scene, i)
+            t = render_transport(scene, camera, spp=spp, seed=_frame_seed(seed, i, stream))
+            cache[i] = np.einsum("prc,prc->p", t[pixels].astype(np.float64), masks)
+        power[n] = cache[i]
+    volts = detector_voltage(torch.from_numpy(power), camera.electronics, noise=False).numpy()
+    return volts, power
