@@ -372,6 +372,8 @@ class _Bench:
 
     def errors(self, t: np.ndarray) -> dict[str, float]:
         """Relative RMS errors of ``T`` against the reference, per mask kind and the larger."""
+        if self.p_ref is None:
+            raise RuntimeError("render the reference first")
         p_ref_r, p_ref_t = self.p_ref
         er = relative_rms(measurements(t, self.masks_random), p_ref_r)
         et = relative_rms(measurements(t, self.masks_trained), p_ref_t)
@@ -598,7 +600,7 @@ def fidelity_statements(
 
 def pareto_front(rows: list[dict]) -> list[dict]:
     """Rows not dominated in (seconds, error): nothing else is both faster and more accurate."""
-    front = []
+    front: list[dict] = []
     for r in sorted(rows, key=lambda r: (r["seconds"], r["error"])):
         if not front or r["error"] < front[-1]["error"]:
             front.append(r)

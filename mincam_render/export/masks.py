@@ -150,7 +150,7 @@ def _texel_rectangles(mask: np.ndarray, x_mm: float, y_mm: float, side_mm: float
     )
     grey = np.clip(mask.ravel(), 0.0, 1.0)
     return PolyCollection(
-        squares,
+        list(squares),
         facecolors=np.stack([grey, grey, grey], axis=1),
         edgecolors="none",
         linewidths=0,

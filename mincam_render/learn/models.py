@@ -44,6 +44,7 @@ its own gain and noise, exactly as if its frames had been stacked.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import cast
 
 import numpy as np
 import torch
@@ -174,7 +175,7 @@ class Head(nn.Module):
     @property
     def in_features(self) -> int:
         """Number of inputs."""
-        return self.body[0].in_features
+        return cast(nn.Linear, self.body[0]).in_features
 
     def count_loss(self, name: str) -> CountLoss:
         """How label ``name`` is learned if it is a COUNT label."""
@@ -359,6 +360,8 @@ class MincamCamera(CameraModel):
 
     """
 
+    detectors: torch.Tensor  # buffer: [pixel] detector index of each pixel
+
     def __init__(
         self,
         camera: FreeformCamera,
@@ -477,6 +480,8 @@ class BaselineCamera(CameraModel):
         read_noise_dn: Gaussian read noise (DN).
 
     """
+
+    exposure_w: torch.Tensor  # buffer: scalar power (W) that reads full scale
 
     def __init__(
         self,

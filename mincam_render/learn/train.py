@@ -42,6 +42,7 @@ unless a docstring says torch.
 
 from __future__ import annotations
 
+import functools
 import io
 import json
 import logging
@@ -231,7 +232,8 @@ class TrainingData:
 
         cam = camera or family.camera()
         scene = family.build_scene()
-        ts, labs = [], {s.name: [] for s in family.labels}
+        ts: list[np.ndarray] = []
+        labs: dict[str, list] = {s.name: [] for s in family.labels}
         for i in tqdm(list(frames), desc=f"render {family.name}", disable=not progress):
             lab = family.set_frame(scene, int(i))
             ts.append(render_transport(scene, cam, spp=spp, seed=seed * 1_000_003 + int(i)))
@@ -317,8 +319,7 @@ class TrainingData:
         Every window's frames stacked (copies shared frames); training and
         evaluation use :meth:`sample`, which does not.
         """
-        index = torch.as_tensor(np.asarray(index, dtype=np.int64))
-        b = self.sample(index)
+        b = self.sample(torch.as_tensor(np.asarray(index, dtype=np.int64)))
         t = b.transport
         if b.frame_scales is not None:
             t = t * b.frame_scales.reshape(-1, 1, 1, 1)
@@ -421,7 +422,7 @@ class Batch:
     labels: dict[str, torch.Tensor]
     frame_scales: torch.Tensor | None = None
 
-    def inputs(self) -> dict[str, torch.Tensor | None]:
+    def inputs(self) -> dict[str, Any]:
         """Keyword arguments of a camera's ``forward`` / ``measure`` for this batch."""
         return {
             "transport": self.transport,
@@ -674,7 +675,7 @@ class RenderedBatches:
         self.seed = seed
         self.next_frame = start_frame
         self.history = 30 if family.needs_history else 1
-        self._scene = None
+        self._scene: Any = None
 
     def next(self, generator: torch.Generator) -> Batch:
         """Render one :class:`Batch` (``T[b, history, K, R, C]``, torch)."""
@@ -688,7 +689,8 @@ class RenderedBatches:
                 f"on-the-fly training ran out of frames: the family has {self.family.num_frames}; "
                 "create it with more num_frames"
             )
-        ts, labs = [], {s.name: [] for s in self.family.labels}
+        ts: list[np.ndarray] = []
+        labs: dict[str, list] = {s.name: [] for s in self.family.labels}
         for b in range(self.batch_size):
             for h in range(self.history):
                 i = self.next_frame + b * self.history + h
@@ -1054,8 +1056,8 @@ def train_model(
         best_state, history, snaps = ck["best_state"], ck["history"], ck["snapshots"]
         elapsed, stopped_early = ck["elapsed"], ck["stopped_early"]
         log.info("resumed %s at step %d (best val loss %.4g)", ckpt_path, step, best_loss)
-    elif _snapshot(model) is not None:
-        snaps.append((0, _snapshot(model)))
+    elif (first := _snapshot(model)) is not None:
+        snaps.append((0, first))
     writer = None
     if out is not None:
         from torch.utils.tensorboard import SummaryWriter
@@ -1134,7 +1136,7 @@ def train_model(
                 snap = _snapshot(model)
                 if snap is not None:
                     snaps.append((step, snap))
-                if writer is not None:
+                if writer is not None and out is not None:
                     val_metrics = metrics(pred, lab, val_loss, val)
                     wall = wall_start + elapsed
                     writer.add_scalar("loss/val", val_loss, step, walltime=wall)
@@ -1230,7 +1232,9 @@ def _val_loss_without(model: MincamCamera, data: TrainingData, pixel: int, limit
     for a in range(0, len(idx), 1024):
         b = data.sample(torch.from_numpy(idx[a : a + 1024]))
         x = temporal_features(model.measure(**b.inputs(), noise=True, generator=g))
-        x[:, cols] = model.head.input_norm.running_mean[cols]
+        means = model.head.input_norm.running_mean
+        assert means is not None  # BatchNorm1d tracks running statistics by default
+        x[:, cols] = means[cols]
         loss, _ = task_loss(model.head, model.head(x), b.labels)
         total += float(loss) * len(b)
     return total / max(1, len(idx))
@@ -1351,7 +1355,9 @@ def sweep(
         jobs.append(
             (
                 f"mincam_{k}px",
-                lambda k=k: build_mincam(train, k, count_loss=config.count_loss, seed=config.seed),
+                functools.partial(
+                    build_mincam, train, k, count_loss=config.count_loss, seed=config.seed
+                ),
             )
         )
     for g in baseline_grids:
@@ -1359,8 +1365,8 @@ def sweep(
         jobs.append(
             (
                 f"baseline_{grid[0]}x{grid[1]}",
-                lambda grid=grid: build_baseline(
-                    train, grid, count_loss=config.count_loss, seed=config.seed
+                functools.partial(
+                    build_baseline, train, grid, count_loss=config.count_loss, seed=config.seed
                 ),
             )
         )
@@ -1493,7 +1499,7 @@ def train_run(
                 count_loss=config.count_loss,
                 seed=config.seed,
             )
-        run = {
+        run: dict[str, Any] = {
             "model": describe_model(model),
             "camera": _camera_dict(train.camera),
             "data": {

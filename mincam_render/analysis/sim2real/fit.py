@@ -98,7 +98,7 @@ def compare_pixel(j: int, detector: int, s: np.ndarray, r: np.ndarray) -> dict[s
     calibrated = fit["gain"] * s + fit["offset_v"]
     resid = r - calibrated
     mean_sim = float(np.mean(s))
-    pix = {
+    pix: dict[str, Any] = {
         "pixel": j,
         "detector": detector,
         **fit,

@@ -143,7 +143,7 @@ def print_masks(
     # normalised coordinates span 2 over the mask: a shift of one texel is 2 / cols
     theta[:, 0, 2] = -torch.from_numpy(shift_texels[:, 1]) * 2.0 / cols
     theta[:, 1, 2] = -torch.from_numpy(shift_texels[:, 0]) * 2.0 / rows
-    grid = F.affine_grid(theta, (p, 1, rows, cols), align_corners=False)
+    grid = F.affine_grid(theta, [p, 1, rows, cols], align_corners=False)
     out = (
         F.grid_sample(t - lo, grid, mode="bilinear", padding_mode="zeros", align_corners=False) + lo
     )
