@@ -14,7 +14,7 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from mincam_render.data.render_job.shards import _worker_init, render_shard
 
@@ -90,7 +90,7 @@ def _run_processes(
         run_tasks(
             render_shard,
             todo,
-            lambda shard: (job, shard, backgrounds_of(shard)),
+            lambda shard: (job, shard, backgrounds_of(cast(int, shard))),
             lambda shard, result: finish(result, True),
             workers=workers,
             tasks_per_worker=shards_per_worker,

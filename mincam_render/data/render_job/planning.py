@@ -116,7 +116,7 @@ def _job_section(
     """The manifest's ``job``: all a worker needs to render a shard (and its backgrounds)."""
     from mincam_render.render.differential import background_parts
 
-    job = {
+    job: dict[str, Any] = {
         "request_sha256": hashlib.sha256(ds.json_bytes(identity)).hexdigest(),
         "family": {
             "name": family.name,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from mincam_render.data import dataset as ds
 
 
@@ -13,7 +15,7 @@ def _load_family(job: dict):
     fam = job["family"]
     if fam.get("rebuild_from_description", True):
         cls = family_class(fam["name"])
-        config = parse(cls.config_type, fam["description"], source="manifest")
+        config: Any = parse(cls.config_type, fam["description"], source="manifest")
         return cls(config, seed=job["seed"], num_frames=job["num_frames"])
     return load_family(
         fam["source"], seed=job["seed"], num_frames=job["num_frames"], overrides=fam["overrides"]
