@@ -125,6 +125,10 @@ def _render_frames(
             os._exit(1)  # the render was killed: do not linger as an orphan
         background_key, background = _frame_background(job, family, i, backgrounds)
         if background_key is not None:
+            # a slip kept so shard files stay byte-identical: the shard's
+            # request_sha256 gets this key, so a differential shard written but
+            # not yet in the manifest when a render is killed is re-rendered,
+            # and `repair` keeps none of a differential dataset's shards
             key = background_key
         t, lab, seed = _render_frame(job, family, scene, render_cam, i, background)
         if job["render"]["shared_render"]:
