@@ -395,10 +395,10 @@ def test_automatic_workers_follow_the_work_left(
     tmp_path, many_shards, variant, monkeypatch, break_even_s
 ):
     """workers=None: the first shard here, the rest in a pool only if it is long enough."""
-    import mincam_render.data.render_job as rj
+    from mincam_render.data.render_job import executors
 
     request, reference = many_shards
-    monkeypatch.setattr(rj, "POOL_BREAK_EVEN_S", break_even_s)
+    monkeypatch.setattr(executors, "POOL_BREAK_EVEN_S", break_even_s)
     render_dataset(request, tmp_path / "ds", workers=None)
     assert _files(tmp_path / "ds") == _files(reference)
     (chosen,) = [e["workers"] for e in _log(tmp_path / "ds") if e["event"] == "workers"]

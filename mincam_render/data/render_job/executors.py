@@ -1,0 +1,189 @@
+"""Where a job's shards render: in this process, a pool of worker processes, or Ray tasks.
+
+Worker processes (:mod:`mincam_render.data.worker_pool`: ``spawn``; each
+replaced after a few shards so Mitsuba/Dr.Jit memory cannot accumulate; each
+limited to ``cores / workers`` Dr.Jit threads; a worker that dies or stalls
+stops the render with an error naming its shard) and Ray tasks return arrays;
+the ``finish`` callback of the parent writes them.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, cast
+
+from mincam_render.data.render_job.shards import _worker_init, render_shard
+
+log = logging.getLogger(__name__)
+
+#: Shards a local worker process renders before it is replaced by a fresh one.
+DEFAULT_SHARDS_PER_WORKER = 4
+
+
+class RenderError(RuntimeError):
+    """A render could not run (worker crash, Ray unavailable)."""
+
+
+#: A worker pool pays off when the shards left would take this process longer than
+#: this (s). Measured on 2 cores (benchmarks/bench_workers.py, first run with 20 s):
+#: a pool renders about 1.6x faster but costs 1.6 s (patches) to 3.5 s (workspace) to
+#: start, so it wins beyond about 2.7x its start-up: 4 s (patches), 9 s (workspace).
+POOL_BREAK_EVEN_S = 10.0
+
+
+def _first_shard_then_choose(
+    job, todo, frames_of, finish, bar, backgrounds_of
+) -> tuple[int, list[int]]:
+    """Render ``todo[0]`` here, then ``(workers, rest)``: a pool only for long remainders.
+
+    The time per frame is taken from the shard's frames after its first (which
+    pays for compiling the kernels) when it has more than one.
+    """
+    stamps = []
+
+    def on_frame(n: int) -> None:
+        stamps.append(time.perf_counter())
+        if bar is not None:
+            bar.update(n)
+
+    first, rest = todo[0], list(todo[1:])
+    t0 = time.perf_counter()
+    finish(render_shard(job, first, backgrounds_of(first), on_frame), True)
+    per_frame = (
+        (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+        if len(stamps) > 1
+        else time.perf_counter() - t0
+    )
+    left_s = per_frame * sum(frames_of[i] for i in rest)
+    workers = (os.cpu_count() or 1) if left_s > POOL_BREAK_EVEN_S and len(rest) > 1 else 0
+    log.info(
+        "workers: %.3g s per frame, about %.0f s left in this process -> %s",
+        per_frame,
+        left_s,
+        f"{workers} worker processes" if workers else "this process",
+    )
+    return workers, rest
+
+
+def _threads_per_worker(workers: int) -> int:
+    cores = os.cpu_count() or 1
+    return max(1, cores // max(1, workers))
+
+
+def _run_processes(
+    job: dict,
+    todo: list[int],
+    finish: Callable[[tuple, bool], None],
+    workers: int,
+    shards_per_worker: int,
+    bar,
+    backgrounds_of: Callable[[int], dict | None],
+) -> None:
+    from mincam_render.data.worker_pool import PoolError, run_tasks
+
+    workers = min(workers, len(todo))  # and the cores go to the workers that run
+    try:
+        run_tasks(
+            render_shard,
+            todo,
+            lambda shard: (job, shard, backgrounds_of(cast(int, shard))),
+            lambda shard, result: finish(result, True),
+            workers=workers,
+            tasks_per_worker=shards_per_worker,
+            initializer=_worker_init,
+            initargs=(_threads_per_worker(workers), os.getpid()),
+            on_progress=None if bar is None else lambda shard, n: bar.update(n),
+        )
+    except PoolError as err:
+        raise RenderError(
+            f"{err}: shard {', '.join(map(str, err.tasks))} did not finish; finished shards "
+            "are kept: run the same command again to resume"
+        ) from None
+
+
+def _run_ray(
+    address: str,
+    job: dict,
+    todo: list[int],
+    finish: Callable[[tuple, bool], None],
+    shards_per_worker: int,
+    backgrounds_of: Callable[[int], dict | None],
+) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise RenderError(
+            "--ray needs the optional dependency ray: pip install 'mincam_render[ray]'"
+        ) from None
+    started = _ray_init(ray, address)
+    try:
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
+        task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
+        job_ref = ray.put(job)
+        shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i)): i for i in todo}
+        log.info("Ray: %d shard tasks on %d CPUs", len(shard_of), cpus)
+        _collect_ray(ray, shard_of, finish)
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _ray_init(ray, address: str) -> bool:
+    """Connect to (or, ``"local"``, start) the Ray cluster; whether Ray was started here."""
+    pkg_dir = str(Path(__file__).resolve().parents[1])  # the directory mincam_render/data
+    init_kwargs: dict[str, Any] = {
+        "ignore_reinit_error": True,
+        "log_to_driver": False,
+        "include_dashboard": False,
+        # ship this package to the workers (other nodes may not have it installed)
+        "runtime_env": {"py_modules": [pkg_dir], "excludes": ["__pycache__"]},
+    }
+    if address != "local":
+        init_kwargs["address"] = address
+    started = not ray.is_initialized()
+    try:
+        ray.init(**init_kwargs)
+    except Exception as err:  # ray raises ConnectionError, RuntimeError, ValueError ...
+        raise RenderError(f"could not connect to Ray at {address!r}: {err}") from None
+    return started
+
+
+def _collect_ray(ray, shard_of: dict, finish: Callable[[tuple, bool], None]) -> None:
+    """Hand each task's result to ``finish`` as it arrives; cancel all if one stalls."""
+    from mincam_render.data.worker_pool import POLL_S, StallWatch, WorkerStalled
+
+    pending = list(shard_of)
+    # tasks wait for a CPU, so the time between two results stands for a task's
+    watch, last_s = StallWatch(), time.monotonic()
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
+        if not done:
+            try:
+                watch.check(sorted(shard_of[r] for r in pending))
+            except WorkerStalled as err:
+                for ref in pending:
+                    ray.cancel(ref, force=True)
+                raise RenderError(f"Ray: {err}; run the same command again to resume") from None
+            continue
+        try:
+            result = ray.get(done[0])
+        except Exception as err:
+            raise RenderError(f"a Ray render task failed: {err}") from None
+        watch.report(time.monotonic() - last_s)
+        last_s = time.monotonic()
+        finish(result, False)
+
+
+def _ray_render_shard(job: dict, shard: int, threads: int, backgrounds: dict | None):
+    import drjit as dr
+
+    from mincam_render.render.backend import use_variant
+
+    use_variant()
+    dr.set_thread_count(max(1, int(threads)))
+    return render_shard(job, shard, backgrounds)

@@ -1,0 +1,128 @@
+"""What a render is asked to do: :class:`RenderRequest`, validated, with its identity."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from mincam_render.data import dataset as ds
+from mincam_render.render import precision
+from mincam_render.render.fidelity import Fidelity
+
+
+@dataclass(frozen=True, kw_only=True)
+class RenderRequest:
+    """What to render; equal requests give byte-identical datasets.
+
+    Args:
+        family: a family name (``"patches"``) or a scene TOML path.
+        num_frames: frames of the sequence, >= 1.
+        seed: dataset seed (scene trajectories and frame render seeds), >= 0.
+        overrides: nested dict replacing values of the scene description.
+        shard_frames: frames per shard file, >= 1.
+        splits: train/val/test fractions of the sequence (contiguous).
+        fidelity: AUTO measures each choice below that is None; FULL takes the
+            expensive option (per-detector, scene integrator, float32, 64 spp).
+        spp: samples per texel, or None to decide.
+        max_depth: path depth (2 = direct light), 0 = the scene's integrator, or
+            None to decide.
+        shared_render: one render for all detectors, or None to decide.
+        mask_res: mask texels per side, or None for the family camera's.
+        dtype: ``"float16"``/``"float32"`` storage, or None to decide.
+        target_error: target relative measurement error (Monte Carlo) for spp.
+        dtype_error_bound: largest relative measurement error float16 may add.
+        indirect_fraction: drop indirect light when it changes measurements less.
+        parallax_fraction: share one render when parallax is below this many texels.
+        differential: render frames as a converged static background plus the
+            change the movers make (:mod:`mincam_render.render.differential`), or None
+            to decide (families with a static background only).
+        background_interval_s: scene time (s) one background's daylight stands for.
+        background_spp: samples per texel of the backgrounds, or None to decide.
+        shared_difference: render the movers' change once from the board centre
+            for all detectors, or None to decide (differential rendering).
+    """
+
+    family: str
+    num_frames: int
+    seed: int = 0
+    overrides: dict | None = None
+    shard_frames: int = 256
+    splits: tuple[float, float, float] = (0.7, 0.15, 0.15)
+    fidelity: Fidelity = Fidelity.AUTO
+    spp: int | None = None
+    max_depth: int | None = None
+    shared_render: bool | None = None
+    mask_res: int | None = None
+    dtype: str | None = None
+    target_error: float = 0.01
+    dtype_error_bound: float = 1e-3
+    indirect_fraction: float = 0.005
+    parallax_fraction: float = 0.25
+    differential: bool | None = None
+    background_interval_s: float = 60.0
+    background_spp: int | None = None
+    shared_difference: bool | None = None
+
+    def __post_init__(self) -> None:
+        def bad(name: str, allowed: str) -> ValueError:
+            return ValueError(
+                f"RenderRequest.{name} = {getattr(self, name)!r} is invalid: allowed {allowed}"
+            )
+
+        def is_int(v: Any) -> bool:
+            return isinstance(v, int) and not isinstance(v, bool)
+
+        if not is_int(self.num_frames) or self.num_frames < 1:
+            raise bad("num_frames", "an integer >= 1")
+        if not is_int(self.seed) or not 0 <= self.seed < 2**63:
+            raise bad("seed", "an integer in [0, 2^63)")
+        if not is_int(self.shard_frames) or not 1 <= self.shard_frames <= 1 << 20:
+            raise bad("shard_frames", "an integer in [1, 2^20]")
+        ds.split_ranges(self.num_frames, self.splits)
+        object.__setattr__(self, "splits", tuple(float(f) for f in self.splits))
+        object.__setattr__(self, "fidelity", Fidelity(self.fidelity))
+        if self.spp is not None and (not is_int(self.spp) or not 1 <= self.spp <= 1 << 20):
+            raise bad("spp", "None or an integer in [1, 2^20]")
+        if self.max_depth is not None and (
+            not is_int(self.max_depth) or not 0 <= self.max_depth <= 64
+        ):
+            raise bad("max_depth", "None, 0 (scene integrator) or an integer in [1, 64]")
+        if self.mask_res is not None and (
+            not is_int(self.mask_res) or not 1 <= self.mask_res <= 4096
+        ):
+            raise bad("mask_res", "None or an integer in [1, 4096]")
+        if self.background_spp is not None and (
+            not is_int(self.background_spp) or not 1 <= self.background_spp <= 1 << 20
+        ):
+            raise bad("background_spp", "None or an integer in [1, 2^20]")
+        for name in ("differential", "shared_difference"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
+                raise bad(name, "None, True or False")
+        if self.dtype is not None and self.dtype not in precision.DTYPES:
+            raise bad("dtype", f"None or one of {', '.join(precision.DTYPES)}")
+        for name, lo, hi in (
+            ("target_error", 1e-6, 1.0),
+            ("dtype_error_bound", 1e-9, 1.0),
+            ("indirect_fraction", 0.0, 1.0),
+            ("parallax_fraction", 0.0, 100.0),
+            ("background_interval_s", 1e-3, 1e6),
+        ):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
+                raise bad(name, f"a number in [{lo:g}, {hi:g}]")
+
+    def identity(self, description: dict) -> dict:
+        """JSON-ready identity: the request with the *resolved* scene description.
+
+        Two renders into one directory must have equal identities; the resolved
+        description (not the file name) makes an edited TOML count as different.
+        """
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d["family"] = str(self.family)
+        d["fidelity"] = self.fidelity.value
+        d["splits"] = list(self.splits)
+        d["overrides"] = self.overrides or {}
+        d["description"] = description
+        return json.loads(json.dumps(d, sort_keys=True, default=ds._json_default))

@@ -1,0 +1,184 @@
+"""One shard of a job rendered into arrays (in whatever process calls it, worker or parent).
+
+Frame ``i`` is rendered with seed :func:`~mincam_render.core.seeds.frame_seed`
+``(seed, i)`` (or its background's seed, differential jobs) and the family's
+scene state ``i``, so a shard re-renders bit-identically in any process.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from mincam_render.core.seeds import frame_seed
+from mincam_render.data import dataset as ds
+from mincam_render.data.render_job.scene import _load_family, _render_camera
+from mincam_render.render import precision
+
+#: Test hook: seconds to sleep after each frame (slows renders so a test can kill
+#: one mid-way). Read by workers from the environment; unset in normal use.
+FRAME_DELAY_ENV = "MINCAM_RENDER_TEST_FRAME_DELAY_S"
+
+_WORKER: dict[str, Any] = {"parent": None, "cache": {}}
+
+
+def _worker_init(threads: int, parent_pid: int | None) -> None:
+    """Initializer of a worker process: limit Dr.Jit threads, remember the parent."""
+    import drjit as dr
+
+    from mincam_render.render.backend import use_variant
+
+    use_variant()
+    dr.set_thread_count(max(1, int(threads)))
+    _WORKER["parent"] = parent_pid
+
+
+def render_shard(
+    job: dict,
+    shard: int,
+    backgrounds: dict | None = None,
+    on_progress: Callable[[int], None] | None = None,
+) -> tuple[int, np.ndarray, dict, float]:
+    """Render one shard of a job (in whatever process calls it).
+
+    Args:
+        job: the ``job`` section of a manifest (family, camera, render settings).
+        shard: shard number.
+        backgrounds: for differentially rendered jobs, ``{key: Background}``
+            covering the shard's frames (see
+            :func:`~mincam_render.data.render_job.backgrounds.load_backgrounds`).
+        on_progress: called with 1 after each frame.
+
+    Returns:
+        ``(shard, stored T[frame, detector, row, col], shard metadata, seconds)``.
+
+    Raises:
+        ValueError: a differential job without the shard's backgrounds.
+    """
+    from mincam_render.render.backend import use_variant
+
+    use_variant()
+    t0 = time.perf_counter()
+    start = shard * job["shard_frames"]
+    stop = min(job["num_frames"], start + job["shard_frames"])
+    images, frames, labels, key = _render_frames(job, start, stop, backgrounds, on_progress)
+    stored, scales = precision.encode_transport(np.stack(images), job["render"]["dtype"])
+    for f, s in zip(frames, scales, strict=True):
+        f["scale"] = float(s)
+    meta = {
+        "format": ds.FORMAT_NAME,
+        "format_version": ds.FORMAT_VERSION,
+        "request_sha256": key,
+        "shard": shard,
+        "start": start,
+        "stop": stop,
+        "dtype": job["render"]["dtype"],
+        "shape": list(stored.shape),
+        "frames": frames,
+        "labels": labels,
+    }
+    # JSON round trip now, so the parent writes exactly what a reader will parse
+    meta = json.loads(json.dumps(meta, default=ds._json_default))
+    return shard, stored, meta, time.perf_counter() - t0
+
+
+def _cached_scene(job: dict) -> tuple:
+    """``(family, scene, camera, render camera)`` of ``job``, built once per process."""
+    key = job["request_sha256"]
+    cached = _WORKER["cache"].get(key)
+    if cached is None:
+        _WORKER["cache"].clear()  # one job per process: free the previous scene
+        family = _load_family(job)
+        cached = (family, family.build_scene(), *_render_camera(job))
+        _WORKER["cache"][key] = cached
+    return cached
+
+
+def _render_frames(
+    job: dict,
+    start: int,
+    stop: int,
+    backgrounds: dict | None,
+    on_progress: Callable[[int], None] | None,
+) -> tuple[list[np.ndarray], list[dict], dict[str, list], str]:
+    """Frames ``start``..``stop - 1`` of ``job``, rendered in order.
+
+    Returns:
+        ``(images, frame records, labels, key)``: ``images[frame]`` is the
+        numpy ``T[detector, row, col]`` (W) of each frame; ``key`` is the job's
+        ``request_sha256``, or for a differential job the last frame's
+        background key (what shard files have always recorded as their
+        ``request_sha256``).
+    """
+    family, scene, camera, render_cam = _cached_scene(job)
+    key = job["request_sha256"]
+    delay = float(os.environ.get(FRAME_DELAY_ENV, "0") or 0)
+    frames, images = [], []
+    labels: dict[str, list] = {s.name: [] for s in family.labels}
+    for i in range(start, stop):
+        if _WORKER["parent"] is not None and os.getppid() != _WORKER["parent"]:
+            os._exit(1)  # the render was killed: do not linger as an orphan
+        background_key, background = _frame_background(job, family, i, backgrounds)
+        if background_key is not None:
+            # a slip kept so shard files stay byte-identical: the shard's
+            # request_sha256 gets this key, so a differential shard written but
+            # not yet in the manifest when a render is killed is re-rendered,
+            # and `repair` keeps none of a differential dataset's shards
+            key = background_key
+        t, lab, seed = _render_frame(job, family, scene, render_cam, i, background)
+        if job["render"]["shared_render"]:
+            t = np.repeat(t, camera.num_detectors, axis=0)
+        images.append(t)
+        for name in labels:
+            labels[name].append(np.asarray(lab[name], dtype=np.float32).reshape(-1).tolist())
+        record = {"index": i, "time_s": family.time_s(i), "seed": seed}
+        if background is not None:
+            record["background"] = background.key
+        frames.append(dict(record, state=family.frame_state(i)))
+        if on_progress is not None:
+            on_progress(1)
+        if delay:
+            time.sleep(delay)
+    return images, frames, labels, key
+
+
+def _frame_background(job: dict, family, i: int, backgrounds: dict | None) -> tuple:
+    """``(key, Background)`` of frame ``i`` of a differential job, else ``(None, None)``.
+
+    Raises:
+        ValueError: the frame's background is not in ``backgrounds``.
+    """
+    settings = job["render"].get("background")
+    if settings is None:
+        return None, None
+    key = family.background_key(i, settings["interval_s"])
+    background = (backgrounds or {}).get(key)
+    if background is None:
+        raise ValueError(f"frame {i}: background {key!r} was not given to render_shard")
+    return key, background
+
+
+def _render_frame(job: dict, family, scene, render_cam, i: int, background) -> tuple:
+    """``(T[detector, row, col] (W, numpy), labels, seed)`` of frame ``i``.
+
+    Differentially with ``background`` (its seed), else the plain transport at
+    :func:`frame_seed` ``(seed, i)``; a shared render has one detector.
+    """
+    from mincam_render.render.differential import render_frame
+
+    r = job["render"]
+    max_depth = r["max_depth"] or None
+    if background is not None:
+        t, lab = render_frame(
+            family, scene, render_cam, i, background, spp=r["spp"], max_depth=max_depth
+        )
+        return t, lab, background.seed
+    lab = family.set_frame(scene, i)
+    seed = frame_seed(job["seed"], i)
+    t = family.render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)
+    return t, lab, seed
