@@ -114,3 +114,31 @@ def test_cli_repair_reports_in_lines(original, tmp_path):
     assert "kept 3 of 3 shards; fields restored from the request's plan: job" in res.output
     missing = CliRunner().invoke(main, ["repair", str(tmp_path / "nothing")])
     assert missing.exit_code == 2 and "cannot repair" in missing.output
+
+
+def test_a_differential_dataset_keeps_its_shards(variant, tmp_path):
+    """Differential shards record their request's hash (they recorded a background key,
+    so `repair` kept none of them and a killed render re-rendered its unrecorded shards)."""
+    request = RenderRequest(
+        family="workspace",
+        num_frames=8,
+        seed=2,
+        shard_frames=4,
+        differential=True,
+        spp=2,
+        background_spp=16,
+        max_depth=2,
+        shared_render=True,
+        dtype="float32",
+        overrides={"camera": {"detectors": 2, "mask_resolution": 4}},
+    )
+    root = tmp_path / "ds"
+    render_dataset(request, root, workers=0)
+    manifest = ds.read_manifest(root)
+    assert manifest["job"]["render"]["background"] is not None  # differential indeed
+    for i in range(2):
+        meta = json.loads(ds.shard_paths(root, i)[1].read_text())
+        assert meta["request_sha256"] == manifest["job"]["request_sha256"]
+    _edit(root, lambda m: m["job"]["render"].__setitem__("spp", 99))
+    summary = repair_dataset(root)
+    assert summary.kept == [0, 1] and summary.dropped == {}

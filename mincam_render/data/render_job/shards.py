@@ -66,14 +66,15 @@ def render_shard(
     t0 = time.perf_counter()
     start = shard * job["shard_frames"]
     stop = min(job["num_frames"], start + job["shard_frames"])
-    images, frames, labels, key = _render_frames(job, start, stop, backgrounds, on_progress)
+    images, frames, labels = _render_frames(job, start, stop, backgrounds, on_progress)
     stored, scales = precision.encode_transport(np.stack(images), job["render"]["dtype"])
     for f, s in zip(frames, scales, strict=True):
         f["scale"] = float(s)
     meta = {
         "format": ds.FORMAT_NAME,
         "format_version": ds.FORMAT_VERSION,
-        "request_sha256": key,
+        # ties the shard to its request: resume and `repair` keep only their request's
+        "request_sha256": job["request_sha256"],
         "shard": shard,
         "start": start,
         "stop": stop,
@@ -105,31 +106,21 @@ def _render_frames(
     stop: int,
     backgrounds: dict | None,
     on_progress: Callable[[int], None] | None,
-) -> tuple[list[np.ndarray], list[dict], dict[str, list], str]:
+) -> tuple[list[np.ndarray], list[dict], dict[str, list]]:
     """Frames ``start``..``stop - 1`` of ``job``, rendered in order.
 
     Returns:
-        ``(images, frame records, labels, key)``: ``images[frame]`` is the
-        numpy ``T[detector, row, col]`` (W) of each frame; ``key`` is the job's
-        ``request_sha256``, or for a differential job the last frame's
-        background key (what shard files have always recorded as their
-        ``request_sha256``).
+        ``(images, frame records, labels)``: ``images[frame]`` is the numpy
+        ``T[detector, row, col]`` (W) of each frame.
     """
     family, scene, camera, render_cam = _cached_scene(job)
-    key = job["request_sha256"]
     delay = float(os.environ.get(FRAME_DELAY_ENV, "0") or 0)
     frames, images = [], []
     labels: dict[str, list] = {s.name: [] for s in family.labels}
     for i in range(start, stop):
         if _WORKER["parent"] is not None and os.getppid() != _WORKER["parent"]:
             os._exit(1)  # the render was killed: do not linger as an orphan
-        background_key, background = _frame_background(job, family, i, backgrounds)
-        if background_key is not None:
-            # a slip kept so shard files stay byte-identical: the shard's
-            # request_sha256 gets this key, so a differential shard written but
-            # not yet in the manifest when a render is killed is re-rendered,
-            # and `repair` keeps none of a differential dataset's shards
-            key = background_key
+        background = _frame_background(job, family, i, backgrounds)
         t, lab, seed = _render_frame(job, family, scene, render_cam, i, background)
         if job["render"]["shared_render"]:
             t = np.repeat(t, camera.num_detectors, axis=0)
@@ -144,23 +135,23 @@ def _render_frames(
             on_progress(1)
         if delay:
             time.sleep(delay)
-    return images, frames, labels, key
+    return images, frames, labels
 
 
-def _frame_background(job: dict, family, i: int, backgrounds: dict | None) -> tuple:
-    """``(key, Background)`` of frame ``i`` of a differential job, else ``(None, None)``.
+def _frame_background(job: dict, family, i: int, backgrounds: dict | None):
+    """The ``Background`` of frame ``i`` of a differential job, else None.
 
     Raises:
         ValueError: the frame's background is not in ``backgrounds``.
     """
     settings = job["render"].get("background")
     if settings is None:
-        return None, None
+        return None
     key = family.background_key(i, settings["interval_s"])
     background = (backgrounds or {}).get(key)
     if background is None:
         raise ValueError(f"frame {i}: background {key!r} was not given to render_shard")
-    return key, background
+    return background
 
 
 def _render_frame(job: dict, family, scene, render_cam, i: int, background) -> tuple:
