@@ -4,7 +4,7 @@ A render whose description, camera, targets, frame count and renderer match a
 shipped plan starts rendering at once instead of planning (minutes for indoor
 families). Re-run this after a change of ``scenes/*.toml``, of the planner
 (bump ``plan_cache.PLANNER_VERSION``) or of the pinned renderer;
-``tests/test_plan_cache.py`` fails on a stale shipped plan.
+``tests/datasets/test_plan_cache.py`` fails on a stale shipped plan.
 
 Usage:
     .venv/bin/python scripts/ship_plans.py workspace:10000 lighting:3000

@@ -406,7 +406,7 @@ def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
 
     Mitsuba's bitmap rows start at the rectangle's local -y (bottom) edge, so the
     image is flipped vertically; columns already run left to right for a viewer
-    the rectangle faces (checked by ``tests/test_scenes.py``).
+    the rectangle faces (checked by ``tests/scenes/test_scenes.py``).
     """
     import numpy as np
 

@@ -298,7 +298,7 @@ def render_transport_with_noise(
     texel (independent across texels), ``sqrt(sum_texels var / spp) / sum(T[k])``.
     On the Cornell box it matches the spread of 40 seeded renders within 20 %
     at 64 spp; at 4 spp, where rare bright paths are mostly missed, it reads
-    about half the true error (``tests/test_user_scene.py``). NaN for detectors
+    about half the true error (``tests/physics/test_user_scene.py``). NaN for detectors
     that see no light.
 
     Returns:

@@ -8,13 +8,12 @@ import logging
 import os
 import re
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support import cli_process
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
@@ -25,7 +24,6 @@ from mincam_render.data.render_job import (
     render_dataset,
 )
 
-REPO = Path(__file__).resolve().parents[1]
 TINY = {"camera": {"detectors": 2, "mask_resolution": 8}}
 CLI_TINY = [
     "render",
@@ -44,19 +42,6 @@ CLI_TINY = [
     "5",
     "--no-progress",
 ]
-
-
-def _cli(args, **kwargs):
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    env.update(kwargs.pop("env", {}))
-    return subprocess.Popen(
-        [sys.executable, "-m", "mincam_render.cli.main", *args],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        **kwargs,
-    )
 
 
 def _files(root: Path) -> dict[str, bytes]:
@@ -80,12 +65,12 @@ def test_frame_seed_is_deterministic_and_distinct():
 def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
     ref, killed = tmp_path / "ref", tmp_path / "killed"
     # uninterrupted reference, rendered in the CLI's own process
-    p = _cli([*CLI_TINY, "--out", str(ref), "--workers", "0"])
+    p = cli_process([*CLI_TINY, "--out", str(ref), "--workers", "0"])
     out, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
 
     # the same command in a worker process, slowed down, killed mid-way
-    p = _cli(
+    p = cli_process(
         [*CLI_TINY, "--out", str(killed), "--workers", "1"],
         env={FRAME_DELAY_ENV: "0.1"},
         start_new_session=True,
@@ -106,7 +91,7 @@ def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
     }
 
     # resumed with the default workers: chosen by job size (this tiny job: this process)
-    p = _cli([*CLI_TINY, "--out", str(killed)])
+    p = cli_process([*CLI_TINY, "--out", str(killed)])
     out, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
     log = [json.loads(line) for line in (killed / ds.LOG_NAME).read_text().splitlines()]
@@ -284,7 +269,7 @@ def many_shards(tmp_path_factory):
 def test_more_shards_than_workers_times_shards_per_worker_finish(tmp_path, many_shards, variant):
     # 13 shards > 2 workers x 4 shards: the pool must replace its workers (gh-115634 hung here)
     request, reference = many_shards
-    p = _cli(
+    p = cli_process(
         [
             *["render", "patches", "--frames", "13", "--shard-frames", "1", "--spp", "1"],
             *["--detectors", "2", "--mask-res", "8", "--seed", "2", "--workers", "2"],
@@ -319,7 +304,7 @@ def test_a_killed_worker_stops_the_render_naming_its_shard(tmp_path, many_shards
         *["--detectors", "2", "--mask-res", "8", "--seed", "2", "--no-progress"],
         *["--out", str(tmp_path / "ds")],
     ]
-    p = _cli([*args, "--workers", "1"], env={FRAME_DELAY_ENV: "0.5"})
+    p = cli_process([*args, "--workers", "1"], env={FRAME_DELAY_ENV: "0.5"})
     deadline = time.monotonic() + 120
     while not list((tmp_path / "ds" / ds.SHARD_DIR).glob("shard-*.json")):
         assert p.poll() is None and time.monotonic() < deadline, p.communicate()
@@ -331,7 +316,7 @@ def test_a_killed_worker_stops_the_render_naming_its_shard(tmp_path, many_shards
     line = err.strip().splitlines()[-1]
     assert re.search(r"exit code -9\) while running task \d+: shard \d+ did not finish", line)
     assert "run the same command again to resume" in line
-    p = _cli([*args, "--workers", "2"])  # and it does
+    p = cli_process([*args, "--workers", "2"])  # and it does
     _, err = p.communicate(timeout=240)
     assert p.returncode == 0, err
     assert _files(tmp_path / "ds") == _files(reference)

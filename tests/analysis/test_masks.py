@@ -151,7 +151,7 @@ def test_bad_input(tmp_path, camera):
         export_masks(np.full((1, 8, 12), np.nan), camera, tmp_path)
 
 
-KEPT = sorted((Path(__file__).parents[1] / "masks").glob("*/*/masks.json"))
+KEPT = sorted((Path(__file__).parents[2] / "masks").glob("*/*/masks.json"))
 
 
 @pytest.mark.parametrize("sidecar", KEPT, ids=lambda p: f"{p.parent.parent.name}/{p.parent.name}")

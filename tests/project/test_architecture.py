@@ -10,7 +10,7 @@ import grimp
 import networkx as nx
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _tool(name: str) -> str:

@@ -25,6 +25,7 @@ import torch
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support import cli_process
 
 from mincam_render.cli.main import main
 from mincam_render.core.config import ConfigError
@@ -35,7 +36,6 @@ from mincam_render.learn import train as tr
 from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
 from mincam_render.scenes import FAMILY_NAMES, load_family
 
-REPO = Path(__file__).resolve().parents[1]
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
 
 
@@ -630,25 +630,14 @@ def test_real_full_disk_render_fails_clearly_and_keeps_what_fits(tiny_tmpfs, var
 # ---- SIGKILL of train and export-masks --------------------------------------------------------
 
 
-def _cli(args, **kw):
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.Popen(
-        [sys.executable, "-m", "mincam_render.cli.main", *args],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-        **kw,
-    )
-
-
 TRAIN_ARGS = ["--steps", "400", "--eval-every", "20", "--batch-size", "8", "--patience", "100"]
 
 
 def _kill_train_then_resume(tiny_dataset: Path, tmp_path: Path, delay_s: float) -> None:
     out = tmp_path / f"killed-{delay_s:.2f}"
-    p = _cli(["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS])
+    p = cli_process(
+        ["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS], start_new_session=True
+    )
     deadline = time.monotonic() + 180
     while not (out / "checkpoint.pt").exists():
         assert p.poll() is None, p.communicate()[1]
@@ -659,7 +648,9 @@ def _kill_train_then_resume(tiny_dataset: Path, tmp_path: Path, delay_s: float) 
     p.wait(timeout=30)
     ck = torch.load(out / "checkpoint.pt", weights_only=False)  # never a torn checkpoint
     assert 20 <= ck["step"] <= 400 and not (out / "metrics.json").exists()
-    p = _cli(["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS])
+    p = cli_process(
+        ["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS], start_new_session=True
+    )
     _, err = p.communicate(timeout=300)
     assert p.returncode == 0, err
     metrics = json.loads((out / "metrics.json").read_text())
@@ -674,7 +665,9 @@ def test_train_killed_mid_run_resumes_to_the_end(tiny_dataset, tmp_path):
 @pytest.mark.slow
 def test_train_killed_at_random_moments_resumes_identically(tiny_dataset, tmp_path):
     ref = tmp_path / "ref"
-    p = _cli(["train", str(tiny_dataset), "--out", str(ref), *TRAIN_ARGS])
+    p = cli_process(
+        ["train", str(tiny_dataset), "--out", str(ref), *TRAIN_ARGS], start_new_session=True
+    )
     assert p.wait(timeout=300) == 0
     want = torch.load(ref / "checkpoint.pt", weights_only=False)["best_state"]
     rng = np.random.default_rng(7)
@@ -712,14 +705,20 @@ def test_export_masks_killed_at_random_moments_never_looks_complete(finished_run
     out = tmp_path / "masks"
     rng = np.random.default_rng(3)
     for delay in rng.uniform(0.5, 4.0, 6):
-        p = _cli(["export-masks", str(finished_run), "--out", str(out), "--task", "t"])
+        p = cli_process(
+            ["export-masks", str(finished_run), "--out", str(out), "--task", "t"],
+            start_new_session=True,
+        )
         time.sleep(float(delay))
         os.killpg(p.pid, signal.SIGKILL)
         p.wait(timeout=30)
         task = out / "t"
         if task.exists():
             _export_is_consistent(task)  # raises on a torn file listed as finished
-    p = _cli(["export-masks", str(finished_run), "--out", str(out), "--task", "t"])
+    p = cli_process(
+        ["export-masks", str(finished_run), "--out", str(out), "--task", "t"],
+        start_new_session=True,
+    )
     assert p.wait(timeout=120) == 0
     assert _export_is_consistent(out / "t")
 

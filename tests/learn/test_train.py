@@ -8,37 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from support import linear_task
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn import train as tr
 from mincam_render.learn.models import CountLoss
-from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
-
-COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
-
-
-def linear_task(n: int = 200, k: int = 2, res: int = 8, seed: int = 0, dead: int | None = None):
-    """Frames whose count is a linear function of the top half of detector 0's image."""
-    rng = np.random.default_rng(seed)
-    cam = FreeformCamera(
-        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
-    )
-    base = rng.uniform(0.0, 1.0, (n, 1, res, res)).astype(np.float32)
-    t = np.repeat(base, k, axis=1) * np.float32(2e-8)
-    t += rng.uniform(0, 2e-9, t.shape).astype(np.float32)
-    if dead is not None:
-        t[:, dead] = 0.0
-    signal = base[:, 0, : res // 2].mean(axis=(1, 2)) - base[:, 0, res // 2 :].mean(axis=(1, 2))
-    count = np.clip(np.rint(5 + 40 * signal), 0, None).astype(np.float32)[:, None]
-    return tr.TrainingData(
-        transport=t,
-        labels={"count": count},
-        label_specs=(COUNT,),
-        camera=cam,
-        fps=30.0,
-        source={"family": "synthetic"},
-    )
-
 
 CFG = tr.TrainConfig(max_steps=150, batch_size=32, eval_every=25, patience=100, mask_lr=0.05)
 

@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from mincam_render.cli.main import main
 
-CORPUS = Path(__file__).parent / "data" / "bad_inputs"
+CORPUS = Path(__file__).parents[1] / "data" / "bad_inputs"
 CASES = tomllib.loads((CORPUS / "cases.toml").read_text())["case"]
 
 

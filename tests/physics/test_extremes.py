@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 import torch
+from support import linear_task
 
 from mincam_render import (
     DetectorElectronics,
@@ -27,7 +28,6 @@ from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import lux_to_irradiance
 from mincam_render.learn import train as tr
 from mincam_render.learn.models import MAX_LOGIT
-from mincam_render.optics.camera import MM
 from mincam_render.render import mitsuba_scene as ms
 
 ONE = DetectorLayout(positions_m=((0.0, 0.0),))
@@ -143,25 +143,6 @@ def test_surface_cutting_through_the_mask_plane(variant):
 # ---- stiff optimisation -------------------------------------------------------------------
 
 
-def linear_task(n=200, k=2, res=8, seed=0, scale=2e-8, noise_w=0.0):
-    rng = np.random.default_rng(seed)
-    cam = FreeformCamera(
-        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
-    )
-    base = rng.uniform(0.0, 1.0, (n, 1, res, res)).astype(np.float32)
-    t = np.repeat(base, k, axis=1) * np.float32(scale)
-    signal = base[:, 0, : res // 2].mean(axis=(1, 2)) - base[:, 0, res // 2 :].mean(axis=(1, 2))
-    count = np.clip(np.rint(5 + 40 * signal), 0, None).astype(np.float32)[:, None]
-    return tr.TrainingData(
-        transport=t,
-        labels={"count": count},
-        label_specs=(COUNT,),
-        camera=cam,
-        fps=30.0,
-        source={"family": "synthetic"},
-    )
-
-
 def _finite_model(model) -> bool:
     return all(
         torch.isfinite(p).all() for p in model.state_dict().values() if p.is_floating_point()
@@ -171,7 +152,7 @@ def _finite_model(model) -> bool:
 @pytest.mark.parametrize("logit", [-1e4, -50.0, 50.0, 1e4])
 def test_training_recovers_from_masks_pinned_at_the_limits(variant, logit):
     """Regression: at |logit| >= 50 sigmoid' ~ 1e-22 < Adam's eps, masks never moved again."""
-    train, val, _ = linear_task(260).split((0.7, 0.15, 0.15))
+    train, val, _ = linear_task(260, background_w=0.0).split((0.7, 0.15, 0.15))
     model = tr.build_mincam(train, 2)
     with torch.no_grad():
         model.logits.fill_(logit)
@@ -189,7 +170,7 @@ def test_training_from_saturated_detectors_is_finite_and_learns(variant, slope):
     """Transport 1e5x brighter than the full scale: every pixel saturated at the start."""
     from dataclasses import replace
 
-    train, val, _ = linear_task(260, scale=2e-3).split((0.7, 0.15, 0.15))
+    train, val, _ = linear_task(260, scale=2e-3, background_w=0.0).split((0.7, 0.15, 0.15))
     cam = replace(train.camera, electronics=DetectorElectronics(saturation_slope=slope))
     train, val = replace(train, camera=cam), replace(val, camera=cam)
     model = tr.build_mincam(train, 2)
@@ -206,7 +187,7 @@ def test_training_from_saturated_detectors_is_finite_and_learns(variant, slope):
 
 def test_noise_dominating_signal_trains_finite(variant):
     """Signal ~1e-3 of the read noise: nothing to learn, but nothing NaN either."""
-    train, val, _ = linear_task(200, scale=1e-16).split((0.7, 0.15, 0.15))
+    train, val, _ = linear_task(200, scale=1e-16, background_w=0.0).split((0.7, 0.15, 0.15))
     model = tr.build_mincam(train, 2)
     res = tr.train_model(
         model, train, val, tr.TrainConfig(max_steps=100, batch_size=32, eval_every=50, patience=100)
@@ -216,7 +197,7 @@ def test_noise_dominating_signal_trains_finite(variant):
 
 @pytest.mark.parametrize(("lr", "mask_lr"), [(0.9, 9.9), (0.3, 5.0)])
 def test_learning_rates_at_the_edge_of_divergence_stay_finite(variant, lr, mask_lr):
-    train, val, _ = linear_task(200).split((0.7, 0.15, 0.15))
+    train, val, _ = linear_task(200, background_w=0.0).split((0.7, 0.15, 0.15))
     model = tr.build_mincam(train, 2)
     res = tr.train_model(
         model,

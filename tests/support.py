@@ -1,0 +1,72 @@
+"""Helpers shared by test modules (importable: pytest puts this folder on sys.path).
+
+Fixtures live in ``conftest.py``; plain functions that build test data or run
+the command line live here.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.learn import train as tr
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+
+REPO = Path(__file__).resolve().parents[1]
+COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
+
+
+def linear_task(
+    n: int = 200,
+    k: int = 2,
+    res: int = 8,
+    seed: int = 0,
+    *,
+    scale: float = 2e-8,
+    background_w: float = 2e-9,
+    dead: int | None = None,
+) -> tr.TrainingData:
+    """Frames whose count is a linear function of the top half of detector 0's image.
+
+    Args:
+        n: frames; k: detectors; res: mask texels per side.
+        scale: power of a fully lit texel (W); background_w: uniform extra power
+            per texel, up to this (W, 0 draws nothing); dead: a detector set dark.
+    """
+    rng = np.random.default_rng(seed)
+    cam = FreeformCamera(
+        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
+    )
+    base = rng.uniform(0.0, 1.0, (n, 1, res, res)).astype(np.float32)
+    t = np.repeat(base, k, axis=1) * np.float32(scale)
+    if background_w > 0:
+        t += rng.uniform(0, background_w, t.shape).astype(np.float32)
+    if dead is not None:
+        t[:, dead] = 0.0
+    signal = base[:, 0, : res // 2].mean(axis=(1, 2)) - base[:, 0, res // 2 :].mean(axis=(1, 2))
+    count = np.clip(np.rint(5 + 40 * signal), 0, None).astype(np.float32)[:, None]
+    return tr.TrainingData(
+        transport=t,
+        labels={"count": count},
+        label_specs=(COUNT,),
+        camera=cam,
+        fps=30.0,
+        source={"family": "synthetic"},
+    )
+
+
+def cli_process(args: list[str], env: dict | None = None, **kw) -> subprocess.Popen:
+    """``mincam-render ARGS`` in a subprocess of this interpreter (text pipes)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "mincam_render.cli.main", *args],
+        env=dict(os.environ, PYTHONPATH=str(REPO), **(env or {})),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
