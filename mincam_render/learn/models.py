@@ -541,3 +541,7 @@ class BaselineCamera(CameraModel):
             dn = dn + self.read_noise_dn * torch.randn(dn.shape, **kw)
             dn = dn + (torch.rand(dn.shape, **kw) - 0.5)
         return torch.clamp(dn, 0.0, float(full)) / full
+
+
+#: A trainable camera of either kind.
+Model = MincamCamera | BaselineCamera

@@ -1,0 +1,248 @@
+r"""The training loop: Adam on the task loss, evaluation, early stopping, checkpoints, logs.
+
+The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
+:class:`TrainConfig`:
+
+* Adam; the head's learning rate follows the number of head inputs ``n``
+  (pixels x time steps): ``lr = 1e-3 * min(1, sqrt(16 / n))`` -- 1e-3 up to 16
+  inputs, then falling as ``1/sqrt(n)`` so that a 32x32 baseline (1024 inputs)
+  trains at 1.25e-4 (the first layer's output moves ~sqrt(n) times faster with
+  Adam's per-weight steps). The mask logits use their own rate
+  (``mask_lr``, logit units per step).
+* A random global gain U(0.8, 1.2) per sample multiplies the light (augmentation).
+* COUNT labels are regressed (MSE) or classified (cross-entropy over the counts
+  ``0 .. max``, predicting the expected count), :class:`~mincam_render.learn.models.CountLoss`;
+  by default the paper's choice for the scene family
+  (:data:`~mincam_render.learn.builders.PAPER_COUNT_LOSS`).
+* Early stopping on the validation loss (evaluated every ``eval_every`` steps;
+  stop after ``patience`` evaluations without improvement; the best state is kept).
+* Checkpoints after every evaluation (atomic ``checkpoint.pt``,
+  :mod:`~mincam_render.learn.checkpoint`): a killed run started again with the
+  same arguments resumes from it and reaches the same state as an
+  uninterrupted run (random generator states are saved too).
+* Logs: TensorBoard event files through ``torch.utils.tensorboard`` (training
+  loss, validation loss and error against the step; each event's wall time is
+  the run's training time, so TensorBoard's "relative" axis shows loss against
+  training time across resumes), ``history.jsonl``
+  (:mod:`~mincam_render.learn.run_log`), and ``mask_evolution.png``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from mincam_render.learn.batches import DatasetBatches, RenderedBatches
+from mincam_render.learn.checkpoint import TrainingState, restore_checkpoint, save_checkpoint
+from mincam_render.learn.evaluation import predict
+from mincam_render.learn.models import MincamCamera, Model
+from mincam_render.learn.run_log import RunLog, TrainingClock
+from mincam_render.learn.snapshots import mask_snapshot, plot_mask_evolution
+from mincam_render.learn.step import build_optimizer, train_step
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.training_data import TrainingData
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TrainResult:
+    """Outcome of :func:`train_model`."""
+
+    steps: int
+    best_step: int
+    best_val_loss: float
+    stopped_early: bool
+    wall_time_s: float
+    history: list[dict[str, float]]
+    snapshots: list[tuple[int, np.ndarray]] = field(default_factory=list)
+
+
+@dataclass
+class _Run:
+    """What the loop works on: the model, its optimiser, random generator, batches and state."""
+
+    model: Model
+    source: DatasetBatches | RenderedBatches
+    opt: torch.optim.Optimizer
+    gen: torch.Generator
+    config: TrainConfig
+    ckpt_path: Path | None
+    state: TrainingState
+
+    def done(self) -> bool:
+        """Whether training has ended (early stopping or ``max_steps``)."""
+        return self.state.stopped_early or self.state.step >= self.config.max_steps
+
+    def save(self) -> None:
+        """Write the checkpoint, when the run has a directory."""
+        if self.ckpt_path is None:
+            return
+        args = (self.model, self.config, self.opt, self.gen, self.source, self.state)
+        save_checkpoint(self.ckpt_path, *args)
+
+
+def train_model(
+    model: Model,
+    train: TrainingData | DatasetBatches | RenderedBatches,
+    val: TrainingData,
+    config: TrainConfig = TrainConfig(),
+    *,
+    out_dir: str | os.PathLike | None = None,
+    resume: bool = True,
+    stop_after_steps: int | None = None,
+    progress: bool = False,
+    desc: str = "train",
+) -> TrainResult:
+    """Train ``model`` in place with Adam and early stopping on ``val``; keep the best state.
+
+    Args:
+        model: a :class:`MincamCamera` or :class:`BaselineCamera`.
+        train: a training split, or a batch source (:class:`RenderedBatches` for
+            on-the-fly training).
+        val: validation split (loss with sensor noise at a fixed seed).
+        config: the recipe.
+        out_dir: where checkpoints, event files, ``history.jsonl`` and
+            ``mask_evolution.png`` go; None keeps everything in memory.
+        resume: continue from ``out_dir/checkpoint.pt`` when it exists.
+        stop_after_steps: checkpoint and return after this many steps in total
+            (simulates a killed run; the result is not final).
+        progress: show a tqdm progress bar.
+        desc: progress-bar label.
+
+    Returns:
+        A :class:`TrainResult`; ``model`` holds the best validation state.
+
+    """
+    from tqdm import tqdm
+
+    out = Path(out_dir) if out_dir is not None else None
+    run = _start(model, train, config, out, resume)
+    logs = RunLog(out, run.state.step, run.state.history)
+    if isinstance(model, MincamCamera):
+        model.project_logits_()  # e.g. a start with masks pinned at their limits
+    bar = tqdm(
+        total=config.max_steps,
+        initial=run.state.step,
+        desc=desc,
+        disable=not progress,
+        leave=False,
+        dynamic_ncols=True,
+    )
+    model.train()
+    clock = TrainingClock.resumed(run.state.elapsed)
+    threads = torch.get_num_threads()
+    if config.torch_threads is not None:
+        torch.set_num_threads(config.torch_threads)
+    try:
+        _train_steps(run, val, logs, bar, clock, stop_after_steps)
+    finally:
+        torch.set_num_threads(threads)
+        bar.close()
+        logs.close()
+    return _finish(run, clock.elapsed(), out)
+
+
+def _start(
+    model: Model,
+    train: TrainingData | DatasetBatches | RenderedBatches,
+    config: TrainConfig,
+    out: Path | None,
+    resume: bool,
+) -> _Run:
+    """The run's optimiser, generator and batches, resumed from its checkpoint if there is one."""
+    source = DatasetBatches(train, config.batch_size) if isinstance(train, TrainingData) else train
+    opt = build_optimizer(model, config)
+    gen = torch.Generator().manual_seed(config.seed + 7919)
+    ckpt_path = out / "checkpoint.pt" if out is not None else None
+    if ckpt_path is not None and resume and ckpt_path.is_file():
+        state = restore_checkpoint(ckpt_path, model, opt, gen, source)
+        log.info(
+            "resumed %s at step %d (best val loss %.4g)", ckpt_path, state.step, state.best_loss
+        )
+    else:
+        state = TrainingState(best_state=_copy_state(model))
+        if (first := mask_snapshot(model)) is not None:
+            state.snapshots.append((0, first))
+    return _Run(model, source, opt, gen, config, ckpt_path, state)
+
+
+def _train_steps(
+    run: _Run,
+    val: TrainingData,
+    logs: RunLog,
+    bar: Any,
+    clock: TrainingClock,
+    stop_after_steps: int | None,
+) -> None:
+    """Steps until the run is done, or checkpoint and return after ``stop_after_steps``."""
+    st, config = run.state, run.config
+    while not run.done():
+        loss = train_step(run.model, run.source, run.opt, run.gen, config.gain_range)
+        st.step += 1
+        bar.update(1)
+        logs.train_loss(loss, st.step, clock)
+        if st.step % config.eval_every == 0 or st.step >= config.max_steps:
+            _evaluate(run, val, loss, logs, clock)
+            bar.set_postfix(val=f"{st.history[-1]['val_loss']:.4g}", best=f"{st.best_loss:.4g}")
+            run.save()
+        if stop_after_steps is not None and st.step >= stop_after_steps and not run.done():
+            st.elapsed = clock.elapsed()
+            run.save()
+            break
+
+
+def _evaluate(
+    run: _Run, val: TrainingData, loss: torch.Tensor, logs: RunLog, clock: TrainingClock
+) -> None:
+    """Validation loss after a step: history, mask snapshot, logs, best state, early stopping."""
+    st = run.state
+    pred, lab, val_loss = predict(run.model, val, limit=run.config.max_eval_samples)
+    st.elapsed = clock.elapsed()
+    rec = {
+        "step": st.step,
+        "train_loss": loss.item(),
+        "val_loss": val_loss,
+        "wall_time_s": st.elapsed,
+    }
+    st.history.append(rec)
+    snap = mask_snapshot(run.model)
+    if snap is not None:
+        st.snapshots.append((st.step, snap))
+    logs.evaluation(rec, pred, lab, val, clock.wall_start + st.elapsed)
+    if val_loss < st.best_loss:
+        st.best_loss, st.best_step, st.bad = val_loss, st.step, 0
+        st.best_state = _copy_state(run.model)
+    else:
+        st.bad += 1
+    if st.bad >= run.config.patience:
+        st.stopped_early = True
+
+
+def _finish(run: _Run, elapsed: float, out: Path | None) -> TrainResult:
+    """The result; a finished run's model is set to its best state and its masks plotted."""
+    st = run.state
+    if run.done():
+        run.model.load_state_dict(st.best_state)
+        if out is not None and st.snapshots:
+            plot_mask_evolution(st.snapshots, out / "mask_evolution.png")
+    return TrainResult(
+        steps=st.step,
+        best_step=st.best_step,
+        best_val_loss=st.best_loss,
+        stopped_early=st.stopped_early,
+        wall_time_s=elapsed,
+        history=st.history,
+        snapshots=st.snapshots,
+    )
+
+
+def _copy_state(model: Model) -> dict[str, torch.Tensor]:
+    """A detached copy of ``model.state_dict()`` (torch)."""
+    return {k: v.detach().clone() for k, v in model.state_dict().items()}

@@ -1,0 +1,206 @@
+"""Training runs: one camera trained into a run directory, and what it leaves there.
+
+:func:`train_run` writes ``run.json`` (what was trained on what, with which
+recipe), trains resumably (:func:`~mincam_render.learn.loop.train_model`) and
+writes ``metrics.json``; :func:`load_run` and :func:`run_masks` read a finished run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from mincam_render.learn.batches import RenderedBatches
+from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
+from mincam_render.learn.checkpoint import load_checkpoint
+from mincam_render.learn.evaluation import evaluate
+from mincam_render.learn.loop import TrainResult, train_model
+from mincam_render.learn.models import Model
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.training_data import TrainingData
+from mincam_render.optics.camera import FreeformCamera
+
+
+def train_run(
+    train: TrainingData,
+    val: TrainingData,
+    test: TrainingData | None,
+    out_dir: str | os.PathLike,
+    *,
+    pixels: int | None = None,
+    baseline_grid: tuple[int, int] | None = None,
+    sensor_model: bool = True,
+    config: TrainConfig = TrainConfig(),
+    on_the_fly: RenderedBatches | None = None,
+    episodes: Mapping[str, TrainingData] | None = None,
+    resume: bool = True,
+    progress: bool = False,
+) -> dict[str, Any]:
+    """Train one camera into ``out_dir`` (resumable) and write ``run.json`` + ``metrics.json``.
+
+    A minimalist camera of ``pixels`` pixels unless ``baseline_grid`` is given.
+    ``on_the_fly`` replaces ``train`` as the source of training batches (``train``
+    still provides target statistics and the baseline exposure). ``episodes``:
+    test episodes evaluated one by one (``metrics["episodes"][name]``), beside
+    ``test``; the metrics also hold the validation ``history``.
+    """
+    from mincam_render.data.writer_lock import exclusive_writer
+
+    with exclusive_writer(out_dir, "training") as out:
+        model = _build_model(train, pixels, baseline_grid, sensor_model, config)
+        run = describe_run(model, train, val, test, config, on_the_fly is not None)
+        _refuse_other_data(out, run, resume)
+        _write_json_atomic(out / "run.json", run)
+        res = train_model(
+            model,
+            on_the_fly if on_the_fly is not None else train,
+            val,
+            config,
+            out_dir=out,
+            resume=resume,
+            progress=progress,
+            desc=f"{run['model']['kind']} {model.num_pixels} px",
+        )
+        metrics = _run_metrics(run, res, model, len(train), test, episodes)
+        _write_json_atomic(out / "metrics.json", metrics)
+        return metrics
+
+
+def _build_model(
+    train: TrainingData,
+    pixels: int | None,
+    baseline_grid: tuple[int, int] | None,
+    sensor_model: bool,
+    config: TrainConfig,
+) -> Model:
+    """A baseline camera of ``baseline_grid``, else a minimalist camera of ``pixels`` pixels."""
+    if baseline_grid is not None:
+        return build_baseline(train, baseline_grid, count_loss=config.count_loss, seed=config.seed)
+    return build_mincam(
+        train,
+        pixels,
+        sensor_model=sensor_model,
+        count_loss=config.count_loss,
+        seed=config.seed,
+    )
+
+
+def describe_run(
+    model: Model,
+    train: TrainingData,
+    val: TrainingData,
+    test: TrainingData | None,
+    config: TrainConfig,
+    on_the_fly: bool,
+) -> dict[str, Any]:
+    """``run.json``: the model, camera, data provenance, recipe and labels of a run."""
+    return {
+        "model": describe_model(model),
+        "camera": _camera_dict(train.camera),
+        "data": {
+            "train": train.source,
+            "val": val.source,
+            "test": test.source if test is not None else None,
+            "train_samples": len(train),
+            "on_the_fly": on_the_fly,
+        },
+        "config": asdict(config),
+        "fps": train.fps,
+        "history": train.history,
+        "label_specs": [
+            {
+                "name": s.name,
+                "kind": s.kind.value,
+                "size": s.size,
+                "unit": s.unit,
+                "median_filter_s": s.median_filter_s,
+            }
+            for s in train.label_specs
+        ],
+    }
+
+
+def _run_metrics(
+    run: Mapping[str, Any],
+    res: TrainResult,
+    model: Model,
+    train_samples: int,
+    test: TrainingData | None,
+    episodes: Mapping[str, TrainingData] | None,
+) -> dict[str, Any]:
+    """``metrics.json``: the training's outcome, test metrics, per-episode metrics, history."""
+    return {
+        "model": run["model"],
+        "steps": res.steps,
+        "best_step": res.best_step,
+        "best_val_loss": res.best_val_loss,
+        "stopped_early": res.stopped_early,
+        "train_wall_time_s": res.wall_time_s,
+        "train_samples": train_samples,
+        "test": evaluate(model, test) if test is not None else None,
+        "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
+        "history": res.history,
+    }
+
+
+def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
+    """A run resumed on other data or another recipe would mix two trainings: refuse it."""
+    path, ckpt = out / "run.json", out / "checkpoint.pt"
+    if not (resume and path.is_file() and ckpt.is_file()):
+        return
+    try:
+        old = json.loads(path.read_text())
+    except ValueError:
+        return  # a damaged run.json is rewritten; the checkpoint check still applies
+    new = json.loads(json.dumps(run, default=str))
+    for key in ("data", "config"):
+        if old.get(key) != new[key]:
+            raise ValueError(
+                f"{out} was trained with another {key} (see {path}); use another --out, "
+                "delete it, or train with --no-resume"
+            )
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    from mincam_render.data.dataset import atomic_write_bytes
+
+    atomic_write_bytes(path, (json.dumps(obj, indent=2, default=str) + "\n").encode())
+
+
+def _camera_dict(camera: FreeformCamera) -> dict[str, Any]:
+    return json.loads(json.dumps(camera.to_dict(), default=lambda o: getattr(o, "value", str(o))))
+
+
+def load_run(run_dir: str | os.PathLike) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
+    """``(run.json contents, best model state)`` of a finished :func:`train_run`."""
+    run_dir = Path(run_dir)
+    run_path, ckpt_path = run_dir / "run.json", run_dir / "checkpoint.pt"
+    if not run_path.is_file() or not ckpt_path.is_file():
+        raise ValueError(f"{run_dir}: not a training run (needs run.json and checkpoint.pt)")
+    try:
+        run = json.loads(run_path.read_text())
+    except ValueError:
+        raise ValueError(f"{run_path}: not valid JSON (truncated?)") from None
+    ck = load_checkpoint(ckpt_path)
+    return run, ck["best_state"]
+
+
+def run_masks(run_dir: str | os.PathLike) -> tuple[np.ndarray, FreeformCamera, dict[str, Any]]:
+    """Trained transmittance ``M[pixel, row, col]``, camera and run info of a mincam run."""
+    from mincam_render.data.dataset import camera_from_dict
+    from mincam_render.optics.maskplane import transmittance
+
+    run, state = load_run(run_dir)
+    if run["model"]["kind"] != "mincam":
+        raise ValueError(f"{run_dir}: a {run['model']['kind']} run has no masks to export")
+    camera = camera_from_dict(run["camera"])
+    with torch.no_grad():
+        m = transmittance(state["logits"], camera.transmittance_range).numpy()
+    return m, camera, run

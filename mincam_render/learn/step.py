@@ -1,0 +1,110 @@
+"""One optimisation step: the Adam optimiser of a camera, its fused kernel, the step itself.
+
+The step is plain torch when the transport is a torch tensor (every dataset on
+disk): one ``index_select`` of the batch's frames, the mask plane as one
+batched matrix product, the electronics as a handful of fused ops, fused Adam.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import torch
+
+from mincam_render.learn.batches import DatasetBatches, RenderedBatches
+from mincam_render.learn.builders import learning_rate_for
+from mincam_render.learn.models import MincamCamera, Model, task_loss
+from mincam_render.learn.train_config import TrainConfig
+
+
+def build_optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
+    """Adam over the head (``config.lr`` or :func:`learning_rate_for`) and the mask logits."""
+    lr = config.lr if config.lr is not None else learning_rate_for(model.head.in_features)
+    groups = [{"params": [p for p in model.head.parameters() if p.requires_grad], "lr": lr}]
+    if isinstance(model, MincamCamera) and model.logits.requires_grad:
+        groups.append({"params": [model.logits], "lr": config.mask_lr})
+    try:
+        # one kernel for all parameters: 0.08 ms per step against 0.22 ms (8 px head)
+        return torch.optim.Adam(groups, fused=True)
+    except (RuntimeError, ValueError):  # a device or dtype without the fused kernel
+        return torch.optim.Adam(groups)
+
+
+def adam_step(opt: torch.optim.Optimizer) -> None:
+    """``opt.step()``; for a plain fused Adam, its fused kernel called directly.
+
+    ``Optimizer.step`` and the functional ``torch.optim.adam.adam`` spend
+    ~0.1 ms of Python per call (hooks, profiler record, lazy state checks,
+    grouping by device) around one fused kernel per parameter group (measured
+    in a step at 1 px, 32x32, batch 64: 0.16 ms through ``adam``, 0.09 ms
+    direct, of a 1.2 ms step). Here the step counters are advanced and
+    ``torch._fused_adam_`` -- the op ``torch.optim.Adam(fused=True)`` itself
+    calls -- runs on the optimiser's own state tensors: bit-identical, state
+    and ``state_dict`` unchanged. Anything else -- other optimisers or
+    options, a torch without the op, parameters of mixed device or dtype, a
+    parameter without a gradient or without state yet (the first step) --
+    goes through ``opt.step()``. Step hooks are not called.
+    """
+    groups = opt.param_groups
+    fused = getattr(torch, "_fused_adam_", None)
+    if fused is None or type(opt) is not torch.optim.Adam or not all(map(_plain_fused, groups)):
+        opt.step()
+        return
+    state = opt.state
+    if any(p.grad is None or p not in state for g in groups for p in g["params"]):
+        opt.step()
+        return
+    with torch.no_grad():
+        for g in groups:
+            params = g["params"]
+            st = [state[p] for p in params]
+            steps = [s["step"] for s in st]
+            beta1, beta2 = g["betas"]
+            torch._foreach_add_(steps, 1)
+            fused(
+                params, [p.grad for p in params], [s["exp_avg"] for s in st],
+                [s["exp_avg_sq"] for s in st], [], steps, amsgrad=False, lr=g["lr"],
+                beta1=beta1, beta2=beta2, weight_decay=0.0, eps=g["eps"], maximize=False,
+            )  # fmt: skip
+
+
+def _plain_fused(group: Mapping[str, Any]) -> bool:
+    """A fused Adam group on one device and dtype, without amsgrad, weight decay, etc."""
+    params = group["params"]
+    return (
+        bool(group["fused"])
+        and not (
+            group["amsgrad"] or group["weight_decay"] or group["maximize"]
+            or group["capturable"] or group["differentiable"]
+            or group["decoupled_weight_decay"] or isinstance(group["lr"], torch.Tensor)
+        )
+        and len({(p.device, p.dtype) for p in params}) == 1
+    )  # fmt: skip
+
+
+def train_step(
+    model: Model,
+    source: DatasetBatches | RenderedBatches,
+    opt: torch.optim.Optimizer,
+    generator: torch.Generator,
+    gain_range: tuple[float, float],
+) -> torch.Tensor:
+    """One optimisation step of :func:`train_model` (Adam on the task loss); the loss, detached.
+
+    A batch, a random global gain per sample (augmentation), the camera with
+    sensor noise, the loss, backward, the optimiser, and the projection of the
+    mask logits (a saturated mask must be able to move back).
+    """
+    batch = source.next(generator)
+    gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
+    out = model(**batch.inputs(), gain=gain, noise=True, generator=generator)
+    loss, _ = task_loss(model.head, out, batch.labels)
+    for group in opt.param_groups:  # zero_grad(set_to_none=True) without its overhead
+        for p in group["params"]:
+            p.grad = None
+    loss.backward()
+    adam_step(opt)
+    if isinstance(model, MincamCamera):
+        model.project_logits_()
+    return loss.detach()

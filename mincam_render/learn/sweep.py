@@ -1,0 +1,185 @@
+"""Sweeps: minimalist cameras and baselines trained at several pixel counts; error vs pixels."""
+
+from __future__ import annotations
+
+import functools
+import json
+import logging
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
+from mincam_render.learn.evaluation import evaluate
+from mincam_render.learn.loop import TrainResult, train_model
+from mincam_render.learn.models import Model
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.training_data import TrainingData
+
+log = logging.getLogger(__name__)
+
+
+def _parse_grid(g: Any) -> tuple[int, int]:
+    if isinstance(g, str):
+        r, c = g.lower().split("x")
+        return int(r), int(c)
+    if isinstance(g, int):
+        return g, g
+    return int(g[0]), int(g[1])
+
+
+def default_pixel_counts(num_detectors: int) -> list[int]:
+    """Pixel counts of a sweep: 1, 2, 4, ... up to ``num_detectors`` (and it, if not a power)."""
+    out = [1 << i for i in range(num_detectors.bit_length()) if 1 << i <= num_detectors]
+    return out if out[-1] == num_detectors else [*out, num_detectors]
+
+
+def sweep(
+    train: TrainingData,
+    val: TrainingData,
+    test: TrainingData,
+    *,
+    pixel_counts: Sequence[int] | None = None,
+    baseline_grids: Sequence[Any] = ((1, 1), (2, 2), (4, 4), (8, 8), (16, 16)),
+    config: TrainConfig = TrainConfig(),
+    out_dir: str | os.PathLike | None = None,
+    progress: bool = False,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Train minimalist cameras and baselines at several pixel counts; error vs pixels.
+
+    ``pixel_counts`` None: :func:`default_pixel_counts` of the rendered detectors.
+    Every model gets the same ``config`` (equal training budget). With
+    ``out_dir``, each run trains in ``out_dir/<name>/`` (resumable) and
+    ``sweep.json``, ``sweep.md`` and ``sweep.png`` (log-x axis) are written.
+    """
+    rows: list[dict[str, Any]] = []
+    out = Path(out_dir) if out_dir is not None else None
+    jobs = _sweep_jobs(train, pixel_counts, baseline_grids, config)
+    for name, make in jobs:
+        model = make()
+        res = train_model(
+            model,
+            train,
+            val,
+            config,
+            out_dir=(out / name) if out is not None else None,
+            progress=progress,
+            desc=name,
+        )
+        metrics = evaluate(model, test)
+        row = _sweep_row(name, model, res, metrics, len(train))
+        rows.append(row)
+        if on_result is not None:
+            on_result(row)
+        log.info(
+            "%s: %s = %.4g after %d steps (%.1f s)",
+            name,
+            metrics["error_name"],
+            metrics["error"],
+            res.steps,
+            res.wall_time_s,
+        )
+    if out is not None:
+        write_sweep(rows, out, title=str(train.source.get("family", "")))
+    return rows
+
+
+def _sweep_jobs(
+    train: TrainingData,
+    pixel_counts: Sequence[int] | None,
+    baseline_grids: Sequence[Any],
+    config: TrainConfig,
+) -> list[tuple[str, Callable[[], Model]]]:
+    """``(name, build the camera)`` of every camera of a sweep, minimalist cameras first."""
+    jobs: list[tuple[str, Callable[[], Model]]] = []
+    for k in pixel_counts or default_pixel_counts(train.transport.shape[1]):
+        jobs.append(
+            (
+                f"mincam_{k}px",
+                functools.partial(
+                    build_mincam, train, k, count_loss=config.count_loss, seed=config.seed
+                ),
+            )
+        )
+    for g in baseline_grids:
+        grid = _parse_grid(g)
+        jobs.append(
+            (
+                f"baseline_{grid[0]}x{grid[1]}",
+                functools.partial(
+                    build_baseline, train, grid, count_loss=config.count_loss, seed=config.seed
+                ),
+            )
+        )
+    return jobs
+
+
+def _sweep_row(
+    name: str, model: Model, res: TrainResult, metrics: dict[str, Any], train_samples: int
+) -> dict[str, Any]:
+    """A sweep row: the camera, its test error and metrics, its training."""
+    return {
+        "name": name,
+        **describe_model(model),
+        "error": metrics["error"],
+        "error_name": metrics["error_name"],
+        "metrics": metrics,
+        "steps": res.steps,
+        "best_step": res.best_step,
+        "train_wall_time_s": res.wall_time_s,
+        "train_samples": train_samples,
+    }
+
+
+def sweep_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """A Markdown table of sweep rows."""
+    lines = [
+        "| camera | pixels | test error | steps | train time (s) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['name']} | {r['pixels']} | {r['error']:.4f} | {r['steps']} | "
+            f"{r['train_wall_time_s']:.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def write_sweep(
+    rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike, title: str = ""
+) -> dict[str, Path]:
+    """Write ``sweep.json``, ``sweep.md`` and ``sweep.png`` (error vs pixel count, log x)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.json").write_text(json.dumps(list(rows), indent=2, default=str))
+    (out / "sweep.md").write_text(sweep_table(rows) + "\n")
+    plot_sweep(rows, out / "sweep.png", title)
+    return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}
+
+
+def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, title: str = "") -> None:
+    """Save test error vs pixel count (log x) of sweep rows ``{"kind", "pixels", "error"}``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    for kind, style, label in (
+        ("mincam", "o-", "minimalist camera"),
+        ("baseline", "s--", "baseline camera"),
+    ):
+        pts = sorted((r["pixels"], r["error"]) for r in rows if r["kind"] == kind)
+        if pts:
+            ax.plot(*zip(*pts, strict=True), style, label=label)
+    ax.set_xscale("log", base=2)
+    ax.set_xlabel("pixel count")
+    ax.set_ylabel(rows[0]["error_name"] if rows else "test error")
+    ax.set_title(f"{title} test error vs pixel count".strip())
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)

@@ -1,0 +1,385 @@
+"""Training data: one contiguous split of transport images and labels, and its batches.
+
+:class:`TrainingData` holds a split (from a dataset on disk, rendered in memory,
+or concatenated episodes) and draws samples from it without per-sample Python:
+static samples are one gather of frames; temporal samples gather the union of
+their windows' frames once (:meth:`TrainingData.sample`), or, when a batch's
+windows cover most frames, index every stored frame in place
+(:meth:`TrainingData.sample_all_frames`). Batches are gathered into one reused
+buffer (:class:`GatherBuffer`); float16 data that fits in RAM is widened to
+float32 once. Arrays are numpy unless a docstring says torch.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import torch
+
+from mincam_render.core.labels import LabelSpec
+from mincam_render.optics.camera import FreeformCamera
+
+#: Float16 transport is widened once to float32 in RAM up to this size (bytes of
+#: the float32 copy, 2 GiB): 10,000 frames of 8 detectors at 64x64 take 1.3 GB.
+WIDEN_MAX_BYTES = 2 * 2**30
+
+
+@dataclass
+class TrainingData:
+    """One contiguous split: transport images, labels and what produced them.
+
+    Args:
+        transport: ``T[frame, detector, row, col]`` (W), numpy or memmap, float32;
+            or with ``scales`` the stored values ``T / scale`` (float16 or float32,
+            as :func:`mincam_render.render.precision.encode_transport` writes them).
+        labels: ``{name: [frame, size]}`` float32, physical units.
+        label_specs: the task's labels.
+        camera: the camera the transport was rendered for.
+        fps: frame rate (1/s), for the temporal median filter.
+        history: frames per sample (1 = static; 30 for traffic).
+        source: provenance (dataset path, split, family, seed) for sidecars.
+        scales: ``[frame]`` factor from ``transport`` to watts; None: already watts.
+
+    """
+
+    transport: np.ndarray
+    labels: dict[str, np.ndarray]
+    label_specs: tuple[LabelSpec, ...]
+    camera: FreeformCamera
+    fps: float
+    history: int = 1
+    source: dict[str, Any] = field(default_factory=dict)
+    scales: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.transport.ndim != 4:
+            raise ValueError(
+                f"transport has shape {self.transport.shape}: expected (frame, detector, row, col)"
+            )
+        n = len(self.transport)
+        for s in self.label_specs:
+            if s.name not in self.labels:
+                raise ValueError(f"labels lack {s.name!r}; have {sorted(self.labels)}")
+            if self.labels[s.name].shape != (n, s.size):
+                raise ValueError(
+                    f"labels[{s.name!r}] has shape {self.labels[s.name].shape}; "
+                    f"expected ({n}, {s.size})"
+                )
+        if not self.fps > 0:
+            raise ValueError(f"fps = {self.fps!r} 1/s: need a positive frame rate")
+        if not 1 <= self.history <= n:
+            raise ValueError(f"history = {self.history}: need 1 <= history <= frames ({n})")
+        if self.scales is not None and np.shape(self.scales) != (n,):
+            raise ValueError(f"scales has shape {np.shape(self.scales)}; expected ({n},)")
+
+    def __getstate__(self) -> dict:
+        # torch views of a memory map are rebuilt where the data is unpickled
+        return {k: v for k, v in self.__dict__.items() if k != "_torch"}
+
+    def _tensors(self) -> tuple[torch.Tensor, torch.Tensor | None, dict[str, torch.Tensor]]:
+        """Torch tensors of the stored frames, scales and labels, made once.
+
+        Float32 frames are a view (no copy). Float16 frames are widened once to a
+        float32 copy in RAM when it takes at most :data:`WIDEN_MAX_BYTES`: every
+        batch is then one float32 gather, not a gather and a conversion pass.
+        Larger float16 data stays a view of its memory map.
+        """
+        cached = self.__dict__.get("_torch")
+        if cached is None:
+            t = np.asarray(self.transport)
+            if t.dtype != np.float32 and (t.dtype != np.float16 or t.size * 4 <= WIDEN_MAX_BYTES):
+                t = t.astype(np.float32)  # exact: every float16 is a float32
+            with warnings.catch_warnings():  # read-only memory maps: never written to
+                warnings.filterwarnings("ignore", "The given NumPy array is not writable")
+                frames = torch.from_numpy(np.ascontiguousarray(t))
+            scales = None
+            if self.scales is not None:
+                scales = torch.from_numpy(np.asarray(self.scales, np.float32).copy())
+            labels = {
+                k: torch.from_numpy(np.ascontiguousarray(v, np.float32))
+                for k, v in self.labels.items()
+            }
+            cached = self.__dict__["_torch"] = (frames, scales, labels)
+        return cached
+
+    def frames_w(self, index: torch.Tensor) -> torch.Tensor:
+        """``T[i, detector, row, col]`` float32 (W) of frames ``index`` (long), torch.
+
+        One ``index_select`` of the stored frames; the per-frame scale (and the
+        float16 -> float32 conversion) is a single multiply into the output.
+        """
+        frames, scales, _ = self._tensors()
+        x = frames.index_select(0, index)
+        if scales is not None:
+            return torch.mul(x, scales.index_select(0, index).reshape(-1, 1, 1, 1))
+        return x if x.dtype == torch.float32 else x.float()
+
+    def frames_np(self, start: int, stop: int) -> np.ndarray:
+        """``T[frame, detector, row, col]`` float32 (W) of frames ``[start, stop)`` (numpy)."""
+        return self.frames_w(torch.arange(start, min(stop, len(self.transport)))).numpy()
+
+    def __len__(self) -> int:
+        """Number of samples (frames with a full history)."""
+        return len(self.transport) - self.history + 1
+
+    @classmethod
+    def from_dataset(cls, ds: Any, split: str) -> TrainingData:
+        """A split of a dataset opened with ``mincam_render.data.dataset.open_dataset``."""
+        if split not in ds.splits:
+            raise ValueError(f"split {split!r} not in the dataset; have {sorted(ds.splits)}")
+        check = getattr(ds, "check_intact", None)
+        if check is not None:  # never train on a shard that fails its checksums
+            check()
+        family = getattr(ds, "family", None)
+        name = family if isinstance(family, str) else getattr(family, "name", "")
+        if isinstance(family, str):
+            from mincam_render.scenes.registry import family_class
+
+            try:
+                needs = family_class(family).needs_history
+            except Exception:  # unknown or not yet importable family: a static task
+                needs = False
+        else:
+            needs = getattr(family, "needs_history", False)
+        history = 30 if needs else 1
+        labels = {k: np.asarray(v, np.float32) for k, v in ds.labels(split).items()}
+        stored, scales = ds.stored_transport(split)
+        return cls(
+            transport=stored,
+            scales=scales,
+            labels=labels,
+            label_specs=tuple(ds.label_specs),
+            camera=ds.camera,
+            fps=float(ds.fps),
+            history=getattr(ds, "history", history),
+            source={
+                "dataset": str(getattr(ds, "path", "")),
+                "split": split,
+                "range": list(ds.splits[split]),
+                "family": name,
+            },
+        )
+
+    @classmethod
+    def render(
+        cls,
+        family: Any,
+        frames: Sequence[int],
+        *,
+        camera: FreeformCamera | None = None,
+        spp: int = 4,
+        seed: int = 0,
+        progress: bool = False,
+    ) -> TrainingData:
+        """Render ``frames`` of a scene family in memory (no dataset on disk)."""
+        from tqdm import tqdm
+
+        from mincam_render.render.transport import render_transport
+
+        cam = camera or family.camera()
+        scene = family.build_scene()
+        ts: list[np.ndarray] = []
+        labs: dict[str, list] = {s.name: [] for s in family.labels}
+        for i in tqdm(list(frames), desc=f"render {family.name}", disable=not progress):
+            lab = family.set_frame(scene, int(i))
+            ts.append(render_transport(scene, cam, spp=spp, seed=seed * 1_000_003 + int(i)))
+            for s in family.labels:
+                labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
+        return cls(
+            transport=np.stack(ts).astype(np.float32),
+            labels={k: np.stack(v) for k, v in labs.items()},
+            label_specs=tuple(family.labels),
+            camera=cam,
+            fps=float(family.fps),
+            history=30 if family.needs_history else 1,
+            source={
+                "family": family.name,
+                "seed": family.seed,
+                "spp": spp,
+                "frames": [int(frames[0]), int(frames[-1]) + 1] if len(frames) else [],
+            },
+        )
+
+    @classmethod
+    def concat(cls, parts: Sequence[TrainingData]) -> TrainingData:
+        """Several static episodes as one training set (a copy of their stored frames).
+
+        Raises:
+            ValueError: no parts, temporal data (windows would cross episode
+                boundaries), or parts of other cameras, labels, frame rates or storage.
+        """
+        if not parts:
+            raise ValueError("concat: no episodes given")
+        first = parts[0]
+        if len(parts) == 1:
+            return first
+        if any(p.history != 1 for p in parts):
+            raise ValueError(
+                "concat: temporal data (history > 1) would get windows across episode "
+                "boundaries; train on one episode (--train-episodes 1)"
+            )
+        for p in parts[1:]:
+            same = (p.camera, p.label_specs, p.fps, p.transport.dtype, p.scales is None)
+            if same != (first.camera, first.label_specs, first.fps, first.transport.dtype,
+                        first.scales is None):  # fmt: skip
+                raise ValueError(
+                    f"concat: episode {p.source} differs from {first.source} in camera, labels, "
+                    "frame rate or storage"
+                )
+        return replace(
+            first,
+            transport=np.concatenate([np.asarray(p.transport) for p in parts]),
+            labels={k: np.concatenate([p.labels[k] for p in parts]) for k in first.labels},
+            scales=None if first.scales is None else np.concatenate([p.scales for p in parts]),
+            source={"episodes": [p.source for p in parts]},
+        )
+
+    def subset(self, start: int, stop: int, name: str = "") -> TrainingData:
+        """Frames ``[start, stop)`` as a new split (contiguous in time)."""
+        src = dict(self.source, split=name or self.source.get("split", ""), range=[start, stop])
+        return replace(
+            self,
+            transport=self.transport[start:stop],
+            labels={k: v[start:stop] for k, v in self.labels.items()},
+            source=src,
+            scales=None if self.scales is None else self.scales[start:stop],
+        )
+
+    def split(self, fractions: Sequence[float] = (0.7, 0.1, 0.2)) -> tuple[TrainingData, ...]:
+        """Contiguous train/val/test segments in the given proportions."""
+        n = len(self.transport)
+        edges = np.round(np.cumsum([0.0, *fractions]) / sum(fractions) * n).astype(int)
+        names = ("train", "val", "test", "extra")
+        pairs = zip(edges[:-1], edges[1:], strict=True)
+        return tuple(self.subset(int(a), int(b), names[i]) for i, (a, b) in enumerate(pairs))
+
+    def target_stats(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Mean and standard deviation of every label (for the head's standardisation)."""
+        mean = {k: v.mean(axis=0) for k, v in self.labels.items()}
+        std = {k: v.std(axis=0) for k, v in self.labels.items()}
+        return mean, std
+
+    def batch(self, index: np.ndarray) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Samples ``index`` (numpy ints) -> ``(T[b, history, K, R, C], labels)`` (torch).
+
+        Every window's frames stacked (copies shared frames); training and
+        evaluation use :meth:`sample`, which does not.
+        """
+        b = self.sample(torch.as_tensor(np.asarray(index, dtype=np.int64)))
+        t = b.transport
+        if b.frame_scales is not None:
+            t = t * b.frame_scales.reshape(-1, 1, 1, 1)
+        if b.windows is None:
+            return t[:, None], b.labels
+        t = t.index_select(0, b.windows.reshape(-1))
+        return t.reshape(*b.windows.shape, *t.shape[1:]), b.labels
+
+    def sample(self, index: torch.Tensor, buffer: GatherBuffer | None = None) -> Batch:
+        """Samples ``index`` (torch long ``[b]``) as a :class:`Batch`, without per-sample Python.
+
+        Static data: the ``b`` frames (one gather). Temporal data: the sorted union
+        of the frames of all windows and ``windows[b, history]`` indices into it,
+        so every frame is gathered (and later measured) once per batch.
+
+        Args:
+            index: ``[b]`` first frame of each sample (torch long).
+            buffer: gather the frames into this reused float32 buffer (the
+                batch's transport is then valid until the buffer's next use);
+                None: a new tensor.
+
+        """
+        stored, scales, labels = self._tensors()
+        last = index if self.history == 1 else index + (self.history - 1)
+        y = {k: v.index_select(0, last) for k, v in labels.items()}
+        windows = None
+        if self.history > 1:
+            frames = index[:, None] + torch.arange(self.history)
+            index, windows = torch.unique(frames, sorted=True, return_inverse=True)
+        t = _gather(stored, index, buffer)
+        s = None if scales is None else scales.index_select(0, index)
+        return Batch(t, windows, y, s)
+
+    def sample_all_frames(self, index: torch.Tensor) -> Batch:
+        """Temporal samples ``index`` over every stored frame: no union, no gather.
+
+        The batch's transport is the stored float32 frames themselves (a view)
+        and ``windows[b, history]`` index them directly, so the camera measures
+        each frame once, in place. Worth it when a batch's windows cover most
+        frames (:class:`DatasetBatches` decides); needs float32 storage.
+        """
+        stored, scales, labels = self._tensors()
+        if stored.dtype != torch.float32 or self.history == 1:
+            return self.sample(index)
+        y = {k: v.index_select(0, index + (self.history - 1)) for k, v in labels.items()}
+        windows = index[:, None] + torch.arange(self.history)
+        return Batch(stored, windows, y, scales)
+
+
+def _gather(stored: torch.Tensor, index: torch.Tensor, buffer: GatherBuffer | None) -> torch.Tensor:
+    """``stored[index]`` as float32 ``T[i, detector, row, col]``: one gather (torch)."""
+    if buffer is None:
+        t = stored.index_select(0, index)
+        return t if t.dtype == torch.float32 else t.float()
+    out = buffer.rows(len(index), stored.shape[1:], stored.device)
+    if stored.dtype == torch.float32:
+        return torch.index_select(stored, 0, index, out=out)
+    return out.copy_(stored.index_select(0, index))
+
+
+class GatherBuffer:
+    """A float32 buffer ``T[row, detector, row, col]`` that batches are gathered into, reused.
+
+    A new batch-sized tensor at every step costs more than filling it once it
+    reaches glibc's largest mmap threshold (32 MiB: 8 detectors, 64x64 masks,
+    batch 256): the kernel hands out fresh zeroed pages, one fault per 4 KiB,
+    and takes them back when the batch is freed (measured: 31 ms of a 31 ms step
+    against 8 ms). Reusing one buffer keeps the
+    pages. A batch gathered into it is overwritten by the next gather; a graph
+    that still holds the old one fails loudly in backward (autograd's version
+    counter), never silently.
+    """
+
+    def __init__(self) -> None:
+        self._t: torch.Tensor | None = None
+
+    def rows(self, n: int, shape: torch.Size, device: torch.device) -> torch.Tensor:
+        """The first ``n`` rows, ``[n, *shape]`` float32, contiguous (grown when needed)."""
+        t = self._t
+        if t is None or len(t) < n or t.shape[1:] != shape or t.device != device:
+            t = self._t = torch.empty((n, *shape), dtype=torch.float32, device=device)
+        return t if len(t) == n else t[:n]
+
+
+@dataclass(frozen=True)
+class Batch:
+    """Training samples (torch).
+
+    Args:
+        transport: ``T[frame, detector, row, col]`` (W) of the frames that
+            ``windows`` index; with ``windows`` None, ``T[batch, (time,) K, R, C]``.
+        windows: ``[batch, history]`` long indices into ``transport``, or None.
+        labels: ``{name: [batch, size]}`` physical labels.
+        frame_scales: ``[frame]`` factor from ``transport`` to watts, or None.
+
+    """
+
+    transport: torch.Tensor
+    windows: torch.Tensor | None
+    labels: dict[str, torch.Tensor]
+    frame_scales: torch.Tensor | None = None
+
+    def inputs(self) -> dict[str, Any]:
+        """Keyword arguments of a camera's ``forward`` / ``measure`` for this batch."""
+        return {
+            "transport": self.transport,
+            "windows": self.windows,
+            "frame_scales": self.frame_scales,
+        }
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return len(self.transport) if self.windows is None else len(self.windows)
