@@ -330,14 +330,15 @@ class _Bench:
             point: ``cam`` has a point detector: rescale to the real diode's area.
             warm_up: render one frame only (enough to compile the kernels).
         """
-        from mincam_render.render.transport import render_transport
-
         k = self.camera.num_detectors
         out = []
         for i in self.frames[:1] if warm_up else self.frames:
             self.family.set_frame(self.scene, i)
             seed = (self.cfg.seed * 1_000_003 + i * 7919 + seed_offset * 104_729) % 2**63
-            t = render_transport(self.scene, cam, spp=spp, seed=seed, max_depth=max_depth)
+            # the family's estimator (sun-patch sampling indoors), as datasets render
+            t = self.family.render_transport(
+                self.scene, cam, spp=spp, seed=seed, max_depth=max_depth
+            )
             if point:
                 # power scales with detector area: rescale to the real diode's
                 t = t * np.float32((self.camera.detector_size_m / POINT_DETECTOR_SIZE_M) ** 2)

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 
 from mincam_render.render import mitsuba_scene as ms
-from mincam_render.render.transport import render_transport
 from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
@@ -80,7 +79,7 @@ def render_preview(
         views = [
             np.asarray(mi.render(scene, sensor=cam_sensor, spp=spp, seed=index))[..., 0],
             np.asarray(mi.render(scene, sensor=bird_sensor, spp=spp, seed=index))[..., 0],
-            render_transport(scene, camera, spp=transport_spp, seed=index)[0],
+            family.render_transport(scene, camera, spp=transport_spp, seed=index)[0],
         ]
         rendered.append((index, labels, views))
     # one exposure per column for all frames, so brightness changes stay visible

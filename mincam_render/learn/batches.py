@@ -91,8 +91,6 @@ class RenderedBatches:
 
     def next(self, generator: torch.Generator) -> Batch:
         """Render one :class:`Batch` (``T[b, history, K, R, C]``, torch)."""
-        from mincam_render.render.transport import render_transport
-
         if self._scene is None:
             self._scene = self.family.build_scene()
         n_needed = self.batch_size * self.history
@@ -107,8 +105,8 @@ class RenderedBatches:
             for h in range(self.history):
                 i = self.next_frame + b * self.history + h
                 lab = self.family.set_frame(self._scene, i)
-                ts.append(
-                    render_transport(
+                ts.append(  # the family's estimator, as its datasets are rendered
+                    self.family.render_transport(
                         self._scene, self.camera, spp=self.spp, seed=self.seed * 1_000_003 + i
                     )
                 )

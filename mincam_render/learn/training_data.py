@@ -178,15 +178,14 @@ class TrainingData:
         """Render ``frames`` of a scene family in memory (no dataset on disk)."""
         from tqdm import tqdm
 
-        from mincam_render.render.transport import render_transport
-
         cam = camera or family.camera()
         scene = family.build_scene()
         ts: list[np.ndarray] = []
         labs: dict[str, list] = {s.name: [] for s in family.labels}
         for i in tqdm(list(frames), desc=f"render {family.name}", disable=not progress):
             lab = family.set_frame(scene, int(i))
-            ts.append(render_transport(scene, cam, spp=spp, seed=seed * 1_000_003 + int(i)))
+            # the family's estimator, as its datasets are rendered
+            ts.append(family.render_transport(scene, cam, spp=spp, seed=seed * 1_000_003 + int(i)))
             for s in family.labels:
                 labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
         return cls(

@@ -35,7 +35,6 @@ def simulate_volts(
     from tqdm import tqdm
 
     from mincam_render.optics.sensor import detector_voltage
-    from mincam_render.render.transport import render_transport
 
     scene = family.build_scene()
     cache: dict[int, np.ndarray] = {}
@@ -45,7 +44,8 @@ def simulate_volts(
         i = int(i)
         if i not in cache:
             family.set_frame(scene, i)
-            t = render_transport(scene, camera, spp=spp, seed=_frame_seed(seed, i, stream))
+            # the family's estimator, as its datasets are rendered (sun-patch sampling)
+            t = family.render_transport(scene, camera, spp=spp, seed=_frame_seed(seed, i, stream))
             cache[i] = np.einsum("prc,prc->p", t[pixels].astype(np.float64), masks)
         power[n] = cache[i]
     volts = detector_voltage(torch.from_numpy(power), camera.electronics, noise=False).numpy()
