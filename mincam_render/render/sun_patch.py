@@ -90,6 +90,117 @@ def find_sun(scene: mi.Scene) -> mi.Emitter | None:
     return suns[0] if suns else None
 
 
+def _emission_hit(scene, si, si_prev, pdf_prev, delta_prev, beta, active) -> mi.Spectrum:
+    """Emitters hit by the BSDF-sampled ray (area lights, the sky), weighed against NEE.
+
+    Args:
+        scene: the scene.
+        si: the vertex the ray found.
+        si_prev: the vertex it left from.
+        pdf_prev: its solid-angle density at ``si_prev``.
+        delta_prev: whether it was sampled from a delta lobe (no NEE to weigh against).
+        beta: path throughput up to ``si_prev``.
+        active: live lanes.
+
+    Returns:
+        The contribution to ``L`` (W m^-2 sr^-1).
+    """
+    ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
+    em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~delta_prev)
+    return beta * _power_heuristic(pdf_prev, em_pdf) * ds.emitter.eval(si, active)
+
+
+def _next_event(scene, sampler, ctx, si, bsdf, beta, smooth, sun) -> mi.Spectrum:
+    """Next event estimation at ``si`` on one of the scene's emitters other than ``sun``.
+
+    Args:
+        scene: the scene.
+        sampler: draws one 2D sample.
+        ctx: BSDF context.
+        si: the vertex.
+        bsdf: its BSDF.
+        beta: path throughput up to ``si``.
+        smooth: lanes whose BSDF at ``si`` can be evaluated.
+        sun: the scene's sun (sampled apart at every vertex), or None.
+
+    Returns:
+        The contribution to ``L`` (W m^-2 sr^-1).
+    """
+    ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, smooth)
+    active_em = smooth & (ds_em.pdf != 0.0)
+    if sun is not None:
+        # the sun is sampled apart at every vertex; a pick of it here
+        # (possible unless run in sun_sampled_apart) adds nothing
+        active_em &= ds_em.emitter != mi.EmitterPtr(sun)
+    f_em, pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), active_em)
+    mis_em = dr.select(ds_em.delta, 1.0, _power_heuristic(ds_em.pdf, pdf_em))
+    return dr.select(active_em, beta * mis_em * f_em * em_weight, 0.0)
+
+
+def _patch_connection(
+    scene, sampler, ctx, si, bsdf, beta, sun_sample, patch_here, window, area_w
+) -> mi.Spectrum:
+    """Patch strategy: a sunlit point ``y`` found from the window, connected to ``si``.
+
+    Args:
+        scene: the scene.
+        sampler: draws one 2D sample (the point on the window).
+        ctx: BSDF context.
+        si: the vertex ``x``.
+        bsdf: its BSDF.
+        beta: path throughput up to ``si``.
+        sun_sample: ``(s, E, cos_w)``: unit vector toward the sun, its
+            irradiance normal to the beam (W m^-2), ``s . n`` of the window.
+        patch_here: lanes that try the strategy.
+        window: ``(corner, edge_u, edge_v)`` of the window (m, world).
+        area_w: the window's area (m^2).
+
+    Returns:
+        The contribution to ``L`` (W m^-2 sr^-1), weighed against BSDF sampling at ``x``.
+    """
+    (s, sun_irr, cos_w), (c_win, eu_win, ev_win) = sun_sample, window
+    xi = sampler.next_2d()
+    w = c_win + eu_win * xi.x + ev_win * xi.y
+    beam = mi.Ray3f(w + s * 1e-4, -s)
+    si_y = scene.ray_intersect(beam, patch_here)
+    to_y = si_y.p - si.p
+    r2 = dr.squared_norm(to_y)
+    d_xy = to_y * dr.rsqrt(r2)
+    ok = patch_here & si_y.is_valid() & (dr.dot(si_y.n, s) != 0.0)
+    f_x, pdf_x = bsdf.eval_pdf(ctx, si, si.to_local(d_xy), ok)
+    f_y = si_y.bsdf(beam).eval(ctx, si_y, si_y.to_local(-d_xy), ok)
+    ok &= dr.max(mi.unpolarized_spectrum(f_x * f_y)) > 0.0
+    ok &= ~scene.ray_test(si.spawn_ray_to(si_y.p), ok)
+    ok &= ~scene.ray_test(si_y.spawn_ray(s), ok)  # nothing outside shades y
+    p_patch_y = dr.abs(dr.dot(si_y.n, s)) / (area_w * cos_w)
+    p_bsdf_y = pdf_x * dr.abs(dr.dot(si_y.n, d_xy)) / r2
+    w_patch = _power_heuristic(p_patch_y, p_bsdf_y)
+    contrib = beta * f_x * f_y * sun_irr * (area_w * cos_w / r2)
+    return dr.select(ok, contrib * w_patch, 0.0)
+
+
+def _russian_roulette(sampler, beta, depth, rr_depth, active_next) -> mi.Bool:
+    """Russian roulette, as Mitsuba's path tracer: ends paths, rescales ``beta`` in place.
+
+    Args:
+        sampler: draws one 1D sample.
+        beta: path throughput (scaled by ``1 / p`` where the path survives roulette).
+        depth: the vertex's depth.
+        rr_depth: depth from which roulette may end paths.
+        active_next: lanes that would continue.
+
+    Returns:
+        Lanes that continue.
+    """
+    beta_max = dr.max(mi.unpolarized_spectrum(beta))
+    active_next &= beta_max != 0.0
+    rr_prob = dr.minimum(beta_max, 0.95)
+    rr_active = depth >= rr_depth
+    beta[rr_active] *= dr.rcp(rr_prob)
+    active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
+    return active_next
+
+
 class SunPatchPathIntegrator:
     """Path tracer with sunlit-patch connections through one window rectangle.
 
@@ -181,6 +292,35 @@ class SunPatchPathIntegrator:
         inside = active & (cos_w > 1e-6) & (t > 0) & (a >= 0) & (a <= 1) & (b >= 0) & (b <= 1)
         return dr.select(inside, dr.abs(dr.dot(n_y, sun_d)) / (self.area_m2 * cos_w), 0.0)
 
+    def _sun_direct(
+        self, scene, ctx, si, bsdf, ray, s, sun_irr, beta, pdf_prev, patch_prev, smooth
+    ) -> mi.Spectrum:
+        """The sun at vertex ``si``, weighed against the previous vertex's patch strategy.
+
+        Args:
+            scene: the scene (for the shadow ray).
+            ctx: BSDF context.
+            si: the vertex.
+            bsdf: its BSDF.
+            ray: the ray that found ``si``.
+            s: unit vector toward the sun.
+            sun_irr: the sun's irradiance normal to its beam (W m^-2).
+            beta: path throughput up to ``si``.
+            pdf_prev: solid-angle density of ``ray`` at the previous vertex.
+            patch_prev: whether the previous vertex tried the patch strategy.
+            smooth: lanes whose BSDF at ``si`` can be evaluated.
+
+        Returns:
+            The contribution to ``L`` (W m^-2 sr^-1), 0 where ``si`` is shaded.
+        """
+        f_s = bsdf.eval(ctx, si, si.to_local(s), smooth)
+        lit = smooth & (dr.max(mi.unpolarized_spectrum(f_s)) > 0.0)
+        lit &= ~scene.ray_test(si.spawn_ray(s), lit)
+        p_patch = self._patch_density(si.p, si.n, s, lit & patch_prev)
+        p_bsdf = pdf_prev * dr.abs(dr.dot(si.n, ray.d)) / dr.square(si.t)
+        w_sun = dr.select(p_patch > 0.0, _power_heuristic(p_bsdf, p_patch), 1.0)
+        return dr.select(lit, beta * w_sun * f_s * sun_irr, 0.0)
+
     @dr.syntax
     def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active=True, **kwargs):
         """Radiance (W m^-2 sr^-1) arriving along ``ray``: ``(L, valid, [])``.
@@ -188,6 +328,12 @@ class SunPatchPathIntegrator:
         The sun is sampled at every vertex, apart from the scene's choice of
         one emitter; run inside :func:`sun_sampled_apart` so that this choice
         does not waste samples on the sun.
+
+        The loop body stays in this method and calls its steps in the order the
+        kernel records them: ``dr.syntax`` makes the loop state of the names the
+        body uses that exist before the loop (the window, depths, ``sun``...),
+        so each is still named here, and moving one into a helper would change
+        the symbolic loop.
         """
         ctx = mi.BSDFContext()
         sun = find_sun(scene)
@@ -213,63 +359,26 @@ class SunPatchPathIntegrator:
             si = scene.ray_intersect(ray, active)
             valid |= active & si.is_valid()
             bsdf = si.bsdf(ray)
-
-            # emitters hit by the BSDF-sampled ray (area lights, the sky)
-            ds = mi.DirectionSample3f(scene, si=si, ref=si_prev)
-            em_pdf = scene.pdf_emitter_direction(si_prev, ds, ~delta_prev)
-            L += beta * _power_heuristic(pdf_prev, em_pdf) * ds.emitter.eval(si, active)
+            L += _emission_hit(scene, si, si_prev, pdf_prev, delta_prev, beta, active)
 
             active_next = active & (depth + 1 < max_depth) & si.is_valid()
             smooth = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-
-            # next event estimation on one of the other emitters
-            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, smooth)
-            active_em = smooth & (ds_em.pdf != 0.0)
-            if dr.hint(has_sun, mode="scalar"):
-                # the sun is sampled below at every vertex; a pick of it here
-                # (possible unless run in sun_sampled_apart) adds nothing
-                active_em &= ds_em.emitter != mi.EmitterPtr(sun)
-            f_em, pdf_em = bsdf.eval_pdf(ctx, si, si.to_local(ds_em.d), active_em)
-            mis_em = dr.select(ds_em.delta, 1.0, _power_heuristic(ds_em.pdf, pdf_em))
-            L += dr.select(active_em, beta * mis_em * f_em * em_weight, 0.0)
+            L += _next_event(scene, sampler, ctx, si, bsdf, beta, smooth, sun)
 
             patch_here = mi.Bool(False)
             if dr.hint(has_sun, mode="scalar"):
                 sun_ds, sun_irr = sun.sample_direction(si, mi.Point2f(0.5, 0.5), smooth)
                 s = sun_ds.d  # toward the sun
-
-                # the sun at every vertex; weighed against the previous vertex's
-                # patch strategy, which may have found this point too
-                f_s = bsdf.eval(ctx, si, si.to_local(s), smooth)
-                lit = smooth & (dr.max(mi.unpolarized_spectrum(f_s)) > 0.0)
-                lit &= ~scene.ray_test(si.spawn_ray(s), lit)
-                p_patch = self._patch_density(si.p, si.n, s, lit & patch_prev)
-                p_bsdf = pdf_prev * dr.abs(dr.dot(si.n, ray.d)) / dr.square(si.t)
-                w_sun = dr.select(p_patch > 0.0, _power_heuristic(p_bsdf, p_patch), 1.0)
-                L += dr.select(lit, beta * w_sun * f_s * sun_irr, 0.0)
-
-                # patch strategy: a sunlit point y from the window, connected to x
+                L += self._sun_direct(
+                    scene, ctx, si, bsdf, ray, s, sun_irr, beta, pdf_prev, patch_prev, smooth
+                )
                 cos_w = dr.dot(s, n_win)
                 patch_here = smooth & (depth + 2 < max_depth) & (depth < patch_vertices)
                 patch_here &= cos_w > 1e-6
-                xi = sampler.next_2d()
-                w = c_win + eu_win * xi.x + ev_win * xi.y
-                beam = mi.Ray3f(w + s * 1e-4, -s)
-                si_y = scene.ray_intersect(beam, patch_here)
-                to_y = si_y.p - si.p
-                r2 = dr.squared_norm(to_y)
-                d_xy = to_y * dr.rsqrt(r2)
-                ok = patch_here & si_y.is_valid() & (dr.dot(si_y.n, s) != 0.0)
-                f_x, pdf_x = bsdf.eval_pdf(ctx, si, si.to_local(d_xy), ok)
-                f_y = si_y.bsdf(beam).eval(ctx, si_y, si_y.to_local(-d_xy), ok)
-                ok &= dr.max(mi.unpolarized_spectrum(f_x * f_y)) > 0.0
-                ok &= ~scene.ray_test(si.spawn_ray_to(si_y.p), ok)
-                ok &= ~scene.ray_test(si_y.spawn_ray(s), ok)  # nothing outside shades y
-                p_patch_y = dr.abs(dr.dot(si_y.n, s)) / (area_w * cos_w)
-                p_bsdf_y = pdf_x * dr.abs(dr.dot(si_y.n, d_xy)) / r2
-                w_patch = _power_heuristic(p_patch_y, p_bsdf_y)
-                contrib = beta * f_x * f_y * sun_irr * (area_w * cos_w / r2)
-                L += dr.select(ok, contrib * w_patch, 0.0)
+                L += _patch_connection(
+                    scene, sampler, ctx, si, bsdf, beta, (s, sun_irr, cos_w), patch_here,
+                    (c_win, eu_win, ev_win), area_w,
+                )  # fmt: skip
 
             # continue the path by BSDF sampling
             bs, bsdf_weight = bsdf.sample(
@@ -281,14 +390,7 @@ class SunPatchPathIntegrator:
             patch_prev = patch_here
             ray = si.spawn_ray(si.to_world(bs.wo))
             beta *= bsdf_weight
-
-            # Russian roulette, as Mitsuba's path tracer
-            beta_max = dr.max(mi.unpolarized_spectrum(beta))
-            active_next &= beta_max != 0.0
-            rr_prob = dr.minimum(beta_max, 0.95)
-            rr_active = depth >= rr_depth
-            beta[rr_active] *= dr.rcp(rr_prob)
-            active_next &= ~rr_active | (sampler.next_1d() < rr_prob)
+            active_next = _russian_roulette(sampler, beta, depth, rr_depth, active_next)
 
             depth += 1
             active = active_next

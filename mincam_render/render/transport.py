@@ -43,6 +43,7 @@ import math
 import re
 from contextlib import nullcontext
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -79,6 +80,164 @@ _COSINE_FRACTION_INDEX = 12
 _CENTERS_OFFSET = 15
 
 
+class _Board(NamedTuple):
+    """One detector's board, gathered per ray from :attr:`_PassGeometry.params` (Dr.Jit).
+
+    Attributes:
+        a_det: detector side (m).
+        w_mask: mask side (m).
+        dist: mask-to-detector distance (m).
+        right: board frame's right axis, world unit vector.
+        up: board frame's up axis, world unit vector.
+        fwd: board frame's forward axis (towards the scene), world unit vector.
+        center: the ray's detector centre, world (m).
+    """
+
+    a_det: mi.Float
+    w_mask: mi.Float
+    dist: mi.Float
+    right: mi.Vector3f
+    up: mi.Vector3f
+    fwd: mi.Vector3f
+    center: mi.Point3f
+
+
+def _param(geo: _PassGeometry, i: int) -> mi.Float:
+    """Scalar ``i`` of ``geo.params`` (a gather, so the kernel hash does not depend on it)."""
+    return dr.gather(mi.Float, geo.params, i)
+
+
+def _texel_coords(spp: int, shape: tuple[int, int, int]) -> tuple[mi.UInt32, mi.UInt32, mi.UInt32]:
+    """Texel ``(u, v, k)`` of each of the ``K*R*C*S`` rays (``shape = (K, R, C)``), S per texel."""
+    n_det, rows, cols = shape
+    idx = dr.arange(mi.UInt32, n_det * rows * cols * spp)
+    texel = idx // spp
+    u = texel % cols
+    v = (texel // cols) % rows
+    k = texel // (cols * rows)
+    return u, v, k
+
+
+def _board(geo: _PassGeometry, k: mi.UInt32) -> _Board:
+    """The board of detector ``k`` per ray (its centre with parallax, if ``geo`` has it)."""
+
+    def vec(i: int) -> mi.Vector3f:
+        return mi.Vector3f(_param(geo, i), _param(geo, i + 1), _param(geo, i + 2))
+
+    a_det, w_mask, dist = _param(geo, 0), _param(geo, 1), _param(geo, 2)
+    right, up, fwd = vec(3), vec(6), vec(9)
+    base = _CENTERS_OFFSET + 3 * k
+    center = mi.Point3f(
+        dr.gather(mi.Float, geo.params, base),
+        dr.gather(mi.Float, geo.params, base + 1),
+        dr.gather(mi.Float, geo.params, base + 2),
+    )
+    return _Board(a_det, w_mask, dist, right, up, fwd, center)
+
+
+def _mask_and_detector_points(
+    sampler: mi.Sampler,
+    geo: _PassGeometry,
+    board: _Board,
+    texel: tuple[mi.UInt32, mi.UInt32],
+    grid: tuple[int, int],
+) -> tuple[mi.Float, mi.Float, mi.Float, mi.Float, mi.Bool]:
+    """Draw ``x`` in its mask texel and ``q`` on (or, cosine-sampled, off) the detector.
+
+    Args:
+        sampler: the pass's sampler (draws 2D, 2D, 1D per ray).
+        geo: the pass geometry (the cosine-sampling fraction).
+        board: the ray's board.
+        texel: ``(u, v)``, the ray's mask texel column and row.
+        grid: ``(rows, cols)`` mask texels per detector.
+
+    Returns:
+        ``(x_s, x_t, q_s, q_t, on_detector)``: board-frame coordinates (right, up)
+        of ``x`` and ``q`` relative to the detector centre (m), and whether ``q``
+        lies on the detector.
+    """
+    (u, v), (rows, cols) = texel, grid
+    a_det, w_mask, dist = board.a_det, board.w_mask, board.dist
+    xi_x = sampler.next_2d()
+    xi_q = sampler.next_2d()
+    pick_cosine = sampler.next_1d() < _param(geo, _COSINE_FRACTION_INDEX)
+    # Board-frame coordinates (right, up) of x on the mask and q on the detector,
+    # relative to the detector centre: differences stay exact in float32.
+    x_s = (mi.Float(u) + xi_x.x) * (w_mask / cols) - 0.5 * w_mask
+    x_t = 0.5 * w_mask - (mi.Float(v) + xi_x.y) * (w_mask / rows)
+    # q: uniform on the detector, or (one-sample MIS) through a cosine-weighted
+    # direction from x, which tames d^2/r^4 when the mask is close to the diode.
+    w_cos = mi.warp.square_to_cosine_hemisphere(xi_q)
+    q_s = dr.select(pick_cosine, x_s - w_cos.x / w_cos.z * dist, (xi_q.x - 0.5) * a_det)
+    q_t = dr.select(pick_cosine, x_t - w_cos.y / w_cos.z * dist, (xi_q.y - 0.5) * a_det)
+    on_detector = (dr.abs(q_s) <= 0.5 * a_det) & (dr.abs(q_t) <= 0.5 * a_det)
+    return x_s, x_t, q_s, q_t, on_detector
+
+
+def _mask_ray(
+    board: _Board, x_s: mi.Float, x_t: mi.Float, q_s: mi.Float, q_t: mi.Float
+) -> tuple[mi.Ray3f, mi.Float]:
+    """The world ray from ``x`` along ``x - q`` and ``1 / |x - q|`` (m^-1).
+
+    Args:
+        board: the ray's board.
+        x_s: ``x`` along ``right`` from the detector centre (m).
+        x_t: ``x`` along ``up`` (m).
+        q_s: ``q`` along ``right`` (m).
+        q_t: ``q`` along ``up`` (m).
+    """
+    right, up, fwd, dist = board.right, board.up, board.fwd, board.dist
+    ds, dt = x_s - q_s, x_t - q_t
+    r2 = dr.fma(ds, ds, dr.fma(dt, dt, dist * dist))
+    inv_r = dr.rsqrt(r2)
+    origin = board.center + fwd * dist + right * x_s + up * x_t
+    direction = dr.normalize((right * ds + up * dt + fwd * dist) * inv_r)
+    return mi.Ray3f(origin, direction), inv_r
+
+
+def _directional_response(geo: _PassGeometry, cos_theta: mi.Float) -> mi.Float | float:
+    """``f(theta)`` beyond Lambert, linear in the response table; 1.0 without one."""
+    if geo.response is None:  # Lambert only: no table lookup per sample
+        return 1.0
+    theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))
+    n_tab = _RESPONSE_TABLE_SIZE
+    pos = dr.clip(theta * ((n_tab - 1) / (0.5 * math.pi)), 0.0, n_tab - 1.0)
+    i0 = mi.UInt32(dr.floor(pos))
+    i1 = dr.minimum(i0 + 1, n_tab - 1)
+    frac = pos - mi.Float(i0)
+    return dr.lerp(
+        dr.gather(mi.Float, geo.response, i0), dr.gather(mi.Float, geo.response, i1), frac
+    )
+
+
+def _sample_weight(
+    geo: _PassGeometry,
+    board: _Board,
+    inv_r: mi.Float,
+    on_detector: mi.Bool,
+    texels: int,
+) -> mi.Float:
+    """``A_t d^2 / |x-q|^4 f(theta) / p(q)`` per ray (m^2 sr), 0 with ``q`` off the detector.
+
+    Args:
+        geo: the pass geometry (response table, cosine-sampling fraction).
+        board: the ray's board.
+        inv_r: ``1 / |x - q|`` (m^-1).
+        on_detector: whether ``q`` lies on the detector.
+        texels: mask texels per detector (``rows * cols``).
+    """
+    a_det, w_mask, dist = board.a_det, board.w_mask, board.dist
+    cos_theta = dist * inv_r
+    f_dir = _directional_response(geo, cos_theta)
+    # cos_q cos_x / r^2 = d^2 / r^4, per unit detector area and unit mask area
+    g = (cos_theta * cos_theta) * (inv_r * inv_r)
+    # pdf of q per unit detector area under the two-technique mixture
+    c = _param(geo, _COSINE_FRACTION_INDEX)
+    pdf_q = (1.0 - c) / (a_det * a_det) + c * g * (1.0 / math.pi)
+    texel_area = w_mask * w_mask / texels
+    return dr.select(on_detector, g * f_dir * texel_area / pdf_q, 0.0)
+
+
 def _transport_pass(
     scene: mi.Scene,
     integrator: mi.Integrator,
@@ -91,73 +250,18 @@ def _transport_pass(
     """One wavefront of ``K*R*C*S`` rays: per texel (flat K*R*C), the mean over S (W).
 
     Also the mean of the squared samples (W^2) if ``second_moment``, else None.
+    The steps record the kernel's operations in a fixed order (one launch).
     """
     n_det, rows, cols, spp = shape
-    n = n_det * rows * cols * spp
-    sampler.seed(seed, n)
-    idx = dr.arange(mi.UInt32, n)
-    texel = idx // spp
-    u = texel % cols
-    v = (texel // cols) % rows
-    k = texel // (cols * rows)
-
-    def scalar(i: int) -> mi.Float:
-        return dr.gather(mi.Float, geo.params, i)
-
-    def vec(i: int) -> mi.Vector3f:
-        return mi.Vector3f(scalar(i), scalar(i + 1), scalar(i + 2))
-
-    a_det, w_mask, dist = scalar(0), scalar(1), scalar(2)
-    right, up, fwd = vec(3), vec(6), vec(9)
-    base = _CENTERS_OFFSET + 3 * k
-    center = mi.Point3f(
-        dr.gather(mi.Float, geo.params, base),
-        dr.gather(mi.Float, geo.params, base + 1),
-        dr.gather(mi.Float, geo.params, base + 2),
+    sampler.seed(seed, n_det * rows * cols * spp)
+    u, v, k = _texel_coords(spp, (n_det, rows, cols))
+    board = _board(geo, k)
+    x_s, x_t, q_s, q_t, on_detector = _mask_and_detector_points(
+        sampler, geo, board, (u, v), (rows, cols)
     )
-
-    xi_x = sampler.next_2d()
-    xi_q = sampler.next_2d()
-    pick_cosine = sampler.next_1d() < scalar(_COSINE_FRACTION_INDEX)
-    # Board-frame coordinates (right, up) of x on the mask and q on the detector,
-    # relative to the detector centre: differences stay exact in float32.
-    x_s = (mi.Float(u) + xi_x.x) * (w_mask / cols) - 0.5 * w_mask
-    x_t = 0.5 * w_mask - (mi.Float(v) + xi_x.y) * (w_mask / rows)
-    # q: uniform on the detector, or (one-sample MIS) through a cosine-weighted
-    # direction from x, which tames d^2/r^4 when the mask is close to the diode.
-    w_cos = mi.warp.square_to_cosine_hemisphere(xi_q)
-    q_s = dr.select(pick_cosine, x_s - w_cos.x / w_cos.z * dist, (xi_q.x - 0.5) * a_det)
-    q_t = dr.select(pick_cosine, x_t - w_cos.y / w_cos.z * dist, (xi_q.y - 0.5) * a_det)
-    on_detector = (dr.abs(q_s) <= 0.5 * a_det) & (dr.abs(q_t) <= 0.5 * a_det)
-    ds, dt = x_s - q_s, x_t - q_t
-    r2 = dr.fma(ds, ds, dr.fma(dt, dt, dist * dist))
-    inv_r = dr.rsqrt(r2)
-
-    origin = center + fwd * dist + right * x_s + up * x_t
-    direction = dr.normalize((right * ds + up * dt + fwd * dist) * inv_r)
-    ray = mi.Ray3f(origin, direction)
-
+    ray, inv_r = _mask_ray(board, x_s, x_t, q_s, q_t)
     radiance, _, _ = integrator.sample(scene, sampler, ray, active=on_detector)
-
-    cos_theta = dist * inv_r
-    f_dir = 1.0
-    if geo.response is not None:  # else Lambert only: no table lookup per sample
-        theta = dr.acos(dr.clip(cos_theta, 0.0, 1.0))
-        n_tab = _RESPONSE_TABLE_SIZE
-        pos = dr.clip(theta * ((n_tab - 1) / (0.5 * math.pi)), 0.0, n_tab - 1.0)
-        i0 = mi.UInt32(dr.floor(pos))
-        i1 = dr.minimum(i0 + 1, n_tab - 1)
-        frac = pos - mi.Float(i0)
-        f_dir = dr.lerp(
-            dr.gather(mi.Float, geo.response, i0), dr.gather(mi.Float, geo.response, i1), frac
-        )
-    # cos_q cos_x / r^2 = d^2 / r^4, per unit detector area and unit mask area
-    g = (cos_theta * cos_theta) * (inv_r * inv_r)
-    # pdf of q per unit detector area under the two-technique mixture
-    c = scalar(_COSINE_FRACTION_INDEX)
-    pdf_q = (1.0 - c) / (a_det * a_det) + c * g * (1.0 / math.pi)
-    texel_area = w_mask * w_mask / (rows * cols)
-    weight = dr.select(on_detector, g * f_dir * texel_area / pdf_q, 0.0)
+    weight = _sample_weight(geo, board, inv_r, on_detector, rows * cols)
     value = mi.Float(radiance[0]) * weight
     mean = dr.block_sum(value, spp) * (1.0 / spp)
     return mean, dr.block_sum(value * value, spp) * (1.0 / spp) if second_moment else None

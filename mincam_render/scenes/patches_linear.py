@@ -251,6 +251,182 @@ def _stratified_samples(rng: np.random.Generator, n_texels: int, spp: int) -> np
     return out
 
 
+@dataclass(frozen=True)
+class _OperatorGeometry:
+    """What the operator's samples need of a camera (numpy float64, metres, board frame).
+
+    Attributes:
+        rows, cols: mask texels per detector.
+        right, up, fwd: ``(3,)`` world unit vectors of the board frame.
+        centers: ``[detector, xyz]`` world detector centres (m).
+        a_det: detector side (m).
+        w_mask: mask side (m).
+        dist: mask-to-detector distance (m).
+        c_cos: probability of the cosine-weighted technique for ``q`` (0-1).
+        table: directional response over ``theta`` in [0, pi/2] (dimensionless).
+    """
+
+    rows: int
+    cols: int
+    right: np.ndarray
+    up: np.ndarray
+    fwd: np.ndarray
+    centers: np.ndarray
+    a_det: float
+    w_mask: float
+    dist: float
+    c_cos: float
+    table: np.ndarray
+
+    @classmethod
+    def of(cls, camera: FreeformCamera) -> _OperatorGeometry:
+        """The geometry of ``camera`` (the parallax of each detector included)."""
+        rows, cols = camera.mask_resolution
+        right, up, fwd = camera.frame
+        return cls(
+            rows=rows,
+            cols=cols,
+            right=right,
+            up=up,
+            fwd=fwd,
+            centers=camera.detector_centers_m,
+            a_det=camera.detector_size_m,
+            w_mask=camera.mask_size_m,
+            dist=camera.mask_distance_m,
+            c_cos=cosine_sampling_fraction(camera),
+            table=_response_table(camera),
+        )
+
+
+def _check_operator_args(spp: int, seed: int) -> None:
+    """Raise ``ValueError`` naming ``spp`` or ``seed`` of :func:`build_plane_transport`."""
+    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 20:
+        raise ValueError(f"build_plane_transport: spp = {spp!r}: allowed an integer in [1, 2^20]")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"build_plane_transport: seed = {seed!r}: allowed an integer >= 0")
+
+
+def _sample_points(
+    geo: _OperatorGeometry, xi: np.ndarray, u: np.ndarray, v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Mask point ``x`` and detector point ``q`` per sample, as the renders draw them.
+
+    Args:
+        geo: the camera.
+        xi: ``[sample, 5]`` uniforms (:func:`_stratified_samples`).
+        u: ``(n,)`` mask texel column per sample.
+        v: ``(n,)`` mask texel row per sample.
+
+    Returns:
+        ``(x_s, x_t, q_s, q_t)``, each ``(n,)``: board-frame coordinates (right, up)
+        of ``x`` and ``q`` relative to the detector centre (m).
+    """
+    w_mask, dist, a_det = geo.w_mask, geo.dist, geo.a_det
+    x_s = (u + xi[:, 0]) * (w_mask / geo.cols) - 0.5 * w_mask
+    x_t = 0.5 * w_mask - (v + xi[:, 1]) * (w_mask / geo.rows)
+    pick_cos = xi[:, 4] < geo.c_cos
+    # cosine-weighted direction (pdf cos/pi per solid angle), any warp of that density
+    rad, phi = np.sqrt(xi[:, 2]), 2.0 * math.pi * xi[:, 3]
+    wx, wy = rad * np.cos(phi), rad * np.sin(phi)
+    wz = np.sqrt(np.maximum(1.0 - rad * rad, 1e-300))
+    q_s = np.where(pick_cos, x_s - wx / wz * dist, (xi[:, 2] - 0.5) * a_det)
+    q_t = np.where(pick_cos, x_t - wy / wz * dist, (xi[:, 3] - 0.5) * a_det)
+    return x_s, x_t, q_s, q_t
+
+
+def _sample_weights(
+    geo: _OperatorGeometry,
+    q_s: np.ndarray,
+    q_t: np.ndarray,
+    ds: np.ndarray,
+    dt: np.ndarray,
+    spp: int,
+) -> np.ndarray:
+    """``A_t d^2 / |x-q|^4 f(theta) / p(q) / spp`` per sample (m^2 sr), 0 off the detector.
+
+    Args:
+        geo: the camera.
+        q_s: ``(n,)`` detector point along ``right`` (m, from the detector centre).
+        q_t: ``(n,)`` detector point along ``up`` (m).
+        ds: ``(n,)`` ``x - q`` along ``right`` (m).
+        dt: ``(n,)`` ``x - q`` along ``up`` (m).
+        spp: samples per mask texel.
+    """
+    a_det, dist, c_cos, table = geo.a_det, geo.dist, geo.c_cos, geo.table
+    texel_area = geo.w_mask * geo.w_mask / (geo.rows * geo.cols)
+    on_det = (np.abs(q_s) <= 0.5 * a_det) & (np.abs(q_t) <= 0.5 * a_det)
+    r2 = ds * ds + dt * dt + dist * dist
+    g = dist * dist / (r2 * r2)  # cos_q cos_x / r^2
+    theta = np.arccos(np.clip(dist / np.sqrt(r2), 0.0, 1.0))
+    f_dir = np.interp(theta, np.linspace(0.0, 0.5 * math.pi, len(table)), table)
+    pdf_q = (1.0 - c_cos) / (a_det * a_det) + c_cos * g / math.pi
+    return np.where(on_det, g * f_dir * texel_area / pdf_q, 0.0) / spp
+
+
+def _chunk_entries(
+    plane: PlaneGeometry,
+    geo: _OperatorGeometry,
+    rng: np.random.Generator,
+    texel: np.ndarray,
+    spp: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Trace the samples of one chunk to the plane.
+
+    Args:
+        plane: the emitting plane.
+        geo: the camera.
+        rng: the operator's generator (advanced by this chunk's draws).
+        texel: ``(n,)`` flat mask texel ``(k * rows + v) * cols + u`` per sample,
+            ``spp`` consecutive samples per texel.
+        spp: samples per mask texel.
+
+    Returns:
+        ``(key, weight)``: flat ``W`` index ``texel * n_plane_texels + j`` (int64)
+        and weight (m^2 sr) of every sample that hits plane texel ``j``.
+    """
+    u = texel % geo.cols
+    v = (texel // geo.cols) % geo.rows
+    k = texel // (geo.cols * geo.rows)
+    xi = _stratified_samples(rng, len(texel) // spp, spp)
+    x_s, x_t, q_s, q_t = _sample_points(geo, xi, u, v)
+    ds, dt = x_s - q_s, x_t - q_t
+    weight = _sample_weights(geo, q_s, q_t, ds, dt, spp)
+    right, up, fwd = geo.right, geo.up, geo.fwd
+    origin = (
+        geo.centers[k] + fwd * geo.dist + x_s[:, None] * right[None, :] + x_t[:, None] * up[None, :]
+    )
+    direction = ds[:, None] * right + dt[:, None] * up + geo.dist * fwd
+    j = plane.hit_texel(origin, direction)
+    ok = (j >= 0) & (weight > 0)
+    return texel[ok].astype(np.int64) * plane.resolution**2 + j[ok], weight[ok]
+
+
+def _csr_operator(key: np.ndarray, val: np.ndarray, shape: tuple[int, int]) -> torch.Tensor:
+    """Sum the samples' weights per entry of ``W`` into a torch sparse CSR float32 matrix.
+
+    Args:
+        key: ``(n,)`` flat index ``row * shape[1] + col`` per sample (int64).
+        val: ``(n,)`` weight per sample.
+        shape: ``(mask texels, plane texels)``.
+    """
+    n_rows_w, n_img = shape
+    uniq, inv = np.unique(key, return_inverse=True)
+    summed = np.bincount(inv, weights=val, minlength=len(uniq))
+    row_idx, col_idx = np.divmod(uniq, n_img)
+    crow = np.zeros(n_rows_w + 1, dtype=np.int64)
+    np.add.at(crow, row_idx + 1, 1)
+    crow = np.cumsum(crow)
+    with warnings.catch_warnings():  # "sparse CSR support is in beta"
+        warnings.simplefilter("ignore", UserWarning)
+        return torch.sparse_csr_tensor(
+            torch.from_numpy(crow),
+            torch.from_numpy(col_idx.astype(np.int64)),
+            torch.from_numpy(summed.astype(np.float32)),
+            size=(n_rows_w, n_img),
+            check_invariants=True,
+        )
+
+
 def build_plane_transport(
     plane: PlaneGeometry,
     camera: FreeformCamera,
@@ -280,74 +456,21 @@ def build_plane_transport(
     Raises:
         ValueError: bad ``spp`` or ``seed``.
     """
-    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 20:
-        raise ValueError(f"build_plane_transport: spp = {spp!r}: allowed an integer in [1, 2^20]")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"build_plane_transport: seed = {seed!r}: allowed an integer >= 0")
-    rows, cols = camera.mask_resolution
-    k_det = camera.num_detectors
-    n_rows_w = k_det * rows * cols
-    n_img = plane.resolution**2
-    right, up, fwd = camera.frame
-    centers = camera.detector_centers_m
-    a_det, w_mask, dist = camera.detector_size_m, camera.mask_size_m, camera.mask_distance_m
-    c_cos = cosine_sampling_fraction(camera)
-    table = _response_table(camera)
-    texel_area = w_mask * w_mask / (rows * cols)
+    _check_operator_args(spp, seed)
+    geo = _OperatorGeometry.of(camera)
+    n_rows_w = camera.num_detectors * geo.rows * geo.cols
     rng = np.random.default_rng([seed, 0x9E37])
-
     texels_per_chunk = max(1, _SAMPLES_PER_CHUNK // spp)
     entries: list[np.ndarray] = []
     values: list[np.ndarray] = []
     for start in range(0, n_rows_w, texels_per_chunk):
         texel = np.repeat(np.arange(start, min(start + texels_per_chunk, n_rows_w)), spp)
-        m = len(texel)
-        u = texel % cols
-        v = (texel // cols) % rows
-        k = texel // (cols * rows)
-        xi = _stratified_samples(rng, m // spp, spp)
-        x_s = (u + xi[:, 0]) * (w_mask / cols) - 0.5 * w_mask
-        x_t = 0.5 * w_mask - (v + xi[:, 1]) * (w_mask / rows)
-        pick_cos = xi[:, 4] < c_cos
-        # cosine-weighted direction (pdf cos/pi per solid angle), any warp of that density
-        rad, phi = np.sqrt(xi[:, 2]), 2.0 * math.pi * xi[:, 3]
-        wx, wy = rad * np.cos(phi), rad * np.sin(phi)
-        wz = np.sqrt(np.maximum(1.0 - rad * rad, 1e-300))
-        q_s = np.where(pick_cos, x_s - wx / wz * dist, (xi[:, 2] - 0.5) * a_det)
-        q_t = np.where(pick_cos, x_t - wy / wz * dist, (xi[:, 3] - 0.5) * a_det)
-        on_det = (np.abs(q_s) <= 0.5 * a_det) & (np.abs(q_t) <= 0.5 * a_det)
-        ds, dt = x_s - q_s, x_t - q_t
-        r2 = ds * ds + dt * dt + dist * dist
-        g = dist * dist / (r2 * r2)  # cos_q cos_x / r^2
-        theta = np.arccos(np.clip(dist / np.sqrt(r2), 0.0, 1.0))
-        f_dir = np.interp(theta, np.linspace(0.0, 0.5 * math.pi, len(table)), table)
-        pdf_q = (1.0 - c_cos) / (a_det * a_det) + c_cos * g / math.pi
-        weight = np.where(on_det, g * f_dir * texel_area / pdf_q, 0.0) / spp
-        origin = (
-            centers[k] + fwd * dist + x_s[:, None] * right[None, :] + x_t[:, None] * up[None, :]
-        )
-        direction = ds[:, None] * right + dt[:, None] * up + dist * fwd
-        j = plane.hit_texel(origin, direction)
-        ok = (j >= 0) & (weight > 0)
-        entries.append(texel[ok].astype(np.int64) * n_img + j[ok])
-        values.append(weight[ok])
-    key = np.concatenate(entries)
-    val = np.concatenate(values)
-    uniq, inv = np.unique(key, return_inverse=True)
-    summed = np.bincount(inv, weights=val, minlength=len(uniq))
-    row_idx, col_idx = np.divmod(uniq, n_img)
-    crow = np.zeros(n_rows_w + 1, dtype=np.int64)
-    np.add.at(crow, row_idx + 1, 1)
-    crow = np.cumsum(crow)
-    with warnings.catch_warnings():  # "sparse CSR support is in beta"
-        warnings.simplefilter("ignore", UserWarning)
-        matrix = torch.sparse_csr_tensor(
-            torch.from_numpy(crow),
-            torch.from_numpy(col_idx.astype(np.int64)),
-            torch.from_numpy(summed.astype(np.float32)),
-            size=(n_rows_w, n_img),
-            check_invariants=True,
-        )
+        key, weight = _chunk_entries(plane, geo, rng, texel, spp)
+        entries.append(key)
+        values.append(weight)
+    matrix = _csr_operator(
+        np.concatenate(entries), np.concatenate(values), (n_rows_w, plane.resolution**2)
+    )
     return PlaneTransport(matrix=matrix, camera=camera, plane=plane, spp=spp, seed=seed)
 
 

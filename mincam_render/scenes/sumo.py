@@ -279,6 +279,129 @@ def _signal_state(time_s: float, road: SumoRoad, offset_s: float) -> str:
     return "r"
 
 
+def _sumo_args(net: Path, routes: Path, step_s: float, seed: int) -> list[str]:
+    """Command line of a SUMO run on ``net`` with demand ``routes`` (step in s, seed >= 0)."""
+    return [
+        "sumo",
+        "--net-file", str(net),
+        "--route-files", str(routes),
+        "--step-length", f"{step_s:.3f}",
+        "--seed", str(int(seed)),
+        "--step-method.ballistic", "true",  # position advances by the mean speed of a step
+        "--lanechange.duration", "2",  # lateral motion over 2 s, not a jump
+        "--time-to-teleport", "-1",  # no teleports out of jams
+        "--xml-validation", "never",
+        "--no-step-log", "true",
+        "--no-warnings", "true",
+        "--duration-log.disable", "true",
+    ]  # fmt: skip
+
+
+class _SignalController:
+    """Sets every traffic light of a running SUMO to :func:`_signal_state` at each step."""
+
+    def __init__(self, libsumo: Any, road: SumoRoad) -> None:
+        self._libsumo = libsumo
+        self._road = road
+        self._tls = list(libsumo.trafficlight.getIDList())
+        self._links = {t: len(libsumo.trafficlight.getRedYellowGreenState(t)) for t in self._tls}
+        # the two signals are half a cycle apart so platoons are not synchronous
+        self._offset_s = {t: 0.5 * road.signal_cycle_s * i for i, t in enumerate(sorted(self._tls))}
+
+    def set(self, time_s: float) -> None:
+        """Set the signals' states for SUMO time ``time_s`` (s)."""
+        for t in self._tls:
+            self._libsumo.trafficlight.setRedYellowGreenState(
+                t, _signal_state(time_s, self._road, self._offset_s[t]) * self._links[t]
+            )
+
+
+class _TrackRecorder:
+    """Vehicles of a running SUMO, numbered in departure order, and their states per step."""
+
+    def __init__(self, libsumo: Any, road: SumoRoad, record_half_length_m: float) -> None:
+        self._libsumo = libsumo
+        self._road = road
+        self._half_length_m = record_half_length_m
+        self._type_index = {t.name: i for i, t in enumerate(road.vehicle_types)}
+        self._lengths_m = np.array([t.length_m for t in road.vehicle_types])
+        self._vars = (libsumo.VAR_POSITION, libsumo.VAR_ANGLE, libsumo.VAR_SPEED)
+        self.index_of: dict[str, int] = {}
+        self.vtype: list[int] = []
+        self.direction: list[int] = []
+        self.offsets = [0]
+        self.rows: dict[str, list[np.ndarray]] = {
+            "vehicle": [],
+            "center": [],
+            "yaw": [],
+            "speed": [],
+        }
+
+    def add_departed(self) -> None:
+        """Number the vehicles that departed in the last step and subscribe to their states."""
+        for vid in self._libsumo.simulation.getDepartedIDList():
+            self.index_of[vid] = len(self.vtype)
+            self.vtype.append(self._type_index[self._libsumo.vehicle.getTypeID(vid)])
+            self.direction.append(EASTBOUND if vid.startswith("east") else WESTBOUND)
+            self._libsumo.vehicle.subscribe(vid, self._vars)
+
+    def record_step(self) -> None:
+        """Append the states of the vehicles within the recorded length, sorted by index."""
+        res = self._libsumo.vehicle.getAllSubscriptionResults()
+        ids = [vid for vid in res if vid in self.index_of]
+        if not ids:
+            self.offsets.append(self.offsets[-1])
+            return
+        idx = np.array([self.index_of[v] for v in ids], dtype=np.int32)
+        front = np.array([res[v][self._vars[0]] for v in ids], dtype=np.float64)
+        angle = np.array([res[v][self._vars[1]] for v in ids], dtype=np.float64)
+        speed = np.array([res[v][self._vars[2]] for v in ids], dtype=np.float32)
+        yaw, center = self._footprint(idx, front, angle)
+        keep = np.abs(center[:, 0]) < self._half_length_m
+        order = np.argsort(idx[keep], kind="stable")
+        self.rows["vehicle"].append(idx[keep][order])
+        self.rows["center"].append(center[keep][order])
+        self.rows["yaw"].append(yaw[keep][order])
+        self.rows["speed"].append(speed[keep][order])
+        self.offsets.append(self.offsets[-1] + int(keep.sum()))
+
+    def _footprint(
+        self, idx: np.ndarray, front: np.ndarray, angle: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Yaw (rad, ccw from +x) and footprint centre ``[vehicle, xy]`` (m) of SUMO's states.
+
+        Args:
+            idx: ``(n,)`` vehicle indices.
+            front: ``(n, 2)`` front-bumper positions in SUMO's network (m).
+            angle: ``(n,)`` SUMO angles (deg).
+        """
+        # SUMO angle: degrees clockwise from north (+y)
+        yaw = np.radians(90.0 - angle)
+        half_len = 0.5 * self._lengths_m[np.asarray(self.vtype)[idx]]
+        center = front - half_len[:, None] * np.stack([np.cos(yaw), np.sin(yaw)], 1)
+        east = np.asarray(self.direction)[idx] == EASTBOUND
+        center[:, 1] += np.where(east, -0.5, 0.5) * self._road.median_width_m
+        return yaw, center
+
+    def trajectories(self, step_s: float) -> Trajectories:
+        """The recorded steps (``step_s`` in s) as :class:`Trajectories`."""
+
+        def cat(parts, dtype, shape=()):
+            return np.concatenate(parts).astype(dtype) if parts else np.zeros((0, *shape), dtype)
+
+        return Trajectories(
+            step_s=step_s,
+            step_offsets=np.asarray(self.offsets, dtype=np.int64),
+            vehicle=cat(self.rows["vehicle"], np.int32),
+            center_m=cat(self.rows["center"], np.float64, (2,)),
+            yaw_rad=cat(self.rows["yaw"], np.float64),
+            speed_m_s=cat(self.rows["speed"], np.float32),
+            vehicle_type=np.asarray(self.vtype, dtype=np.int32),
+            direction=np.asarray(self.direction, dtype=np.int8),
+            sumo_id=sorted(self.index_of, key=self.index_of.__getitem__),
+        )
+
+
 def simulate(
     road: SumoRoad,
     *,
@@ -307,96 +430,52 @@ def simulate(
         RuntimeError: netconvert or SUMO failed.
     """
     libsumo, netconvert = require_sumo()
-    type_index = {t.name: i for i, t in enumerate(road.vehicle_types)}
-    lengths = np.array([t.length_m for t in road.vehicle_types])
     steps = int(math.ceil(duration_s / step_s)) + 2
     end_s = warmup_s + steps * step_s + 1.0
-    offsets = [0]
-    rows_vehicle: list[np.ndarray] = []
-    rows_center: list[np.ndarray] = []
-    rows_yaw: list[np.ndarray] = []
-    rows_speed: list[np.ndarray] = []
-    index_of: dict[str, int] = {}
-    vtype: list[int] = []
-    direction: list[int] = []
-    vars_ = (libsumo.VAR_POSITION, libsumo.VAR_ANGLE, libsumo.VAR_SPEED)
+    recorder = _TrackRecorder(libsumo, road, record_half_length_m)
     with tempfile.TemporaryDirectory(prefix="mincam_sumo_") as tmp:
         work = Path(tmp)
         net = _write_network(road, work, netconvert)
         routes = _write_routes(road, work, end_s)
-        args = [
-            "sumo",
-            "--net-file", str(net),
-            "--route-files", str(routes),
-            "--step-length", f"{step_s:.3f}",
-            "--seed", str(int(seed)),
-            "--step-method.ballistic", "true",  # position advances by the mean speed of a step
-            "--lanechange.duration", "2",  # lateral motion over 2 s, not a jump
-            "--time-to-teleport", "-1",  # no teleports out of jams
-            "--xml-validation", "never",
-            "--no-step-log", "true",
-            "--no-warnings", "true",
-            "--duration-log.disable", "true",
-        ]  # fmt: skip
-        libsumo.start(args)
+        libsumo.start(_sumo_args(net, routes, step_s, seed))
         try:
-            tls = list(libsumo.trafficlight.getIDList())
-            links = {t: len(libsumo.trafficlight.getRedYellowGreenState(t)) for t in tls}
-            # the two signals are half a cycle apart so platoons are not synchronous
-            tls_offset = {t: 0.5 * road.signal_cycle_s * i for i, t in enumerate(sorted(tls))}
-            t_sim = 0.0
-            total_steps = int(round(warmup_s / step_s)) + steps
-            warm = total_steps - steps
-            for k in range(total_steps):
-                for t in tls:
-                    libsumo.trafficlight.setRedYellowGreenState(
-                        t, _signal_state(t_sim, road, tls_offset[t]) * links[t]
-                    )
-                libsumo.simulationStep()
-                t_sim = (k + 1) * step_s
-                for vid in libsumo.simulation.getDepartedIDList():
-                    index_of[vid] = len(vtype)
-                    vtype.append(type_index[libsumo.vehicle.getTypeID(vid)])
-                    direction.append(EASTBOUND if vid.startswith("east") else WESTBOUND)
-                    libsumo.vehicle.subscribe(vid, vars_)
-                if k + 1 < warm:
-                    continue
-                res = libsumo.vehicle.getAllSubscriptionResults()
-                ids = [vid for vid in res if vid in index_of]
-                if ids:
-                    idx = np.array([index_of[v] for v in ids], dtype=np.int32)
-                    front = np.array([res[v][vars_[0]] for v in ids], dtype=np.float64)
-                    angle = np.array([res[v][vars_[1]] for v in ids], dtype=np.float64)
-                    speed = np.array([res[v][vars_[2]] for v in ids], dtype=np.float32)
-                    # SUMO angle: degrees clockwise from north (+y)
-                    yaw = np.radians(90.0 - angle)
-                    half_len = 0.5 * lengths[np.asarray(vtype)[idx]]
-                    center = front - half_len[:, None] * np.stack([np.cos(yaw), np.sin(yaw)], 1)
-                    east = np.asarray(direction)[idx] == EASTBOUND
-                    center[:, 1] += np.where(east, -0.5, 0.5) * road.median_width_m
-                    keep = np.abs(center[:, 0]) < record_half_length_m
-                    order = np.argsort(idx[keep], kind="stable")
-                    rows_vehicle.append(idx[keep][order])
-                    rows_center.append(center[keep][order])
-                    rows_yaw.append(yaw[keep][order])
-                    rows_speed.append(speed[keep][order])
-                    offsets.append(offsets[-1] + int(keep.sum()))
-                else:
-                    offsets.append(offsets[-1])
+            _run_steps(
+                libsumo,
+                _SignalController(libsumo, road),
+                recorder,
+                steps=steps,
+                warm=int(round(warmup_s / step_s)),
+                step_s=step_s,
+            )
         finally:
             libsumo.close()
+    return recorder.trajectories(step_s)
 
-    def cat(parts, dtype, shape=()):
-        return np.concatenate(parts).astype(dtype) if parts else np.zeros((0, *shape), dtype)
 
-    return Trajectories(
-        step_s=step_s,
-        step_offsets=np.asarray(offsets, dtype=np.int64),
-        vehicle=cat(rows_vehicle, np.int32),
-        center_m=cat(rows_center, np.float64, (2,)),
-        yaw_rad=cat(rows_yaw, np.float64),
-        speed_m_s=cat(rows_speed, np.float32),
-        vehicle_type=np.asarray(vtype, dtype=np.int32),
-        direction=np.asarray(direction, dtype=np.int8),
-        sumo_id=sorted(index_of, key=index_of.__getitem__),
-    )
+def _run_steps(
+    libsumo: Any,
+    signals: _SignalController,
+    recorder: _TrackRecorder,
+    *,
+    steps: int,
+    warm: int,
+    step_s: float,
+) -> None:
+    """Step a running SUMO ``warm + steps`` times, recording the last ``steps + 1`` states.
+
+    Args:
+        libsumo: the started ``libsumo`` module.
+        signals: sets the traffic lights before each step.
+        recorder: numbers departed vehicles and records their states.
+        steps: recorded steps after the warm-up.
+        warm: warm-up steps.
+        step_s: SUMO step (s).
+    """
+    t_sim = 0.0
+    for k in range(warm + steps):
+        signals.set(t_sim)
+        libsumo.simulationStep()
+        t_sim = (k + 1) * step_s
+        recorder.add_departed()
+        if k + 1 >= warm:
+            recorder.record_step()
