@@ -401,3 +401,12 @@ def test_the_plan_reports_each_detectors_error_against_the_reference(variant):
     assert apart[0] != apart[1]  # each detector its own render and its own noise
     pooled = own["achieved"]["error_rms"]
     assert all(0.25 * pooled < e < 4 * pooled for e in apart), (apart, pooled)
+
+
+def test_ray_ships_the_package_root_to_its_workers():
+    """Ray imports a shipped directory under its own name: it must be mincam_render/."""
+    import mincam_render
+    from mincam_render.data.render_job.executors import ray_runtime_env
+
+    (shipped,) = ray_runtime_env()["py_modules"]
+    assert Path(shipped) == Path(mincam_render.__file__).resolve().parent

@@ -133,15 +133,24 @@ def _run_ray(
             ray.shutdown()
 
 
+def ray_runtime_env() -> dict[str, Any]:
+    """Ray's ``runtime_env`` that ships this package to the workers.
+
+    Other nodes may not have it installed. Ray makes a shipped directory
+    importable as the module named after it, so the directory is the package
+    root ``mincam_render/`` (it shipped ``mincam_render/data``, which made only a
+    module named ``data`` importable there).
+    """
+    return {"py_modules": [str(Path(__file__).resolve().parents[2])], "excludes": ["__pycache__"]}
+
+
 def _ray_init(ray, address: str) -> bool:
     """Connect to (or, ``"local"``, start) the Ray cluster; whether Ray was started here."""
-    pkg_dir = str(Path(__file__).resolve().parents[1])  # the directory mincam_render/data
     init_kwargs: dict[str, Any] = {
         "ignore_reinit_error": True,
         "log_to_driver": False,
         "include_dashboard": False,
-        # ship this package to the workers (other nodes may not have it installed)
-        "runtime_env": {"py_modules": [pkg_dir], "excludes": ["__pycache__"]},
+        "runtime_env": ray_runtime_env(),
     }
     if address != "local":
         init_kwargs["address"] = address
