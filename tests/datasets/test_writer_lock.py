@@ -40,7 +40,7 @@ def test_a_second_writer_fails_at_once_and_a_killed_holder_releases(tmp_path):
 
 
 def test_training_into_a_locked_directory_is_refused(tmp_path):
-    from test_train import linear_task
+    from support import linear_task
 
     train, val, test = linear_task(60).split((0.6, 0.2, 0.2))
     cfg = tr.TrainConfig(max_steps=5, batch_size=8, eval_every=5)
