@@ -32,7 +32,7 @@ import os
 import uuid
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -44,6 +44,10 @@ from mincam_render.optics.camera import (
     FreeformCamera,
 )
 from mincam_render.render.precision import decode_transport
+
+if TYPE_CHECKING:
+    import torch
+    import torch.utils.data
 
 log = logging.getLogger(__name__)
 
@@ -603,7 +607,7 @@ class TransportDataset:
         parts = [self._metadata(s)["times_s"][lo:hi] for s, lo, hi in self._pieces(start, stop)]
         return np.concatenate(parts) if parts else np.zeros(0)
 
-    def torch_dataset(self, split: str, history: int = 1):
+    def torch_dataset(self, split: str, history: int = 1) -> torch.utils.data.Dataset:
         """A ``torch.utils.data.Dataset`` over a split, reading shards lazily (mmap).
 
         Item ``j`` is frame ``i = start + history - 1 + j`` of the split:
@@ -704,7 +708,7 @@ def open_dataset(path: str | os.PathLike) -> TransportDataset:
 _TORCH_CLASSES: dict[str, type] = {}
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> type:
     # TransportTorchDataset subclasses torch's Dataset; it is built on first use so
     # that importing this module (e.g. in render workers) does not import torch.
     # Module-level __getattr__ (PEP 562) also lets pickle find it by name.
@@ -740,7 +744,7 @@ def _make_torch_dataset_class() -> type:
         def __len__(self) -> int:
             return len(self.frame_indices)
 
-        def __getitem__(self, j: int):
+        def __getitem__(self, j: int) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
             if not -len(self) <= j < len(self):
                 raise IndexError(f"item {j} outside [0, {len(self)})")
             i = int(self.frame_indices[j])

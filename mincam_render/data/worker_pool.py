@@ -107,7 +107,13 @@ class StallWatch:
             )
 
 
-def _worker_main(conn: Connection, fn, tasks_per_worker: int, initializer, initargs) -> None:
+def _worker_main(
+    conn: Connection,
+    fn: Callable[..., Any],
+    tasks_per_worker: int,
+    initializer: Callable[..., None] | None,
+    initargs: tuple,
+) -> None:
     """Body of a worker process: run up to ``tasks_per_worker`` tasks sent through ``conn``."""
     if initializer is not None:
         initializer(*initargs)
@@ -120,7 +126,7 @@ def _worker_main(conn: Connection, fn, tasks_per_worker: int, initializer, inita
             return
         key, args = message
 
-        def on_progress(n: int = 1, key=key) -> None:
+        def on_progress(n: int = 1, key: Hashable = key) -> None:
             conn.send(("progress", key, n))
 
         try:
@@ -215,7 +221,12 @@ def run_tasks(
         _shut_down(pool)
 
 
-def _read_messages(w: _Worker, watch: StallWatch, on_result, on_progress) -> bool:
+def _read_messages(
+    w: _Worker,
+    watch: StallWatch,
+    on_result: Callable[[Hashable, Any], None],
+    on_progress: Callable[[Hashable, int], None] | None,
+) -> bool:
     """Handle every message waiting on a worker's pipe; False once the worker has ended."""
     while True:
         try:

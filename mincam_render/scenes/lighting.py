@@ -49,7 +49,13 @@ from mincam_render.scenes.indoor import (
 from mincam_render.scenes.sky import DaylightConfig
 
 
-def _f(kind, x, y, rot=0.0, size=None):
+def _f(
+    kind: FurnitureKind,
+    x: float,
+    y: float,
+    rot: float = 0.0,
+    size: tuple[float, float, float] | None = None,
+) -> FurnitureConfig:
     return FurnitureConfig(kind=kind, position_m=(x, y), rotation_deg=rot, size_m=size)
 
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mitsuba as mi
 import numpy as np
@@ -25,6 +25,9 @@ from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.scenes.base import CameraMount, SceneFamily, View
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
 
 _PLANE_KEY = "plane"
 #: Per-frame parameter, checked against mi.traverse when the scene is built.
@@ -92,7 +95,7 @@ class PatchesFamily(SceneFamily):
     def labels(self) -> tuple[LabelSpec, ...]:
         return (LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0),)
 
-    def camera(self):
+    def camera(self) -> FreeformCamera:
         return self.config.camera.camera()
 
     def _plane_geometry(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

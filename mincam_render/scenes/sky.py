@@ -17,11 +17,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.core.config import spec
 from mincam_render.core.photometry import SOLAR_CONSTANT_W_M2, VISIBLE_FRACTION_OF_SUNLIGHT
+
+if TYPE_CHECKING:
+    import mitsuba as mi
 
 # CIE standard general sky parameters (a, b, c, d, e), ISO 15469:2004.
 _CIE_CLEAR = (-1.0, -0.32, 10.0, -3.0, 0.45)  # type 12, clear, low turbidity
@@ -90,13 +94,18 @@ def diffuse_horizontal_irradiance(elevation_rad: float, overcast: float) -> floa
     return (1.0 - overcast) * clear_diffuse + overcast * overcast_diffuse
 
 
-def _cie_relative(params, zenith: np.ndarray, gamma: np.ndarray, sun_zenith: float) -> np.ndarray:
+def _cie_relative(
+    params: tuple[float, float, float, float, float],
+    zenith: np.ndarray,
+    gamma: np.ndarray,
+    sun_zenith: float,
+) -> np.ndarray:
     a, b, c, d, e = params
 
-    def grad(z):
+    def grad(z: np.ndarray) -> np.ndarray:
         return 1.0 + a * np.exp(b / np.maximum(np.cos(z), 1e-3))
 
-    def indic(g):
+    def indic(g: np.ndarray) -> np.ndarray:
         return 1.0 + c * (np.exp(d * g) - math.exp(d * math.pi / 2)) + e * np.cos(g) ** 2
 
     return indic(gamma) * grad(zenith) / (indic(np.array(sun_zenith)) * grad(np.array(0.0)))
@@ -139,7 +148,7 @@ def envmap_directions(height: int, width: int) -> np.ndarray:
     return np.stack([lx, -lz, ly], axis=-1)
 
 
-def envmap_to_world():
+def envmap_to_world() -> mi.ScalarTransform4f:
     """The envmap ``to_world`` used with :func:`envmap_directions` (Mitsuba transform)."""
     import mitsuba as mi
 

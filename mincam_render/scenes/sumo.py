@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 log = logging.getLogger(__name__)
 
@@ -386,7 +387,9 @@ class _TrackRecorder:
     def trajectories(self, step_s: float) -> Trajectories:
         """The recorded steps (``step_s`` in s) as :class:`Trajectories`."""
 
-        def cat(parts, dtype, shape=()):
+        def cat(
+            parts: list[np.ndarray], dtype: npt.DTypeLike, shape: tuple[int, ...] = ()
+        ) -> np.ndarray:
             return np.concatenate(parts).astype(dtype) if parts else np.zeros((0, *shape), dtype)
 
         return Trajectories(

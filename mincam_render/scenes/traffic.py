@@ -549,7 +549,9 @@ def vehicle_vertices(
     lay = _LAYOUTS[shape]
     L, W, H = length_m, width_m, height_m
 
-    def box(x0, x1, hw, z0, z1, proud=0.0):
+    def box(
+        x0: float, x1: float, hw: float, z0: float, z1: float, proud: float = 0.0
+    ) -> np.ndarray:
         centre = np.array([(x0 + x1) / 2 * L, 0.0, (z0 + z1) / 2 * H])
         ext = np.array([(x1 - x0) * L + 2 * proud, 2 * hw * W + 2 * proud, (z1 - z0) * H])
         if ext[0] <= 2 * proud:  # a zero box stays zero
@@ -680,7 +682,9 @@ class TrafficFamily(SceneFamily):
             "albedo": self._albedo[v],
         }
 
-    def labels_for_state(self, center_m, yaw_rad, speed_m_s) -> dict[str, np.ndarray]:
+    def labels_for_state(
+        self, center_m: np.ndarray, yaw_rad: np.ndarray, speed_m_s: np.ndarray
+    ) -> dict[str, np.ndarray]:
         """Labels from an explicit vehicle state (see :func:`traffic_labels`)."""
         return traffic_labels(self._camera, center_m, yaw_rad, speed_m_s)
 

@@ -57,7 +57,13 @@ _D, _C, _S, _T, _K = (
 )
 
 
-def _f(kind, x, y, rot=0.0, size=None):
+def _f(
+    kind: FurnitureKind,
+    x: float,
+    y: float,
+    rot: float = 0.0,
+    size: tuple[float, float, float] | None = None,
+) -> FurnitureConfig:
     return FurnitureConfig(kind=kind, position_m=(x, y), rotation_deg=rot, size_m=size)
 
 

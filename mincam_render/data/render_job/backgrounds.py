@@ -12,8 +12,9 @@ from __future__ import annotations
 import hashlib
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,10 +22,17 @@ from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.manifest import _append_log
 from mincam_render.data.render_job.scene import _load_family, _render_camera
 
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.differential import Background, BackgroundSettings
+    from mincam_render.scenes.base import SceneFamily
+
 log = logging.getLogger(__name__)
 
 
-def background_keys(family, job: dict) -> list[str]:
+def background_keys(family: SceneFamily, job: dict) -> list[str]:
     """Background key of every frame of a differential job (frame order)."""
     interval = job["render"]["background"]["interval_s"]
     return [family.background_key(i, interval) for i in range(job["num_frames"])]
@@ -46,7 +54,9 @@ def _background_path(out: Path, index: int) -> Path:
     return out / ds.BACKGROUND_DIR / f"background-{index:05d}-same_seed.npy"
 
 
-def render_backgrounds(job: dict, family, keys: list[str], wanted: list[str]):
+def render_backgrounds(
+    job: dict, family: SceneFamily, keys: list[str], wanted: list[str]
+) -> Iterator[Background]:
     """Render the backgrounds ``wanted`` (keys) of a differential job, in order.
 
     Args:
@@ -98,7 +108,7 @@ def _write_array(out: Path, path: Path, array: np.ndarray) -> dict:
 
 
 def ensure_backgrounds(
-    out: Path, manifest: dict, family, keys: list[str], *, progress: bool = False
+    out: Path, manifest: dict, family: SceneFamily, keys: list[str], *, progress: bool = False
 ) -> list[str]:
     """Render (in this process) every background file of ``manifest`` missing or corrupt.
 
@@ -172,7 +182,13 @@ def _missing_backgrounds(out: Path, manifest: dict) -> tuple[list[int], list[int
 
 
 def _render_component(
-    out: Path, manifest: dict, family, scene, render_cam, settings, c: int
+    out: Path,
+    manifest: dict,
+    family: SceneFamily,
+    scene: mi.Scene,
+    render_cam: FreeformCamera,
+    settings: BackgroundSettings,
+    c: int,
 ) -> str:
     """Render component ``c``, write its file and record it in the manifest; its key."""
     from mincam_render.render.differential import component_seed, render_component
@@ -188,7 +204,14 @@ def _render_component(
 
 
 def _render_same_seed(
-    out: Path, manifest: dict, family, scene, render_cam, settings, b: int, frame: int
+    out: Path,
+    manifest: dict,
+    family: SceneFamily,
+    scene: mi.Scene,
+    render_cam: FreeformCamera,
+    settings: BackgroundSettings,
+    b: int,
+    frame: int,
 ) -> str:
     """Render background ``b``'s ``C`` (first frame ``frame``), write and record it; its key."""
     from mincam_render.render.differential import render_same_seed
@@ -212,7 +235,7 @@ def _render_same_seed(
     return key
 
 
-def load_backgrounds(out: Path, manifest: dict, keys) -> dict:
+def load_backgrounds(out: Path, manifest: dict, keys: Iterable[str]) -> dict[str, Background]:
     """``{key: Background}`` for ``keys`` from a dataset's background files."""
     from mincam_render.render.differential import Background, BackgroundSettings
 

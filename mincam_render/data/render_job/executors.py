@@ -14,9 +14,14 @@ import os
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, cast
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, cast
 
 from mincam_render.data.render_job.shards import _worker_init, render_shard
+
+if TYPE_CHECKING:
+    import numpy as np
+    from tqdm import tqdm
 
 log = logging.getLogger(__name__)
 
@@ -36,7 +41,12 @@ POOL_BREAK_EVEN_S = 10.0
 
 
 def _first_shard_then_choose(
-    job, todo, frames_of, finish, bar, backgrounds_of
+    job: dict,
+    todo: list[int],
+    frames_of: dict[int, int],
+    finish: Callable[[tuple, bool], None],
+    bar: tqdm | None,
+    backgrounds_of: Callable[[int], dict | None],
 ) -> tuple[int, list[int]]:
     """Render ``todo[0]`` here, then ``(workers, rest)``: a pool only for long remainders.
 
@@ -80,7 +90,7 @@ def _run_processes(
     finish: Callable[[tuple, bool], None],
     workers: int,
     shards_per_worker: int,
-    bar,
+    bar: tqdm | None,
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
     from mincam_render.data.worker_pool import PoolError, run_tasks
@@ -144,7 +154,7 @@ def ray_runtime_env() -> dict[str, Any]:
     return {"py_modules": [str(Path(__file__).resolve().parents[2])], "excludes": ["__pycache__"]}
 
 
-def _ray_init(ray, address: str) -> bool:
+def _ray_init(ray: ModuleType, address: str) -> bool:
     """Connect to (or, ``"local"``, start) the Ray cluster; whether Ray was started here."""
     init_kwargs: dict[str, Any] = {
         "ignore_reinit_error": True,
@@ -162,7 +172,7 @@ def _ray_init(ray, address: str) -> bool:
     return started
 
 
-def _collect_ray(ray, shard_of: dict, finish: Callable[[tuple, bool], None]) -> None:
+def _collect_ray(ray: ModuleType, shard_of: dict, finish: Callable[[tuple, bool], None]) -> None:
     """Hand each task's result to ``finish`` as it arrives; cancel all if one stalls."""
     from mincam_render.data.worker_pool import POLL_S, StallWatch, WorkerStalled
 
@@ -188,7 +198,9 @@ def _collect_ray(ray, shard_of: dict, finish: Callable[[tuple, bool], None]) -> 
         finish(result, False)
 
 
-def _ray_render_shard(job: dict, shard: int, threads: int, backgrounds: dict | None):
+def _ray_render_shard(
+    job: dict, shard: int, threads: int, backgrounds: dict | None
+) -> tuple[int, np.ndarray, dict, float]:
     import drjit as dr
 
     from mincam_render.render.backend import use_variant

@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +30,9 @@ from mincam_render.data.render_job.manifest import _append_log, _check_shards, _
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.data.render_job.shards import render_shard
 from mincam_render.data.writer_lock import exclusive_writer
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 log = logging.getLogger(__name__)
 
@@ -130,7 +134,7 @@ def _frames_of(job: dict, num_shards: int) -> dict[int, int]:
     }
 
 
-def _progress_bar(out: Path, job: dict, done_frames: int):
+def _progress_bar(out: Path, job: dict, done_frames: int) -> tqdm:
     """A tqdm bar over the job's frames on stderr, starting at ``done_frames``."""
     from tqdm import tqdm
 
@@ -185,7 +189,9 @@ class _ShardWriter:
             self.bar = _progress_bar(out, self.job, sum(self.frames_of[i] for i in kept))
         self.rendered: list[int] = []
 
-    def __call__(self, result: tuple[int, np.ndarray, dict, float], per_frame_progress: bool):
+    def __call__(
+        self, result: tuple[int, np.ndarray, dict, float], per_frame_progress: bool
+    ) -> None:
         shard, stored, meta, seconds = result
         record = ds.write_shard(self.out, shard, stored, meta)
         self.manifest["shards"][shard] = record

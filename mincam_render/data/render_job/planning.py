@@ -14,11 +14,15 @@ import logging
 import math
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.render.fidelity import FidelityPlan
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +53,7 @@ def package_versions() -> dict[str, str]:
     return out
 
 
-def _describe_family(request: RenderRequest):
+def _describe_family(request: RenderRequest) -> tuple[SceneFamily, dict[str, Any], bool]:
     """``(family, description dict, rebuild flag)`` for a request."""
     from mincam_render.core.config import parse, to_dict
     from mincam_render.scenes.registry import load_family
@@ -107,10 +111,10 @@ def plan_render(
 def _job_section(
     request: RenderRequest,
     identity: dict,
-    family,
+    family: SceneFamily,
     description: dict,
     rebuild: bool,
-    camera,
+    camera: FreeformCamera,
     plan: FidelityPlan,
 ) -> dict:
     """The manifest's ``job``: all a worker needs to render a shard (and its backgrounds)."""
@@ -149,7 +153,7 @@ def _job_section(
 def _manifest(
     request: RenderRequest,
     identity: dict,
-    family,
+    family: SceneFamily,
     description: dict,
     job: dict,
     plan: FidelityPlan,
@@ -203,7 +207,7 @@ def _fidelity_plan(
     request: RenderRequest,
     family_name: str,
     identity: dict,
-    camera,
+    camera: FreeformCamera,
     use_cache: bool,
     ship: bool,
     progress: bool,

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mincam_render.data import dataset as ds
 
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.scenes.base import SceneFamily
 
-def _load_family(job: dict):
+
+def _load_family(job: dict) -> SceneFamily:
     """The scene family of a job, rebuilt from the manifest's resolved description."""
     from mincam_render.core.config import parse
     from mincam_render.scenes.registry import family_class, load_family
@@ -22,7 +26,7 @@ def _load_family(job: dict):
     )
 
 
-def _render_camera(job: dict):
+def _render_camera(job: dict) -> tuple[FreeformCamera, FreeformCamera]:
     """``(camera of the dataset, camera actually rendered)``; they differ for shared renders."""
     camera = ds.camera_from_dict(job["camera"])
     if job["render"]["shared_render"]:

@@ -11,7 +11,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -19,6 +19,13 @@ from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.scene import _load_family, _render_camera
 from mincam_render.render import precision
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.differential import Background
+    from mincam_render.scenes.base import SceneFamily
 
 #: Test hook: seconds to sleep after each frame (slows renders so a test can kill
 #: one mid-way). Read by workers from the environment; unset in normal use.
@@ -138,7 +145,9 @@ def _render_frames(
     return images, frames, labels
 
 
-def _frame_background(job: dict, family, i: int, backgrounds: dict | None):
+def _frame_background(
+    job: dict, family: SceneFamily, i: int, backgrounds: dict | None
+) -> Background | None:
     """The ``Background`` of frame ``i`` of a differential job, else None.
 
     Raises:
@@ -154,7 +163,14 @@ def _frame_background(job: dict, family, i: int, backgrounds: dict | None):
     return background
 
 
-def _render_frame(job: dict, family, scene, render_cam, i: int, background) -> tuple:
+def _render_frame(
+    job: dict,
+    family: SceneFamily,
+    scene: mi.Scene,
+    render_cam: FreeformCamera,
+    i: int,
+    background: Background | None,
+) -> tuple:
     """``(T[detector, row, col] (W, numpy), labels, seed)`` of frame ``i``.
 
     Differentially with ``background`` (its seed), else the plain transport at

@@ -10,11 +10,18 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.core.config import spec
+
+if TYPE_CHECKING:
+    from mincam_render.scenes.base import CameraMount
+    from mincam_render.scenes.lighting import LightingConfig
+    from mincam_render.scenes.workspace import WorkspaceConfig
 
 #: Floor area one person needs (m^2): a room "holds" floor_area / this many people.
 AREA_PER_PERSON_M2 = 2.0
@@ -82,7 +89,7 @@ class RoomConfig:
     def floor_area_m2(self) -> float:
         return self.size_m[0] * self.size_m[1]
 
-    def contains(self, point, margin: float = 0.0) -> bool:
+    def contains(self, point: Sequence[float] | np.ndarray, margin: float = 0.0) -> bool:
         """True when a 2-D or 3-D point is inside the room by at least ``margin`` (m)."""
         p = np.asarray(point, dtype=np.float64)
         return bool(np.all(p >= margin) and np.all(p <= np.asarray(self.size_m[: len(p)]) - margin))
@@ -286,7 +293,9 @@ def check_wall_opening(
         )
 
 
-def check_inside(name: str, room: RoomConfig, point, margin: float = 0.0) -> None:
+def check_inside(
+    name: str, room: RoomConfig, point: Sequence[float] | np.ndarray, margin: float = 0.0
+) -> None:
     """Raise ``ValueError`` naming ``name`` unless ``point`` is ``margin`` (m) inside the room."""
     if not room.contains(point, margin):
         box = " x ".join(f"[{margin:g}, {s - margin:g}]" for s in room.size_m[: len(point)])
@@ -344,13 +353,13 @@ def check_light_banks(room: RoomConfig, banks: tuple[LightBankConfig, ...]) -> N
                 )
 
 
-def check_camera(room: RoomConfig, camera) -> None:
+def check_camera(room: RoomConfig, camera: CameraMount) -> None:
     """Raise ``ValueError`` unless the camera and the point it faces are in the room."""
     check_inside("camera.position", room, camera.position, 0.01)
     check_inside("camera.look_at", room, camera.look_at, 0.0)
 
 
-def check_room_layout(config) -> None:
+def check_room_layout(config: LightingConfig | WorkspaceConfig) -> None:
     """Checks shared by the indoor descriptions: openings, furniture, lights, capacity, camera.
 
     Raises:

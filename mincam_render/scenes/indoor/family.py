@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +18,12 @@ from mincam_render.scenes.indoor.motion import (
 )
 from mincam_render.scenes.indoor.rig import IndoorRig, IndoorState
 
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.scenes.base import View
+
 
 class IndoorFamily(SceneFamily):
     """What the indoor families share: one :class:`IndoorRig`, people and switched lights.
@@ -25,7 +32,7 @@ class IndoorFamily(SceneFamily):
     ``labels``, ``labels_for(state)`` and ``frame_state``.
     """
 
-    def __init__(self, config, *, seed: int, num_frames: int) -> None:
+    def __init__(self, config: Any, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)
         c = config
         lamps = self.floor_lamps
@@ -83,10 +90,10 @@ class IndoorFamily(SceneFamily):
     def fps(self) -> float:
         return self.config.fps
 
-    def camera(self):
+    def camera(self) -> FreeformCamera:
         return self.config.camera.camera()
 
-    def build_scene(self):
+    def build_scene(self) -> mi.Scene:
         return self.rig.build_scene()
 
     def state(self, index: int) -> IndoorState:
@@ -103,12 +110,12 @@ class IndoorFamily(SceneFamily):
         """Labels of any state (e.g. one placed by hand in a test)."""
         raise NotImplementedError
 
-    def apply_state(self, scene, state: IndoorState) -> dict[str, np.ndarray]:
+    def apply_state(self, scene: mi.Scene, state: IndoorState) -> dict[str, np.ndarray]:
         """Set ``scene`` to ``state`` in place and return its labels."""
         self.rig.apply(scene, state)
         return self.labels_for(state)
 
-    def set_frame(self, scene, index: int) -> dict[str, np.ndarray]:
+    def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
         return self.apply_state(scene, self.state(index))
 
     has_background = True
@@ -124,7 +131,9 @@ class IndoorFamily(SceneFamily):
             return f"lights={lights}"
         return f"lights={lights};daylight_s={self._window_start_s(index, interval_s):.10g}"
 
-    def set_background(self, scene, index: int, interval_s: float, *, at: float = 0.0) -> None:
+    def set_background(
+        self, scene: mi.Scene, index: int, interval_s: float, *, at: float = 0.0
+    ) -> None:
         # nobody in the room, the door closed, the frame's lights, and the daylight
         # at position ``at`` of the frame's interval (0 its start, 1 its end)
         if not 0.0 <= at <= 1.0:
@@ -151,7 +160,7 @@ class IndoorFamily(SceneFamily):
                 parts[key] = parts.get(key, 0.0) + w
         return parts
 
-    def set_background_component(self, scene, key: str) -> None:
+    def set_background_component(self, scene: mi.Scene, key: str) -> None:
         off = (False,) * len(self.rig.lights)
         name, _, value = key.partition("=")
         if name == "daylight_s" and self.rig.window is not None:
@@ -163,11 +172,13 @@ class IndoorFamily(SceneFamily):
             raise ValueError(f"{key!r} is not a background component of family {self.name!r}")
         self.rig.apply(scene, state)
 
-    def set_frame_in_window(self, scene, index: int, interval_s: float) -> dict[str, np.ndarray]:
+    def set_frame_in_window(
+        self, scene: mi.Scene, index: int, interval_s: float
+    ) -> dict[str, np.ndarray]:
         state = replace(self.state(index), daylight_time_s=self._window_start_s(index, interval_s))
         return self.apply_state(scene, state)
 
-    def sun_window(self):
+    def sun_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """The window opening (see the base class), or None without a window."""
         return None if self.rig.window is None else self.rig.window_rectangle()
 
@@ -186,5 +197,5 @@ class IndoorFamily(SceneFamily):
             return 0.0
         return min(max((shown(self.time_s(index)) - t0) / (t1 - t0), 0.0), 1.0)
 
-    def birdseye_view(self):
+    def birdseye_view(self) -> View:
         return self.rig.birdseye_view()

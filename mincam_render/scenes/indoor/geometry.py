@@ -10,8 +10,11 @@ the room and floor zones.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 import trimesh
 
 from mincam_render.core.photometry import lambertian_radiance, lumens_to_watts
@@ -27,8 +30,17 @@ from mincam_render.scenes.indoor.config import (
     wall_length,
 )
 
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
 
-def quad(p0, p1, p2, p3, normal) -> tuple[np.ndarray, np.ndarray]:
+
+def quad(
+    p0: npt.ArrayLike,
+    p1: npt.ArrayLike,
+    p2: npt.ArrayLike,
+    p3: npt.ArrayLike,
+    normal: npt.ArrayLike,
+) -> tuple[np.ndarray, np.ndarray]:
     """The quad ``p0 p1 p2 p3`` (m) as two triangles facing ``normal``: ``(vertices, faces)``."""
     v = np.array([p0, p1, p2, p3], dtype=np.float64)
     f = np.array([[0, 1, 2], [0, 2, 3]])
@@ -38,7 +50,7 @@ def quad(p0, p1, p2, p3, normal) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
-def merge_meshes(parts) -> tuple[np.ndarray, np.ndarray]:
+def merge_meshes(parts: Iterable[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
     """Concatenate ``[(V_i, F_i)]`` into one ``(V, F)``."""
     vs, fs, off = [], [], 0
     for v, f in parts:
@@ -48,7 +60,9 @@ def merge_meshes(parts) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(vs), np.concatenate(fs)
 
 
-def wall_with_holes(room: RoomConfig, wall: Wall, holes) -> tuple[np.ndarray, np.ndarray]:
+def wall_with_holes(
+    room: RoomConfig, wall: Wall, holes: list[tuple[float, float, float, float]]
+) -> tuple[np.ndarray, np.ndarray]:
     """A wall facing into the room, minus rectangular holes ``(s0, s1, z0, z1)`` (m)."""
     origin, t, n = wall_frame(room, wall)
     length, height = wall_length(room, wall), room.size_m[2]
@@ -69,7 +83,9 @@ def wall_with_holes(room: RoomConfig, wall: Wall, holes) -> tuple[np.ndarray, np
     return merge_meshes(quads)
 
 
-def box_mesh(center, extents, rotation_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def box_mesh(
+    center: npt.ArrayLike, extents: npt.ArrayLike, rotation_deg: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned (then rotated about +z) box with outward faces."""
     b = trimesh.creation.box(extents=extents)
     v = np.asarray(b.vertices, dtype=np.float64)
@@ -78,7 +94,9 @@ def box_mesh(center, extents, rotation_deg: float = 0.0) -> tuple[np.ndarray, np
     return v @ rot.T + np.asarray(center), np.asarray(b.faces)
 
 
-def inward_box(lo, hi, *, open_axis: int | None = None, open_at: float = 0.0):
+def inward_box(
+    lo: np.ndarray, hi: np.ndarray, *, open_axis: int | None = None, open_at: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """A box whose faces point inward (a corridor seen from inside): ``(vertices, faces)``.
 
     Args:
@@ -217,7 +235,7 @@ def lamp_surface_points(lamp: FloorLampConfig, n: int = 64) -> np.ndarray:
     return np.concatenate(pts)
 
 
-def points_in_view(camera, points) -> np.ndarray:
+def points_in_view(camera: FreeformCamera, points: npt.ArrayLike) -> np.ndarray:
     """Which points project inside some detector's mask (ignoring occlusion), shape (N,) bool."""
     pts = np.asarray(points, dtype=np.float64)
     right, up, fwd = camera.frame

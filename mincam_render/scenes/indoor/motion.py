@@ -49,15 +49,15 @@ class NavGrid:
         if len(self.free_cells) == 0:
             raise ValueError("furniture: no free floor left to walk on")
 
-    def cell(self, p) -> tuple[int, int]:
+    def cell(self, p: np.ndarray) -> tuple[int, int]:
         ix = min(max(int(p[0] / NAV_CELL_M), 0), self.nx - 1)
         iy = min(max(int(p[1] / NAV_CELL_M), 0), self.ny - 1)
         return iy, ix
 
-    def point(self, c) -> np.ndarray:
+    def point(self, c: tuple[int, int] | np.ndarray) -> np.ndarray:
         return (np.array([c[1], c[0]], dtype=np.float64) + 0.5) * NAV_CELL_M
 
-    def nearest_free(self, p) -> tuple[int, int]:
+    def nearest_free(self, p: np.ndarray) -> tuple[int, int]:
         iy, ix = self.cell(p)
         if self.free[iy, ix]:
             return iy, ix
@@ -68,7 +68,7 @@ class NavGrid:
         c = self.free_cells[rng.integers(len(self.free_cells))]
         return self.point(c) + rng.uniform(-0.3, 0.3, 2) * NAV_CELL_M
 
-    def _clear(self, a, b) -> bool:
+    def _clear(self, a: np.ndarray, b: np.ndarray) -> bool:
         n = int(np.linalg.norm(b - a) / (0.5 * NAV_CELL_M)) + 2
         for t in np.linspace(0, 1, n):
             iy, ix = self.cell(a + t * (b - a))
@@ -76,7 +76,7 @@ class NavGrid:
                 return False
         return True
 
-    def plan(self, a, b) -> list[np.ndarray]:
+    def plan(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
         """Waypoints from ``a`` to ``b`` (x, y), around obstacles (A*, 8-connected, smoothed)."""
         a, b = np.asarray(a, float), np.asarray(b, float)
         s, g = self.nearest_free(a), self.nearest_free(b)
@@ -167,7 +167,7 @@ class _Agent:
     passing: bool = False  # on the way through the doorway (opens the door)
 
 
-def _turn(h, target, max_step):
+def _turn(h: float, target: float, max_step: float) -> float:
     d = (target - h + math.pi) % (2 * math.pi) - math.pi
     return h + max(-max_step, min(max_step, d))
 
@@ -249,7 +249,7 @@ class _PeopleSimulation:
         self.last_near = -math.inf
         self.angle = 0.0  # door opening (rad)
 
-    def new_agent(self, pos, stops) -> _Agent:
+    def new_agent(self, pos: np.ndarray, stops: int) -> _Agent:
         """A visitor at ``pos`` (x, y) with ``stops`` stops to make, of a newly drawn look."""
         self.appearances.append(Appearance.draw(self.rng, self.people))
         return _Agent(

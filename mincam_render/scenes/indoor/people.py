@@ -67,7 +67,7 @@ class Pose:
     sit: float = 0.0
 
 
-def _rot_fwd(theta):
+def _rot_fwd(theta: float) -> np.ndarray:
     """Rotation about local y that swings a limb hanging along -z forward (+x) by theta."""
     c, s = math.cos(theta), math.sin(theta)
     return np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
@@ -180,5 +180,10 @@ class BodyModel:
         return {k: vv + np.array([0, 0, z]) for k, vv in v.items()}
 
     @staticmethod
-    def _place(mesh, origin, rot, scale) -> np.ndarray:
+    def _place(
+        mesh: tuple[np.ndarray, np.ndarray],
+        origin: np.ndarray,
+        rot: np.ndarray,
+        scale: tuple[float, float, float],
+    ) -> np.ndarray:
         return (mesh[0] * np.asarray(scale)) @ rot.T + origin

@@ -11,7 +11,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +38,12 @@ from mincam_render.scenes.indoor.geometry import (
     wall_with_holes,
 )
 from mincam_render.scenes.indoor.people import Appearance, BodyModel, Pose
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.scenes.base import View
+    from mincam_render.scenes.sky import Daylight, DaylightConfig
 
 #: Parameter keys of the sun and sky (checked against mi.traverse at build time).
 SUN_KEY, SKY_KEY = "sun", "sky"
@@ -185,7 +191,7 @@ class PeopleLayout:
         """Vertex range of slot ``s``."""
         return slice(s * self.slot_size, (s + 1) * self.slot_size)
 
-    def shape(self):
+    def shape(self) -> dict[str, Any]:
         """The people mesh with every slot parked, for a scene dict."""
         v, albedo = self.empty()
         return ms.mesh(
@@ -222,7 +228,7 @@ class IndoorRig:
         furniture: tuple[FurnitureConfig, ...],
         banks: tuple[LightBankConfig, ...],
         lamps: tuple[FloorLampConfig, ...],
-        daylight,
+        daylight: DaylightConfig,
         daylight_update_s: float,
         slots: int,
         max_depth: int,
@@ -240,7 +246,7 @@ class IndoorRig:
             [Light(b.name, f"bank_{i}", bank_radiance_w_m2_sr(b)) for i, b in enumerate(banks)]
             + [Light(lp.name, f"lamp_{i}", lamp_radiance_w_m2_sr(lp)) for i, lp in enumerate(lamps)]
         )
-        self._sky_cache: dict[float, object] = {}
+        self._sky_cache: dict[float, Daylight] = {}
         self._scenes: list[_SceneCache] = []  # newest first
 
     # -- building
@@ -253,7 +259,7 @@ class IndoorRig:
             keys += [SUN_IRRADIANCE_PARAM, SUN_TO_WORLD_PARAM, SKY_DATA_PARAM]
         return keys
 
-    def build_scene(self):
+    def build_scene(self) -> mi.Scene:
         import mitsuba as mi
 
         from mincam_render.scenes.sky import envmap_to_world
@@ -310,7 +316,7 @@ class IndoorRig:
             corner, edge_u = corner + edge_u, -edge_u
         return corner, edge_u, edge_v
 
-    def sky(self, time_s: float):
+    def sky(self, time_s: float) -> Daylight:
         """Daylight at ``time_s`` rounded down to the update interval (cached)."""
         from mincam_render.scenes.sky import daylight
 
@@ -328,7 +334,7 @@ class IndoorRig:
         return math.floor(time_s / self.daylight_update_s + 1e-9) * self.daylight_update_s
 
     # -- per frame
-    def apply(self, scene, state: IndoorState) -> None:
+    def apply(self, scene: mi.Scene, state: IndoorState) -> None:
         """Set ``scene``'s parameters to ``state`` in place (no rebuild)."""
         import drjit as dr
         import mitsuba as mi
@@ -391,7 +397,7 @@ class IndoorRig:
         params.update()
         applied.update(todo)
 
-    def _parameters(self, scene) -> _SceneCache:
+    def _parameters(self, scene: mi.Scene) -> _SceneCache:
         """What this rig keeps of ``scene`` between frames (for the scenes last used)."""
         import mitsuba as mi
 
@@ -409,7 +415,7 @@ class IndoorRig:
         self._scenes = [cache, *self._scenes[: _SCENES_KEPT - 1]]
         return cache
 
-    def birdseye_view(self):
+    def birdseye_view(self) -> View:
         from mincam_render.scenes.base import View
 
         w, d, h = self.room.size_m
