@@ -53,9 +53,19 @@ import logging
 import math
 import platform
 import time
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import os
+    from pathlib import Path
+
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
 
@@ -200,7 +210,7 @@ def relative_rms(p: np.ndarray, p_ref: np.ndarray) -> float:
 # ---- the benchmark -----------------------------------------------------------------------
 
 
-def _median_time(fn, repeats: int) -> tuple[Any, float, float]:
+def _median_time(fn: Callable[..., np.ndarray], repeats: int) -> tuple[Any, float, float]:
     """``(result, median s, spread s)`` of ``fn()`` after an untimed ``fn(warm_up=True)``."""
     fn(warm_up=True)
     result = None
@@ -267,9 +277,9 @@ class _Bench:
     """
 
     cfg: FidelityBenchConfig
-    family: Any
-    camera: Any
-    scene: Any
+    family: SceneFamily
+    camera: FreeformCamera
+    scene: mi.Scene
     frames: list[int]
     scene_depth: int | None
     masks_random: np.ndarray
@@ -317,7 +327,15 @@ class _Bench:
         )
 
     def render(
-        self, cam, *, spp, max_depth=None, shared=False, seed_offset=0, point=False, warm_up=False
+        self,
+        cam: FreeformCamera,
+        *,
+        spp: int,
+        max_depth: int | None = None,
+        shared: bool = False,
+        seed_offset: int = 0,
+        point: bool = False,
+        warm_up: bool = False,
     ) -> np.ndarray:
         """``T[frame, detector, row, col]`` (float32, W) of the bench frames through ``cam``.
 
@@ -380,7 +398,16 @@ class _Bench:
         et = relative_rms(measurements(t, self.masks_trained), p_ref_t)
         return {"error_random": er, "error_trained": et, "error": max(er, et)}
 
-    def setting(self, cam, *, spp=None, max_depth=None, shared=False, point=False, float16=False):
+    def setting(
+        self,
+        cam: FreeformCamera,
+        *,
+        spp: int | None = None,
+        max_depth: int | None = None,
+        shared: bool = False,
+        point: bool = False,
+        float16: bool = False,
+    ) -> Callable[..., np.ndarray]:
         """A render of all bench frames under one setting; ``warm_up`` renders one frame.
 
         ``spp`` and ``max_depth`` default (None) to the base setting's.
@@ -398,7 +425,9 @@ class _Bench:
 
         return run
 
-    def add(self, knob: str, level: Any, fn, **changed) -> np.ndarray:
+    def add(
+        self, knob: str, level: Any, fn: Callable[..., np.ndarray], **changed: Any
+    ) -> np.ndarray:
         """Time ``fn`` (a :meth:`setting`), add its row; returns its transport."""
         t, sec, spread = _median_time(fn, self.cfg.repeats)
         e = self.errors(t)
@@ -608,7 +637,7 @@ def pareto_front(rows: list[dict]) -> list[dict]:
     return front
 
 
-def plot_pareto(result: dict, path) -> Any:
+def plot_pareto(result: dict[str, Any], path: str | os.PathLike) -> Path:
     """Save the error-vs-seconds plot (log axes) of one family; returns the path."""
     from pathlib import Path
 
@@ -682,7 +711,9 @@ def pareto_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def write_fidelity_report(results: list[dict], out_dir) -> dict[str, Any]:
+def write_fidelity_report(
+    results: list[dict[str, Any]], out_dir: str | os.PathLike
+) -> dict[str, Any]:
     """Write ``fidelity.json``, ``pareto_<family>.png`` and ``fidelity.html`` to ``out_dir``."""
     from pathlib import Path
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 
@@ -12,6 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.colors  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 
 def plot_transport_grid(
@@ -95,7 +99,7 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
     return out
 
 
-def _plot_error_vs_pixels(ax, result: dict) -> None:
+def _plot_error_vs_pixels(ax: Axes, result: dict[str, Any]) -> None:
     lo, hi = result["trivial"]["error"]["ci95"]
     ax.axhspan(lo, hi, color="0.85", label="trivial predictor (95 % CI)")
     ax.axhline(result["trivial"]["error"]["mean"], color="0.5", lw=1, ls="--")
@@ -131,7 +135,7 @@ def _plot_error_vs_pixels(ax, result: dict) -> None:
     ax.legend(fontsize=7)
 
 
-def _plot_label(ax, name: str, lab: dict) -> None:
+def _plot_label(ax: Axes, name: str, lab: dict[str, Any]) -> None:
     """One label's figure per configuration (the trivial predictor in grey), 95 % CIs."""
     configs = list(lab["configs"].items())
     x = np.arange(len(configs))

@@ -14,7 +14,10 @@ import html
 import io
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto;
@@ -53,7 +56,7 @@ def png_data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def figure_png(fig, *, dpi: int = 110) -> bytes:
+def figure_png(fig: Figure, *, dpi: int = 110) -> bytes:
     """PNG bytes of a matplotlib figure (the figure is closed)."""
     from mincam_render.analysis.plots import plt
 
@@ -129,7 +132,7 @@ class Report:
             f"<figcaption>Figure {self.num_figures}. {html.escape(caption)}</figcaption></figure>"
         )
 
-    def figure(self, fig, caption: str) -> None:
+    def figure(self, fig: Figure, caption: str) -> None:
         """Embed a matplotlib figure (closed afterwards)."""
         self.figure_png(figure_png(fig), caption)
 

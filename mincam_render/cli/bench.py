@@ -9,6 +9,8 @@ option's parameter name is the field's name and its default the field's default
 from __future__ import annotations
 
 import functools
+from pathlib import Path
+from typing import Any
 
 import click
 
@@ -64,7 +66,7 @@ def bench_group() -> None:
 @click.option(
     "--seed", type=click.IntRange(0, 2**63 - 1), default=_default("seed"), show_default=True
 )
-def bench_fidelity_cmd(families, out, no_auto, **fields):
+def bench_fidelity_cmd(families: tuple[str, ...], out: Path, no_auto: bool, **fields: Any) -> None:
     """Error of detector measurements against run time for every fidelity knob.
 
     \b

@@ -20,7 +20,9 @@ class FiniteFloat(click.FloatRange):
 
     name = "finite float"
 
-    def convert(self, value, param, ctx):
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> float:
         """The float, or a usage error naming the option."""
         number = super().convert(value, param, ctx)
         if not math.isfinite(number):
@@ -28,7 +30,7 @@ class FiniteFloat(click.FloatRange):
         return number
 
 
-def vec3(ctx, param, value):
+def vec3(ctx: click.Context, param: click.Parameter, value: str | None) -> tuple[float, ...] | None:
     """Callback: ``"x,y,z"`` (metres) -> a tuple of three floats; None stays None."""
     if value is None:
         return None
@@ -43,7 +45,7 @@ def vec3(ctx, param, value):
     return tuple(parts)
 
 
-def grid(ctx, param, value):
+def grid(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, int]:
     """Callback: ``"ROWSxCOLS"`` -> ``(rows, cols)``, each in [1, 64]."""
     try:
         r, c = (int(p) for p in value.lower().split("x"))
@@ -54,12 +56,14 @@ def grid(ctx, param, value):
     return (r, c)
 
 
-def optional_grid(ctx, param, value):
+def optional_grid(
+    ctx: click.Context, param: click.Parameter, value: str | None
+) -> tuple[int, int] | None:
     """Callback: like :func:`grid`, and None stays None."""
     return None if value is None else grid(ctx, param, value)
 
 
-def int_list(ctx, param, value):
+def int_list(ctx: click.Context, param: click.Parameter, value: str | None) -> list[int] | None:
     """Callback: ``"1,2,4"`` -> ``[1, 2, 4]`` (each >= 1); None (the default) stays None."""
     if value is None:  # the option's default: decided by the command
         return None
@@ -74,7 +78,7 @@ def int_list(ctx, param, value):
     return out
 
 
-def grid_list(ctx, param, value):
+def grid_list(ctx: click.Context, param: click.Parameter, value: str) -> list[tuple[int, int]]:
     """Callback: ``"2x2,4x4"`` -> ``[(2, 2), (4, 4)]``."""
     try:
         return [grid(ctx, param, v.strip()) for v in value.split(",") if v.strip()]

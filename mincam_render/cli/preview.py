@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 import numpy as np
 
@@ -35,7 +37,9 @@ from .options import FiniteFloat, out_option
     show_default=True,
     help="Samples per pixel of the views.",
 )
-def preview_cmd(scene, out, seed, n_shown, duration_s, spp):
+def preview_cmd(
+    scene: str, out: Path, seed: int, n_shown: int, duration_s: float, spp: int
+) -> None:
     """Render a few frames of a scene family with their labels drawn on.
 
     SCENE is a family name (patches, workspace, lighting, traffic) or a path to

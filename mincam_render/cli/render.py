@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -22,7 +23,7 @@ from .options import FiniteFloat, apply_options, field_default, out_option
 _default = functools.partial(field_default, RenderRequest)
 
 
-def _render_splits(ctx, param, value):
+def _render_splits(ctx: click.Context, param: click.Parameter, value: str) -> tuple[float, ...]:
     try:
         parts = tuple(float(p) for p in value.split(","))
     except ValueError:
@@ -32,7 +33,9 @@ def _render_splits(ctx, param, value):
     return parts
 
 
-def _render_settings(ctx, param, values):
+def _render_settings(
+    ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+) -> dict[str, Any]:
     import tomllib
 
     out: dict = {}
@@ -161,7 +164,14 @@ _RUN_OPTIONS = [
 @out_option("Dataset directory (created; an unfinished one is resumed).")
 @apply_options(_REQUEST_OPTIONS)
 @apply_options(_RUN_OPTIONS)
-def render_cmd(out, workers, ray_address, replan, no_progress, **request_options):
+def render_cmd(
+    out: Path,
+    workers: int | None,
+    ray_address: str | None,
+    replan: bool,
+    no_progress: bool,
+    **request_options: Any,
+) -> None:
     """Render a dataset of transport images T[frame, detector, row, col] with labels.
 
     FAMILY is a scene family name (patches, workspace, lighting, traffic) or a
@@ -200,7 +210,7 @@ def render_cmd(out, workers, ray_address, replan, no_progress, **request_options
     )
 
 
-def _request(*, detectors, overrides, **fields) -> RenderRequest:
+def _request(*, detectors: int | None, overrides: dict[str, Any], **fields: Any) -> RenderRequest:
     """The request the options describe; ``fields`` are named like RenderRequest's fields."""
     if detectors is not None:
         overrides = {**overrides, "camera": {**overrides.get("camera", {}), "detectors": detectors}}
@@ -216,7 +226,7 @@ def _request(*, detectors, overrides, **fields) -> RenderRequest:
     help="Frame indices, e.g. 0,5,10-12 (ranges inclusive).",
 )
 @out_option("Directory for frame-NNNNNN.exr files (created).")
-def export_exr_cmd(dataset, frame_list, out):
+def export_exr_cmd(dataset: Path, frame_list: str, out: Path) -> None:
     """Write chosen frames of a rendered dataset as OpenEXR (one channel per detector, W).
 
     \b
@@ -235,7 +245,7 @@ def export_exr_cmd(dataset, frame_list, out):
 
 @click.command("repair")
 @click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
-def repair_cmd(dataset):
+def repair_cmd(dataset: Path) -> None:
     """Rebuild an edited or damaged manifest from its request and the shards' own records.
 
     Shards that pass their own checksum and were rendered for the request are

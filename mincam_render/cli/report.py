@@ -49,7 +49,15 @@ def report_group() -> None:
     help="Training steps of each inference head.",
 )
 @click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
-def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps, seed):
+def report_sim2real_cmd(
+    measurements: Path | None,
+    surrogate_family: str | None,
+    frames: int,
+    out: Path,
+    spp: int,
+    steps: int,
+    seed: int,
+) -> None:
     """Compare simulated with measured (or SURROGATE) freeform-pixel recordings.
 
     Give a recording directory (format: docs/sim2real_format.md), or --surrogate FAMILY.
@@ -79,6 +87,7 @@ def report_sim2real_cmd(measurements, surrogate_family, frames, out, spp, steps,
                 seed=seed,
                 progress=True,
             )
+        assert measurements is not None  # for mypy: exactly one of the two was given
         result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed, progress=True)
         paths = write_sim2real_report(result, out)
     except (ValueError, ConfigError, Sim2RealError, OSError) as err:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -17,6 +18,9 @@ from mincam_render.analysis.comparison_config import ComparisonConfig as C
 
 from .errors import user_error
 from .options import FiniteFloat, apply_options, grid, grid_list, int_list, out_option
+
+if TYPE_CHECKING:
+    from mincam_render.analysis.comparison_config import Design
 
 #: Options of the commands that render independent episodes and compare designs;
 #: named like the ComparisonConfig fields they fill, except --steps (the training
@@ -69,7 +73,15 @@ def _family_detectors(family: str) -> int:
         raise user_error(err) from None
 
 
-def _compare(out: Path, designs: tuple, *, spp, steps, workers, **episode) -> dict:
+def _compare(
+    out: Path,
+    designs: tuple[Design, ...],
+    *,
+    spp: int | None,
+    steps: int,
+    workers: int,
+    **episode: Any,
+) -> dict[str, Any]:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
     from mincam_render.analysis.comparison import run_comparison
     from mincam_render.core.config import ConfigError
@@ -103,7 +115,7 @@ def _compare(out: Path, designs: tuple, *, spp, steps, workers, **episode) -> di
     return result
 
 
-def _echo_comparison(result: dict, seeds: int) -> None:
+def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
     """Each design's test error [95 % CI], the trivial predictor's, and the verdict."""
     click.echo(f"[2/2] test {result['error_name']}, mean over {seeds} seeds [95 % CI]")
     for name, d in result["designs"].items():
@@ -137,7 +149,9 @@ def _echo_comparison(result: dict, seeds: int) -> None:
     callback=grid,
     help="Baseline camera resolution ROWSxCOLS.",
 )
-def pipeline_cmd(out, pixels, baseline_grid, **episode):
+def pipeline_cmd(
+    out: Path, pixels: int | None, baseline_grid: tuple[int, int], **episode: Any
+) -> None:
     """The main job: a minimalist camera against a conventional one, with a verdict that holds.
 
     Renders independent episodes of the family (other scene seeds) into
@@ -191,7 +205,14 @@ def pipeline_cmd(out, pixels, baseline_grid, **episode):
     show_default=True,
     help="Pixel count of the design whose pixel reduction factor is reported.",
 )
-def study_cmd(out, pixels, baseline_grids, ablation, reference_pixels, **episode):
+def study_cmd(
+    out: Path,
+    pixels: list[int] | None,
+    baseline_grids: list[tuple[int, int]],
+    ablation: bool,
+    reference_pixels: int,
+    **episode: Any,
+) -> None:
     """A sweep of minimalist cameras against baselines on independent episodes.
 
     Like `pipeline`, with every design of --pixels (and, with --ablation, the

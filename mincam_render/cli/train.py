@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
@@ -27,6 +29,13 @@ from .options import (
     optional_grid,
     out_option,
 )
+
+if TYPE_CHECKING:
+    import torch
+
+    from mincam_render.learn.batches import RenderedBatches
+    from mincam_render.learn.models import MincamCamera
+    from mincam_render.learn.training_data import TrainingData
 
 log = logging.getLogger(_pkg)
 
@@ -82,7 +91,7 @@ _RECIPE_OPTIONS = {
 }
 
 
-def _recipe_option(name: str):
+def _recipe_option(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """The option filling ``TrainConfig.<name>``, with the field's default."""
     flag, type_, help_text = _RECIPE_OPTIONS[name]
     default = field_default(TrainConfig, name)
@@ -99,7 +108,9 @@ training_options = apply_options(
 )
 
 
-def _splits(dataset, family, frames, spp, seed):
+def _splits(
+    dataset: Path | None, family: str | None, frames: int, spp: int, seed: int
+) -> tuple[TrainingData, ...]:
     """(train, val, test) TrainingData from a dataset directory or an in-memory render."""
     from mincam_render.learn.train import TrainingData
 
@@ -161,19 +172,19 @@ def _splits(dataset, family, frames, spp, seed):
 )
 @click.option("--no-resume", is_flag=True, help="Start afresh even if a checkpoint exists.")
 def train_cmd(
-    dataset,
-    family,
-    frames,
-    spp,
-    out,
-    pixels,
-    baseline,
-    no_sensor_model,
-    on_the_fly,
-    export_dir,
-    no_resume,
-    **recipe,
-):
+    dataset: Path | None,
+    family: str | None,
+    frames: int,
+    spp: int,
+    out: Path,
+    pixels: int | None,
+    baseline: tuple[int, int] | None,
+    no_sensor_model: bool,
+    on_the_fly: bool,
+    export_dir: Path | None,
+    no_resume: bool,
+    **recipe: Any,
+) -> None:
     """Train a minimalist (or baseline) camera end to end; metrics on the test split.
 
     Reads a dataset written by `mincam-render render`, or renders --frames of a
@@ -218,7 +229,9 @@ def train_cmd(
     )
 
 
-def _fresh_batches(family, spp, config: TrainConfig, train):
+def _fresh_batches(
+    family: str | None, spp: int, config: TrainConfig, train: TrainingData
+) -> RenderedBatches:
     """--on-the-fly: training batches of frames rendered afresh (from the next seed)."""
     from mincam_render.learn.train import RenderedBatches
     from mincam_render.scenes import load_family
@@ -232,7 +245,7 @@ def _fresh_batches(family, spp, config: TrainConfig, train):
     )
 
 
-def _export_run_masks(run_dir: Path, export_dir: Path, train) -> None:
+def _export_run_masks(run_dir: Path, export_dir: Path, train: TrainingData) -> None:
     """--export-masks: the printable masks of a finished run."""
     from mincam_render.export.masks import export_masks
     from mincam_render.learn.train import run_masks
@@ -264,7 +277,16 @@ def _export_run_masks(run_dir: Path, export_dir: Path, train) -> None:
     callback=grid_list,
     help="Baseline resolutions ROWSxCOLS.",
 )
-def sweep_cmd(dataset, family, frames, spp, out, pixel_counts, baselines, **recipe):
+def sweep_cmd(
+    dataset: Path | None,
+    family: str | None,
+    frames: int,
+    spp: int,
+    out: Path,
+    pixel_counts: list[int] | None,
+    baselines: list[tuple[int, int]],
+    **recipe: Any,
+) -> None:
     """Task error against pixel count: minimalist cameras vs baselines (log axis).
 
     Every camera gets the same training budget. Writes sweep.png, sweep.md,
@@ -306,7 +328,15 @@ def sweep_cmd(dataset, family, frames, spp, out, pixel_counts, baselines, **reci
     help="A minimalist-camera run directory from `mincam-render train`.",
 )
 @out_option("Output directory (created).", default="runs/prune")
-def prune_cmd(dataset, family, frames, spp, run_dir, out, **recipe):
+def prune_cmd(
+    dataset: Path | None,
+    family: str | None,
+    frames: int,
+    spp: int,
+    run_dir: Path,
+    out: Path,
+    **recipe: Any,
+) -> None:
     """Greedy pruning (supplement C): drop the least useful pixel, retrain the head, repeat.
 
     Use the same data as the run. Writes prune.json and prune.png (test error
@@ -349,7 +379,9 @@ def prune_cmd(dataset, family, frames, spp, run_dir, out, **recipe):
     click.echo(f"wrote {out / 'prune.json'}, prune.png")
 
 
-def _restored_mincam(run: dict, state: dict, train):
+def _restored_mincam(
+    run: dict[str, Any], state: dict[str, torch.Tensor], train: TrainingData
+) -> MincamCamera:
     """The minimalist camera of a run (its description and weights), for ``train``'s data."""
     from mincam_render.learn.models import CountLoss
     from mincam_render.learn.train import build_mincam
@@ -371,7 +403,7 @@ def _restored_mincam(run: dict, state: dict, train):
 @click.option("--task", default=None, help="Task name [default: the run's scene family].")
 @out_option("Masks go into OUT/<task>/.", default="masks")
 @click.option("--no-pdf", is_flag=True, help="Skip the PDF print sheet.")
-def export_masks_cmd(run_dir, task, out, no_pdf):
+def export_masks_cmd(run_dir: Path, task: str | None, out: Path, no_pdf: bool) -> None:
     """Export a trained camera's masks for printing.
 
     Writes into OUT/<task>/: mask_NN.png (16-bit transmittance), masks.exr,
@@ -387,7 +419,8 @@ def export_masks_cmd(run_dir, task, out, no_pdf):
     try:
         m, camera, run = run_masks(run_dir)
         task = task or str(run["data"]["train"].get("family") or "task")
-        paths = export_masks(
+        # export_masks is annotated dict[str, Path], but its "png" entry is a list of paths
+        paths: dict[str, Any] = export_masks(
             m,
             camera,
             out / task,

@@ -6,6 +6,7 @@ import json
 import logging
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
@@ -13,6 +14,11 @@ import numpy as np
 from . import __name__ as _pkg
 from .errors import user_error
 from .options import FiniteFloat, grid, out_option, vec3
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
 
 MM = 1e-3
 log = logging.getLogger(_pkg)
@@ -92,7 +98,18 @@ log = logging.getLogger(_pkg)
     help="Override the scene's path depth (1 = emitters only).",
 )
 @click.pass_context
-def transport_cmd(ctx, scene, out, spp, seed, mask_res, grid, pitch_mm, max_depth, **pose):
+def transport_cmd(
+    ctx: click.Context,
+    scene: Path | None,
+    out: Path,
+    spp: int,
+    seed: int,
+    mask_res: int,
+    grid: tuple[int, int],
+    pitch_mm: float,
+    max_depth: int | None,
+    **pose: Any,
+) -> None:
     """Render transport images T[detector, row, col] of a camera in a scene.
 
     SCENE is a Mitsuba XML file; without it the built-in demo scene is used.
@@ -144,7 +161,14 @@ def transport_cmd(ctx, scene, out, spp, seed, mask_res, grid, pitch_mm, max_dept
     )
 
 
-def _scene_and_camera(ctx, scene, mask_res, grid, pitch_mm, pose: dict):
+def _scene_and_camera(
+    ctx: click.Context,
+    scene: Path | None,
+    mask_res: int,
+    grid: tuple[int, int],
+    pitch_mm: float,
+    pose: dict[str, Any],
+) -> tuple[mi.Scene, FreeformCamera]:
     """The Mitsuba scene (rescaled) and the freeform camera the options describe."""
     from mincam_render.optics.camera import DetectorLayout, FreeformCamera
     from mincam_render.render import user_scene
@@ -161,7 +185,9 @@ def _scene_and_camera(ctx, scene, mask_res, grid, pitch_mm, pose: dict):
     return mi_scene, camera
 
 
-def _render(mi_scene, camera, spp, seed, max_depth):
+def _render(
+    mi_scene: mi.Scene, camera: FreeformCamera, spp: int, seed: int, max_depth: int | None
+) -> tuple[np.ndarray, dict[str, Any]]:
     """``T[detector, row, col]`` (W) and the run's backend, seconds, noise and warnings."""
     from mincam_render.render import backend, user_scene
     from mincam_render.render.transport import render_transport_with_noise
@@ -186,7 +212,7 @@ def _render(mi_scene, camera, spp, seed, max_depth):
     return t, {"backend": info, "seconds": seconds, "noise": noise, "warnings": warnings}
 
 
-def _write(out: Path, config: dict, t, camera) -> None:
+def _write(out: Path, config: dict[str, Any], t: np.ndarray, camera: FreeformCamera) -> None:
     """transport.exr, transport.png and config.json into ``out`` (created)."""
     from mincam_render.analysis.plots import plot_transport_grid
     from mincam_render.data.exr import write_transport_exr
@@ -202,7 +228,16 @@ def _write(out: Path, config: dict, t, camera) -> None:
     (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
 
 
-def _transport_pose(ctx, mi_scene, *, position, look_at, up, pose_from_sensor, sensor_id) -> dict:
+def _transport_pose(
+    ctx: click.Context,
+    mi_scene: mi.Scene,
+    *,
+    position: tuple[float, ...],
+    look_at: tuple[float, ...],
+    up: tuple[float, ...],
+    pose_from_sensor: bool,
+    sensor_id: str | None,
+) -> dict[str, Any]:
     """Camera pose keywords from the options, or from the scene's sensor."""
     from mincam_render.render.user_scene import sensor_pose
 

@@ -8,14 +8,19 @@ Each function takes the JSON-ready result of
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mincam_render.analysis.sim2real.fit import THRESHOLDS
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-def figures(result: dict) -> list[tuple[Any, str]]:
+
+def figures(result: dict[str, Any]) -> list[tuple[Figure, str]]:
     """``[(figure, caption)]`` of the report, in page order (the task figure if tasks ran)."""
     figs = [
         _fit_scatter(result),
@@ -28,17 +33,19 @@ def figures(result: dict) -> list[tuple[Any, str]]:
     return figs
 
 
-def _series(result: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _series(result: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(sim V[N, P], real V[N, P], time_s[N])`` of the result (V, s)."""
     series = result["series"]
     return np.asarray(series["sim_v"]), np.asarray(series["real_v"]), np.asarray(series["time_s"])
 
 
-def _tag(result: dict) -> str:
+def _tag(result: dict[str, Any]) -> str:
     return " [SURROGATE]" if result["surrogate"] else ""
 
 
-def _pixel_panels(result: dict, height_in: float, draw):
+def _pixel_panels(
+    result: dict[str, Any], height_in: float, draw: Callable[[Axes, int], None]
+) -> Figure:
     """A figure of one 3.2 x ``height_in`` inch panel per pixel, up to 4 per row.
 
     ``draw(ax, j)`` fills pixel ``j``'s panel; spare panels of the last row are hidden.
@@ -59,11 +66,11 @@ def _pixel_panels(result: dict, height_in: float, draw):
     return fig
 
 
-def _fit_scatter(result: dict) -> tuple[Any, str]:
+def _fit_scatter(result: dict[str, Any]) -> tuple[Figure, str]:
     sim, real, _ = _series(result)
     pix = result["pixels"]
 
-    def draw(ax, j: int) -> None:
+    def draw(ax: Axes, j: int) -> None:
         s, r = sim[:, j] * 1e3, real[:, j] * 1e3
         ax.scatter(s, r, s=4, alpha=0.5, label="samples")
         xs = np.linspace(s.min(), s.max(), 2)
@@ -89,7 +96,7 @@ def _fit_scatter(result: dict) -> tuple[Any, str]:
     )
 
 
-def _time_series(result: dict) -> tuple[Any, str]:
+def _time_series(result: dict[str, Any]) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
     sim, real, t = _series(result)
@@ -116,11 +123,11 @@ def _time_series(result: dict) -> tuple[Any, str]:
     return fig, "Time series overlay per pixel (raw simulation and after the gain/offset fit)."
 
 
-def _residuals(result: dict) -> tuple[Any, str]:
+def _residuals(result: dict[str, Any]) -> tuple[Figure, str]:
     sim, real, _ = _series(result)
     pix = result["pixels"]
 
-    def draw(ax, j: int) -> None:
+    def draw(ax: Axes, j: int) -> None:
         resid = (real[:, j] - (pix[j]["gain"] * sim[:, j] + pix[j]["offset_v"])) * 1e3
         ax.hist(resid, bins=30, color="tab:purple", label="residuals")
         ax.set_title(f"pixel {j}: std {pix[j]['residual_std_v'] * 1e3:.3g} mV", fontsize=9)
@@ -133,7 +140,7 @@ def _residuals(result: dict) -> tuple[Any, str]:
     return fig, "Residuals after the gain/offset fit."
 
 
-def _calibration(result: dict) -> tuple[Any, str]:
+def _calibration(result: dict[str, Any]) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
     pix = result["pixels"]
@@ -156,7 +163,7 @@ def _calibration(result: dict) -> tuple[Any, str]:
     )
 
 
-def _fitted_gains(ax, x: np.ndarray, pix: list[dict]) -> None:
+def _fitted_gains(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
     """Fitted gain per pixel with ±2 se, and the expected one of SURROGATE data."""
     g = np.array([q["gain"] for q in pix])
     ax.errorbar(x, g, yerr=2 * np.array([q["gain_se"] for q in pix]), fmt="o", label="fitted ±2 se")
@@ -169,7 +176,7 @@ def _fitted_gains(ax, x: np.ndarray, pix: list[dict]) -> None:
     ax.legend(fontsize=7)
 
 
-def _fitted_offsets(ax, x: np.ndarray, pix: list[dict]) -> None:
+def _fitted_offsets(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
     """Fitted offset per pixel (mV) with ±2 se, and the expected one of SURROGATE data."""
     o = np.array([q["offset_v"] for q in pix]) * 1e3
     ax.errorbar(
@@ -188,7 +195,7 @@ def _fitted_offsets(ax, x: np.ndarray, pix: list[dict]) -> None:
     ax.legend(fontsize=7)
 
 
-def _task_errors(result: dict) -> tuple[Any, str]:
+def _task_errors(result: dict[str, Any]) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
     tk = result["tasks"]

@@ -13,10 +13,16 @@ import csv
 import dataclasses
 import json
 import logging
+import types
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from mincam_render.core.labels import LabelSpec
+    from mincam_render.optics.camera import FreeformCamera
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +68,7 @@ class Recording:
     volts: np.ndarray
     labels: dict[str, np.ndarray]
     masks: np.ndarray
-    camera: Any
+    camera: FreeformCamera
     pixels: np.ndarray
     label_specs: tuple
     injected: dict | None
@@ -73,7 +79,7 @@ class Recording:
         return bool(self.meta.get("surrogate", False))
 
 
-def _label_columns(specs) -> list[str]:
+def _label_columns(specs: Iterable[LabelSpec]) -> list[str]:
     cols = []
     for s in specs:
         cols += [s.name] if s.size == 1 else [f"{s.name}[{i}]" for i in range(s.size)]
@@ -85,7 +91,9 @@ def _measurement_columns(num_pixels: int) -> list[str]:
     return ["time_s", "frame_index"] + [f"pixel_{j}" for j in range(num_pixels)]
 
 
-def _write_csv(path: Path, header: list[str], rows: np.ndarray, integer_columns=()) -> None:
+def _write_csv(
+    path: Path, header: list[str], rows: np.ndarray, integer_columns: Iterable[int] = ()
+) -> None:
     """Write ``rows`` under ``header``: floats exactly (repr), ``integer_columns`` as ints."""
     ints = set(integer_columns)
     with path.open("w", newline="") as fh:
@@ -152,7 +160,7 @@ def _read_meta(root: Path) -> dict:
         raise Sim2RealError(f"{meta_path}: not valid JSON: {err}") from None
 
 
-def _need(meta: dict, meta_path: Path, key: str, kind, allowed: str):
+def _need(meta: dict, meta_path: Path, key: str, kind: type | types.UnionType, allowed: str) -> Any:
     """``meta[key]`` if it is a ``kind`` (never a bool), else a Sim2RealError naming it."""
     if key not in meta or not isinstance(meta[key], kind) or isinstance(meta[key], bool):
         raise Sim2RealError(
@@ -161,7 +169,7 @@ def _need(meta: dict, meta_path: Path, key: str, kind, allowed: str):
     return meta[key]
 
 
-def _check_meta(root: Path, meta: dict) -> tuple[Any, np.ndarray, tuple]:
+def _check_meta(root: Path, meta: dict) -> tuple[FreeformCamera, np.ndarray, tuple]:
     """Validate ``recording.json`` (and the checksums it lists); ``(camera, pixels, specs)``."""
     from mincam_render.data.dataset import camera_from_dict, label_spec_from_dict
 
@@ -323,7 +331,7 @@ def write_recording(
     frame_index: np.ndarray,
     volts: np.ndarray,
     label_rows: np.ndarray,
-    label_specs,
+    label_specs: Sequence[LabelSpec],
     masks: np.ndarray,
     injected: dict,
 ) -> None:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mincam_render.analysis.sim2real.figures import figures
+
+if TYPE_CHECKING:
+    from mincam_render.analysis.report import Report
 
 #: Per-pixel table: the columns of every recording.
 _PIXEL_COLUMNS = [
@@ -53,7 +56,7 @@ def write_sim2real_report(result: dict, out_dir: str | Path) -> dict[str, str]:
     return {"json": str(json_path), "html": str(html_path)}
 
 
-def _verdict_section(page, result: dict) -> None:
+def _verdict_section(page: Report, result: dict[str, Any]) -> None:
     page.heading("Verdict")
     page.paragraph(result["verdict"]["summary"])
     page.paragraph(
@@ -66,7 +69,7 @@ def _verdict_section(page, result: dict) -> None:
     )
 
 
-def _pixel_section(page, result: dict) -> None:
+def _pixel_section(page: Report, result: dict[str, Any]) -> None:
     """The per-pixel table (with the injected values of SURROGATE data, explained)."""
     has_inj = "expected_gain" in result["pixels"][0]
     cols = list(_PIXEL_COLUMNS)
@@ -121,7 +124,7 @@ def _verdict_class(verdict: str) -> str:
     return "pass" if verdict == "agrees" else "warn" if "calibration" in verdict else "fail"
 
 
-def _task_section(page, result: dict) -> None:
+def _task_section(page: Report, result: dict[str, Any]) -> None:
     page.heading("Task metrics")
     if result.get("tasks"):
         tk = result["tasks"]

@@ -5,7 +5,13 @@ Arrays are numpy float64; powers in watts, voltages in volts.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.scenes.base import SceneFamily
 
 
 def _frame_seed(seed: int, index: int, stream: int) -> int:
@@ -13,8 +19,8 @@ def _frame_seed(seed: int, index: int, stream: int) -> int:
 
 
 def simulate_volts(
-    family,
-    camera,
+    family: SceneFamily,
+    camera: FreeformCamera,
     frame_index: np.ndarray,
     masks: np.ndarray,
     pixels: np.ndarray,

@@ -18,7 +18,7 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,10 @@ from mincam_render.analysis.sim2real.recording import (
     write_recording,
 )
 from mincam_render.analysis.sim2real.simulation import simulate_volts
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import DetectorElectronics, FreeformCamera
+    from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
 
@@ -151,7 +155,10 @@ def print_masks(
 
 
 def _mount_masks(
-    design: np.ndarray, camera, pert: SurrogatePerturbations, rng: np.random.Generator
+    design: np.ndarray,
+    camera: FreeformCamera,
+    pert: SurrogatePerturbations,
+    rng: np.random.Generator,
 ) -> tuple[np.ndarray, dict[str, list]]:
     """Designs ``M[pixel, row, col]`` as printed and mounted.
 
@@ -195,8 +202,8 @@ def _rotate_about(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 def _misplace_board(
-    camera, pert: SurrogatePerturbations, rng: np.random.Generator
-) -> tuple[Any, dict[str, list[float]]]:
+    camera: FreeformCamera, pert: SurrogatePerturbations, rng: np.random.Generator
+) -> tuple[FreeformCamera, dict[str, list[float]]]:
     """The camera as mounted, and ``injected.json``'s ``board`` (pose error in m and deg).
 
     Draws the position error, then the pointing error (about up, then right), from ``rng``.
@@ -224,7 +231,7 @@ def _misplace_board(
 def _measure(
     power: np.ndarray,
     power_design: np.ndarray,
-    e,
+    e: DetectorElectronics,
     pert: SurrogatePerturbations,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -262,7 +269,7 @@ def _measure(
     return volts, injected
 
 
-def _saturate(volts: np.ndarray, e) -> np.ndarray:
+def _saturate(volts: np.ndarray, e: DetectorElectronics) -> np.ndarray:
     """The electronics' leaky saturation of ``volts`` (any shape, V)."""
     import torch
 
@@ -330,9 +337,9 @@ def make_surrogate(
 
 
 def _powers(
-    family,
-    camera,
-    real_cam,
+    family: SceneFamily,
+    camera: FreeformCamera,
+    real_cam: FreeformCamera,
     design: np.ndarray,
     printed: np.ndarray,
     frame_index: np.ndarray,
@@ -369,7 +376,9 @@ def _powers(
     return power, power_design
 
 
-def _design(family, mask_resolution: int | None, seed: int) -> tuple[Any, np.ndarray]:
+def _design(
+    family: SceneFamily, mask_resolution: int | None, seed: int
+) -> tuple[FreeformCamera, np.ndarray]:
     """The designed camera (the family's, at ``mask_resolution`` if given) and its masks.
 
     Returns:
@@ -385,7 +394,7 @@ def _design(family, mask_resolution: int | None, seed: int) -> tuple[Any, np.nda
 
 
 def _expected_fit(
-    electronics: dict[str, np.ndarray], e, pert: SurrogatePerturbations
+    electronics: dict[str, np.ndarray], e: DetectorElectronics, pert: SurrogatePerturbations
 ) -> dict[str, Any]:
     """The gain and offset (V) per pixel a fit of ``real = gain * sim + offset`` should find.
 
@@ -404,7 +413,7 @@ def _expected_fit(
     }
 
 
-def _label_rows(family, frame_index: np.ndarray) -> np.ndarray:
+def _label_rows(family: SceneFamily, frame_index: np.ndarray) -> np.ndarray:
     """Ground truth ``[N, sum of label sizes]`` (float64) of each frame, in label order."""
     scene = family.build_scene()
     rows = []
@@ -418,7 +427,9 @@ def _label_rows(family, frame_index: np.ndarray) -> np.ndarray:
     return np.asarray(rows)
 
 
-def _recording_meta(family, family_name: str, seed: int, camera, pixels: np.ndarray) -> dict:
+def _recording_meta(
+    family: SceneFamily, family_name: str, seed: int, camera: FreeformCamera, pixels: np.ndarray
+) -> dict[str, Any]:
     """``recording.json``'s content (the checksums are added when the files are written)."""
     from mincam_render.data.dataset import camera_to_dict, label_spec_to_dict
 

@@ -8,17 +8,25 @@ says torch; voltages in volts.
 from __future__ import annotations
 
 import copy
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from mincam_render.analysis.sim2real.recording import Recording
 
+if TYPE_CHECKING:
+    import torch
+
+    from mincam_render.learn.models import Model
+    from mincam_render.learn.training_data import TrainingData
+
 #: Fraction of the recording in the train/val/test segments (contiguous).
 SPLITS = (0.6, 0.2, 0.2)
 
 
-def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
+def _measurement_model(
+    num_inputs: int, data: TrainingData, read_noise_v: float, seed: int
+) -> Model:
     """A torch module: measured voltages ``[b, time, P, 1, 1]`` -> :class:`Head` outputs."""
     import torch
     from torch import nn
@@ -33,14 +41,14 @@ def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
 
         def forward(
             self,
-            transport,
+            transport: torch.Tensor,
             *,
-            windows=None,
-            frame_scales=None,
-            gain=None,
-            noise=True,
-            generator=None,
-        ):
+            windows: torch.Tensor | None = None,
+            frame_scales: torch.Tensor | None = None,
+            gain: torch.Tensor | None = None,
+            noise: bool = True,
+            generator: torch.Generator | None = None,
+        ) -> dict[str, torch.Tensor]:
             # the arguments of CameraModel.forward; frames [frame, P, 1, 1] -> [b, time, P, 1, 1]
             t = _per_window(transport, windows, frame_scales) if transport.ndim == 4 else transport
             v = t.reshape(t.shape[0], -1, t.shape[-3])
@@ -50,10 +58,12 @@ def _measurement_model(num_inputs: int, data, read_noise_v: float, seed: int):
                 v = v + read_noise_v * torch.randn(v.shape, generator=generator, dtype=v.dtype)
             return self.head(temporal_features(v))
 
-    return MeasurementHead()
+    # duck-types CameraModel (same forward and .head), which the training loop and
+    # evaluation accept; the cast is for mypy only
+    return cast("Model", MeasurementHead())
 
 
-def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int) -> dict:
+def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int) -> dict[str, Any]:
     """Task errors on the real test segment for heads trained on simulation and/or real data."""
     from mincam_render.learn.train import TrainConfig, TrainingData, evaluate, train_model
 
