@@ -8,6 +8,7 @@ PyTorch, Mitsuba and Dr.Jit.
 from __future__ import annotations
 
 import importlib
+from typing import Any
 
 #: public name -> the module that defines it
 _EXPORTS = {
@@ -38,7 +39,7 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str):
+def __getattr__(name: str) -> Any:
     if name not in _EXPORTS:
         raise AttributeError(f"module 'mincam_render' has no attribute {name!r}")
     value = getattr(importlib.import_module(_EXPORTS[name]), name)

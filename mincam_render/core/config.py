@@ -16,6 +16,7 @@ import os
 import tomllib
 import types
 import typing
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -45,7 +46,7 @@ def _fail(source: str, path: str, value: Any, reason: str) -> ConfigError:
     return ConfigError(f"{source}: {path} = {value!r}: {reason}")
 
 
-def _check_range(source, path, value, md):
+def _check_range(source: str, path: str, value: Any, md: Mapping[str, Any]) -> None:
     rng = md.get("range")
     unit = md.get("unit", "")
     if rng is not None and isinstance(value, int | float) and not isinstance(value, bool):

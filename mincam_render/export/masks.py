@@ -25,12 +25,15 @@ import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PIL import Image
 
 from mincam_render.optics.camera import MM, FreeformCamera
+
+if TYPE_CHECKING:
+    from matplotlib.collections import PolyCollection
 
 #: Sheet margin around the board layout (mm) and offset/length of cut marks (mm).
 SHEET_MARGIN_MM = 12.0
@@ -131,7 +134,7 @@ def print_sheet_svg(masks: np.ndarray, camera: FreeformCamera, *, title: str = "
     return "\n".join(parts) + "\n"
 
 
-def _texel_rectangles(mask: np.ndarray, x_mm: float, y_mm: float, side_mm: float):
+def _texel_rectangles(mask: np.ndarray, x_mm: float, y_mm: float, side_mm: float) -> PolyCollection:
     """A PolyCollection of one square per texel of ``mask`` (grey = transmittance), in mm."""
     from matplotlib.collections import PolyCollection
 

@@ -42,7 +42,7 @@ class MaskPlaneBackend(enum.Enum):
     DRJIT = "drjit"
 
 
-def _sigmoid(x):
+def _sigmoid(x: dr.ArrayBase) -> dr.ArrayBase:
     """Logistic function of a Dr.Jit array, finite with finite gradients for any x.
 
     exp(-|x|) never overflows, so neither branch of the select (whose unused
@@ -55,7 +55,9 @@ def _sigmoid(x):
 
 
 @dr.wrap(source="torch", target="drjit")
-def _power_drjit(transport, logits, lo: float, hi: float):
+def _power_drjit(
+    transport: dr.ArrayBase, logits: dr.ArrayBase, lo: float, hi: float
+) -> dr.ArrayBase:
     """Dr.Jit side of :func:`mask_power`; tensors arrive as Dr.Jit TensorXf(64)."""
     t_shape = transport.shape
     n_det, rows, cols = logits.shape
@@ -180,4 +182,5 @@ def mask_power(
         return power_through(transport, stable_transmittance(logits, (lo, hi)))
     # dr.wrap converts plain tensors only: pass views, never an nn.Parameter itself
     transport = transport.contiguous().view(transport.shape)
-    return _power_drjit(transport, logits.contiguous().view(logits.shape), lo, hi)
+    # dr.wrap is typed Callable[[T], T]: its stub cannot say that torch goes in and out
+    return _power_drjit(transport, logits.contiguous().view(logits.shape), lo, hi)  # type: ignore[arg-type,return-value]

@@ -93,13 +93,15 @@ _IRRELEVANT_MITSUBA_MESSAGES = ("Monochrome mode enabled",)
 class _MitsubaToLogging(mi.Appender):
     """Mitsuba's log into Python logging (logger ``mitsuba``), irrelevant warnings dropped."""
 
-    def append(self, level, text):
+    def append(self, level: mi.LogLevel, text: str) -> None:
         if any(m in text for m in _IRRELEVANT_MITSUBA_MESSAGES):
             return
         py_level = {mi.LogLevel.Warn: logging.WARNING, mi.LogLevel.Error: logging.ERROR}
         logging.getLogger("mitsuba").log(py_level.get(level, logging.DEBUG), "%s", text.strip())
 
-    def log_progress(self, progress, name, formatted, eta, ptr=None):
+    def log_progress(
+        self, progress: float, name: str, formatted: str, eta: str, ptr: object | None = None
+    ) -> None:
         """Mitsuba's own progress bars are not used (our commands draw theirs)."""
 
 

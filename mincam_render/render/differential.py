@@ -54,10 +54,49 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from mincam_render.optics.camera import FreeformCamera
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    class BackgroundFamily(Protocol):
+        """What differential rendering needs of a scene family (``SceneFamily`` has it).
+
+        Structural: ``render`` sits below ``scenes`` in the layers and does not import it.
+        """
+
+        def background_key(self, index: int, interval_s: float) -> str:
+            """Identity of frame ``index``'s static background."""
+
+        def background_components(self, index: int, interval_s: float) -> dict[str, float]:
+            """``{component key: weight}`` of frame ``index``'s background."""
+
+        def set_background(
+            self, scene: mi.Scene, index: int, interval_s: float, *, at: float = 0.0
+        ) -> None:
+            """Set ``scene`` to frame ``index``'s static background (movers removed)."""
+
+        def set_background_component(self, scene: mi.Scene, key: str) -> None:
+            """Set ``scene`` to one static component."""
+
+        def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
+            """Set ``scene`` to frame ``index`` lit by its window's slow light; return labels."""
+
+        def render_transport(
+            self,
+            scene: mi.Scene,
+            camera: FreeformCamera,
+            *,
+            spp: int,
+            seed: int,
+            max_depth: int | None = None,
+            parallax: bool = True,
+        ) -> np.ndarray:
+            """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
 
 
 @dataclass(frozen=True)
@@ -159,7 +198,9 @@ def component_seed(dataset_seed: int, key: str) -> int:
     return background_seed(dataset_seed, f"component|{key}")
 
 
-def background_parts(family, num_frames: int, interval_s: float) -> dict[str, list[str]]:
+def background_parts(
+    family: BackgroundFamily, num_frames: int, interval_s: float
+) -> dict[str, list[str]]:
     """``{background key: its component keys}`` over frames ``[0, num_frames)``, first-use order."""
     parts: dict[str, list[str]] = {}
     for i in range(num_frames):
@@ -170,8 +211,8 @@ def background_parts(family, num_frames: int, interval_s: float) -> dict[str, li
 
 
 def render_same_seed(
-    family,
-    scene,
+    family: BackgroundFamily,
+    scene: mi.Scene,
     camera: FreeformCamera,
     index: int,
     settings: BackgroundSettings,
@@ -199,7 +240,13 @@ def render_same_seed(
 
 
 def render_component(
-    family, scene, camera: FreeformCamera, key: str, settings: BackgroundSettings, *, dataset_seed
+    family: BackgroundFamily,
+    scene: mi.Scene,
+    camera: FreeformCamera,
+    key: str,
+    settings: BackgroundSettings,
+    *,
+    dataset_seed: int,
 ) -> np.ndarray:
     """The converged render of background component ``key`` (``[detector, row, col]``, W)."""
     family.set_background_component(scene, key)
@@ -213,8 +260,8 @@ def render_component(
 
 
 def render_background(
-    family,
-    scene,
+    family: BackgroundFamily,
+    scene: mi.Scene,
     camera: FreeformCamera,
     index: int,
     settings: BackgroundSettings,
@@ -270,8 +317,8 @@ def render_background(
 
 
 def render_frame(
-    family,
-    scene,
+    family: BackgroundFamily,
+    scene: mi.Scene,
     camera: FreeformCamera,
     index: int,
     background: Background,

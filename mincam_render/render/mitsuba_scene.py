@@ -8,12 +8,19 @@ scene families can compose them; :func:`load_scene` accepts what users bring.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Union
+from typing import TYPE_CHECKING, Any, Union
 
 import mitsuba as mi
 
 from mincam_render.render.backend import use_variant
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike
+
+    from mincam_render.optics.camera import FreeformCamera
 
 #: What :func:`load_scene` accepts.
 SceneInput = Union[dict, str, os.PathLike, "mi.Scene"]
@@ -62,7 +69,12 @@ def _first_line(err: Exception) -> str:
     return text[-1] if text else type(err).__name__
 
 
-def _to_world(position, look_at=None, up=(0.0, 1.0, 0.0), scale=None) -> mi.ScalarTransform4f:
+def _to_world(
+    position: Sequence[float] | np.ndarray,
+    look_at: Sequence[float] | np.ndarray | None = None,
+    up: Sequence[float] | np.ndarray = (0.0, 1.0, 0.0),
+    scale: Sequence[float] | np.ndarray | None = None,
+) -> mi.ScalarTransform4f:
     use_variant()
     t = mi.ScalarTransform4f()
     if look_at is not None:
@@ -85,7 +97,12 @@ def constant_environment(radiance_w_m2_sr: float) -> dict[str, Any]:
 
 
 def rectangle(
-    center_m, facing_m, size_m, bsdf=None, radiance_w_m2_sr: float | None = None, up=(0.0, 1.0, 0.0)
+    center_m: Sequence[float] | np.ndarray,
+    facing_m: Sequence[float] | np.ndarray,
+    size_m: Sequence[float] | np.ndarray,
+    bsdf: dict[str, Any] | None = None,
+    radiance_w_m2_sr: float | None = None,
+    up: Sequence[float] | np.ndarray = (0.0, 1.0, 0.0),
 ) -> dict[str, Any]:
     """A ``(width, height)`` rectangle centred at ``center_m``, front facing ``facing_m``.
 
@@ -104,7 +121,12 @@ def rectangle(
     return shape
 
 
-def sphere(center_m, radius_m: float, bsdf=None, radiance_w_m2_sr: float | None = None):
+def sphere(
+    center_m: Sequence[float] | np.ndarray,
+    radius_m: float,
+    bsdf: dict[str, Any] | None = None,
+    radiance_w_m2_sr: float | None = None,
+) -> dict[str, Any]:
     """A sphere; an area emitter when ``radiance_w_m2_sr`` is given (W m^-2 sr^-1)."""
     shape: dict[str, Any] = {
         "type": "sphere",
@@ -151,7 +173,12 @@ def demo_scene() -> dict[str, Any]:
 
 
 def with_mask_geometry(
-    scene: dict[str, Any], camera, detector: int, transmittance, *, max_depth: int
+    scene: dict[str, Any],
+    camera: FreeformCamera,
+    detector: int,
+    transmittance: ArrayLike,
+    *,
+    max_depth: int,
 ) -> dict[str, Any]:
     """Copy of ``scene`` with one freeform pixel built as geometry, for validation.
 
@@ -171,7 +198,11 @@ def with_mask_geometry(
     # local x = -right keeps the frame proper (det +1), so the diode's front is +fwd
     rot = np.column_stack([-right, up, fwd])
 
-    def placed(offset_local, scale, extra=None):
+    def placed(
+        offset_local: Sequence[float] | np.ndarray,
+        scale: Sequence[float] | np.ndarray,
+        extra: np.ndarray | None = None,
+    ) -> mi.ScalarTransform4f:
         m = np.eye(4)
         m[:3, :3] = rot @ (extra if extra is not None else np.eye(3)) @ np.diag(scale)
         m[:3, 3] = centre + rot @ np.asarray(offset_local, dtype=np.float64)
@@ -236,12 +267,12 @@ VERTEX_ALBEDO = "vertex_albedo"
 
 def mesh(
     name: str,
-    vertices_m,
-    faces,
+    vertices_m: ArrayLike,
+    faces: ArrayLike,
     *,
-    reflectance,
+    reflectance: ArrayLike,
     radiance_w_m2_sr: float | None = None,
-):
+) -> mi.Mesh:
     """A triangle mesh object (e.g. from trimesh) with a diffuse BSDF, for a scene dict.
 
     Its ``vertex_positions`` can be updated per frame with ``mi.traverse``
@@ -293,7 +324,9 @@ def mesh(
     return m
 
 
-def environment_map(radiance_w_m2_sr, to_world=None) -> dict[str, Any]:
+def environment_map(
+    radiance_w_m2_sr: ArrayLike, to_world: mi.ScalarTransform4f | None = None
+) -> dict[str, Any]:
     """An environment emitter from a lat-long map ``L[row, col]`` (W m^-2 sr^-1).
 
     Row 0 is the zenith of the map's frame (Mitsuba's +y up by default).
@@ -309,7 +342,12 @@ def environment_map(radiance_w_m2_sr, to_world=None) -> dict[str, Any]:
     return d
 
 
-def portal_sky(radiance_w_m2_sr, corner_m, edge_u_m, edge_v_m) -> dict[str, Any]:
+def portal_sky(
+    radiance_w_m2_sr: ArrayLike,
+    corner_m: Sequence[float] | np.ndarray,
+    edge_u_m: Sequence[float] | np.ndarray,
+    edge_v_m: Sequence[float] | np.ndarray,
+) -> dict[str, Any]:
     """Sky and ground seen through one window, sampled through it (a light portal).
 
     ``radiance_w_m2_sr`` is a lat-long map ``L[row, col]`` in the layout of
@@ -335,7 +373,13 @@ def portal_sky(radiance_w_m2_sr, corner_m, edge_u_m, edge_v_m) -> dict[str, Any]
     }
 
 
-def sun_patch_integrator(corner_m, edge_u_m, edge_v_m, *, max_depth: int = -1) -> dict[str, Any]:
+def sun_patch_integrator(
+    corner_m: Sequence[float] | np.ndarray,
+    edge_u_m: Sequence[float] | np.ndarray,
+    edge_v_m: Sequence[float] | np.ndarray,
+    *,
+    max_depth: int = -1,
+) -> dict[str, Any]:
     """The :mod:`~mincam_render.render.sun_patch` path tracer as an integrator dict (``mi.render``).
 
     The window is the rectangle ``corner_m + a edge_u_m + b edge_v_m``, ``a, b``
@@ -356,7 +400,7 @@ def sun_patch_integrator(corner_m, edge_u_m, edge_v_m, *, max_depth: int = -1) -
     }
 
 
-def portal_sky_data(radiance_w_m2_sr) -> mi.Float:
+def portal_sky_data(radiance_w_m2_sr: ArrayLike) -> mi.Float:
     """Flat value of a :func:`portal_sky`'s ``"<key>.data"`` from ``L[row, col]``."""
     import numpy as np
 
@@ -364,7 +408,9 @@ def portal_sky_data(radiance_w_m2_sr) -> mi.Float:
     return mi.Float(np.ascontiguousarray(np.asarray(radiance_w_m2_sr, dtype=np.float32)).ravel())
 
 
-def directional_light(direction, irradiance_w_m2: float) -> dict[str, Any]:
+def directional_light(
+    direction: Sequence[float] | np.ndarray, irradiance_w_m2: float
+) -> dict[str, Any]:
     """A distant light (e.g. the sun) travelling along ``direction``, irradiance in W/m^2."""
     return {
         "type": "directional",
@@ -373,7 +419,13 @@ def directional_light(direction, irradiance_w_m2: float) -> dict[str, Any]:
     }
 
 
-def textured_emitter_rectangle(center_m, facing_m, size_m, radiance_w_m2_sr, up=(0.0, 1.0, 0.0)):
+def textured_emitter_rectangle(
+    center_m: Sequence[float] | np.ndarray,
+    facing_m: Sequence[float] | np.ndarray,
+    size_m: Sequence[float] | np.ndarray,
+    radiance_w_m2_sr: ArrayLike,
+    up: Sequence[float] | np.ndarray = (0.0, 1.0, 0.0),
+) -> dict[str, Any]:
     """A rectangle emitting a radiance image ``L[row, col]`` (W m^-2 sr^-1), nearest filtered.
 
     Row 0 of the image is the ``up`` edge and column 0 the left edge as seen by
@@ -401,7 +453,7 @@ def textured_emitter_rectangle(center_m, facing_m, size_m, radiance_w_m2_sr, up=
     }
 
 
-def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
+def emitter_image_data(radiance_w_m2_sr: ArrayLike) -> mi.TensorXf:
     """Tensor for a textured rectangle's ``radiance.data`` from ``L[row, col]``.
 
     Mitsuba's bitmap rows start at the rectangle's local -y (bottom) edge, so the
@@ -415,7 +467,14 @@ def emitter_image_data(radiance_w_m2_sr) -> mi.TensorXf:
     return mi.TensorXf(np.ascontiguousarray(img[::-1, :])[..., None])
 
 
-def perspective_sensor(position_m, look_at_m, up, fov_deg: float, width: int, height: int):
+def perspective_sensor(
+    position_m: Sequence[float] | np.ndarray,
+    look_at_m: Sequence[float] | np.ndarray,
+    up: Sequence[float] | np.ndarray,
+    fov_deg: float,
+    width: int,
+    height: int,
+) -> mi.Sensor:
     """A pinhole camera (loaded ``mi.Sensor``) for previews: ``fov_deg`` is horizontal."""
     use_variant()
     return mi.load_dict(
@@ -435,7 +494,7 @@ def perspective_sensor(position_m, look_at_m, up, fov_deg: float, width: int, he
     )
 
 
-def directional_light_to_world(direction) -> mi.ScalarTransform4f:
+def directional_light_to_world(direction: Sequence[float] | np.ndarray) -> mi.ScalarTransform4f:
     """``to_world`` of a distant light travelling along ``direction``, for per-frame updates.
 
     Set it as ``"<key>.to_world"`` of a :func:`directional_light` (e.g. the sun
@@ -450,7 +509,7 @@ def directional_light_to_world(direction) -> mi.ScalarTransform4f:
     return mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, 0.0], target=list(d), up=list(up))
 
 
-def environment_map_data(radiance_w_m2_sr) -> mi.TensorXf:
+def environment_map_data(radiance_w_m2_sr: ArrayLike) -> mi.TensorXf:
     """Tensor for an :func:`environment_map`'s ``"<key>.data"`` from a lat-long map ``L[row, col]``.
 
     Mitsuba stores the map with one wrap-around column on each side and three

@@ -33,6 +33,7 @@ and clamped in ``theta``. The map is the ``"<key>.data"`` parameter
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import drjit as dr
 import mitsuba as mi
@@ -84,11 +85,11 @@ class PortalSkyEmitter(mi.Emitter):
         if bbox.valid():
             self.far_m = float(2.0 * (dr.norm(bbox.extents()) + 1.0))
 
-    def traverse(self, callback) -> None:
+    def traverse(self, callback: mi.TraversalCallback) -> None:
         """Expose the radiance map as ``data`` (updatable per frame)."""
         callback.put(DATA_PARAM, self.data, mi.ParamFlags.NonDifferentiable)
 
-    def parameters_changed(self, keys=None) -> None:
+    def parameters_changed(self, keys: Sequence[str] | None = None) -> None:
         """Check that an updated map keeps its size."""
         if dr.width(self.data) != self.height * self.width:
             raise ValueError(
@@ -96,11 +97,15 @@ class PortalSkyEmitter(mi.Emitter):
                 f"{self.height} x {self.width}"
             )
 
-    def eval(self, si, active=True):
+    def eval(
+        self, si: mi.SurfaceInteraction3f, active: bool | dr.auto.ad.Bool = True
+    ) -> mi.Spectrum:
         """Radiance arriving along ``-si.wi`` (a ray that escaped the scene)."""
         return mi.Spectrum(self._radiance(-si.wi))
 
-    def sample_direction(self, it, sample, active=True):
+    def sample_direction(
+        self, it: mi.Interaction3f, sample: mi.Point2f, active: bool | dr.auto.ad.Bool = True
+    ) -> tuple[mi.DirectionSample3f, mi.Spectrum]:
         """A direction through a uniform point of the window; weight = radiance / density."""
         c, eu, ev, n = (
             mi.Vector3f(*v) for v in (self.corner, self.edge_u, self.edge_v, self.normal)
@@ -125,15 +130,26 @@ class PortalSkyEmitter(mi.Emitter):
         value = dr.select(ok, self._radiance(d) / dr.maximum(pdf, 1e-30), 0.0)
         return ds, mi.Spectrum(value)
 
-    def pdf_direction(self, it, ds, active=True):
+    def pdf_direction(
+        self, it: mi.Interaction3f, ds: mi.DirectionSample3f, active: bool | dr.auto.ad.Bool = True
+    ) -> dr.auto.ad.Float:
         """Solid-angle density of :meth:`sample_direction` (0 off the window)."""
         return self._portal_pdf(it.p, ds.d, active)
 
-    def eval_direction(self, it, ds, active=True):
+    def eval_direction(
+        self, it: mi.Interaction3f, ds: mi.DirectionSample3f, active: bool | dr.auto.ad.Bool = True
+    ) -> mi.Spectrum:
         """Radiance arriving from direction ``ds.d``."""
         return mi.Spectrum(dr.select(active, self._radiance(ds.d), 0.0))
 
-    def sample_ray(self, time, sample1, sample2, sample3, active=True):
+    def sample_ray(
+        self,
+        time: dr.auto.ad.Float,
+        sample1: dr.auto.ad.Float,
+        sample2: mi.Point2f,
+        sample3: mi.Point2f,
+        active: bool | dr.auto.ad.Bool = True,
+    ) -> tuple[mi.Ray3f, mi.Spectrum]:
         """Not supported: the portal sky only serves paths traced from the camera."""
         raise NotImplementedError("portal_sky: light tracing is not supported")
 
@@ -145,7 +161,7 @@ class PortalSkyEmitter(mi.Emitter):
         )
 
     # -- helpers (Dr.Jit arrays)
-    def _portal_pdf(self, x: mi.Point3f, d: mi.Vector3f, active) -> mi.Float:
+    def _portal_pdf(self, x: mi.Point3f, d: mi.Vector3f, active: mi.Bool) -> mi.Float:
         """Solid-angle density of :meth:`sample_direction` for direction ``d`` at ``x``."""
         c, eu, ev, n = (
             mi.Vector3f(*v) for v in (self.corner, self.edge_u, self.edge_v, self.normal)
@@ -175,7 +191,7 @@ class PortalSkyEmitter(mi.Emitter):
         iv0 = dr.clip(mi.Int32(v0), 0, h - 1)
         iv1 = dr.clip(mi.Int32(v0) + 1, 0, h - 1)
 
-        def at(iv, iu):
+        def at(iv: mi.Int32, iu: mi.Int32) -> mi.Float:
             return dr.gather(mi.Float, self.data, mi.UInt32(iv * w + iu))
 
         top = dr.lerp(at(iv0, iu0), at(iv0, iu1), tu)

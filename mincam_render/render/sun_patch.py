@@ -55,11 +55,16 @@ lower the background's error to 0.0033 in 5.3 s.
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import TYPE_CHECKING, Any
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 #: Mitsuba's path tracer starts Russian roulette at this depth.
 DEFAULT_RR_DEPTH = 5
@@ -90,7 +95,15 @@ def find_sun(scene: mi.Scene) -> mi.Emitter | None:
     return suns[0] if suns else None
 
 
-def _emission_hit(scene, si, si_prev, pdf_prev, delta_prev, beta, active) -> mi.Spectrum:
+def _emission_hit(
+    scene: mi.Scene,
+    si: mi.SurfaceInteraction3f,
+    si_prev: mi.SurfaceInteraction3f,
+    pdf_prev: mi.Float,
+    delta_prev: mi.Bool,
+    beta: mi.Spectrum,
+    active: mi.Bool,
+) -> mi.Spectrum:
     """Emitters hit by the BSDF-sampled ray (area lights, the sky), weighed against NEE.
 
     Args:
@@ -110,7 +123,16 @@ def _emission_hit(scene, si, si_prev, pdf_prev, delta_prev, beta, active) -> mi.
     return beta * _power_heuristic(pdf_prev, em_pdf) * ds.emitter.eval(si, active)
 
 
-def _next_event(scene, sampler, ctx, si, bsdf, beta, smooth, sun) -> mi.Spectrum:
+def _next_event(
+    scene: mi.Scene,
+    sampler: mi.Sampler,
+    ctx: mi.BSDFContext,
+    si: mi.SurfaceInteraction3f,
+    bsdf: mi.BSDFPtr,
+    beta: mi.Spectrum,
+    smooth: mi.Bool,
+    sun: mi.Emitter | None,
+) -> mi.Spectrum:
     """Next event estimation at ``si`` on one of the scene's emitters other than ``sun``.
 
     Args:
@@ -138,7 +160,16 @@ def _next_event(scene, sampler, ctx, si, bsdf, beta, smooth, sun) -> mi.Spectrum
 
 
 def _patch_connection(
-    scene, sampler, ctx, si, bsdf, beta, sun_sample, patch_here, window, area_w
+    scene: mi.Scene,
+    sampler: mi.Sampler,
+    ctx: mi.BSDFContext,
+    si: mi.SurfaceInteraction3f,
+    bsdf: mi.BSDFPtr,
+    beta: mi.Spectrum,
+    sun_sample: tuple[mi.Vector3f, mi.Spectrum, mi.Float],
+    patch_here: mi.Bool,
+    window: tuple[mi.Point3f, mi.Vector3f, mi.Vector3f],
+    area_w: float,
 ) -> mi.Spectrum:
     """Patch strategy: a sunlit point ``y`` found from the window, connected to ``si``.
 
@@ -179,7 +210,9 @@ def _patch_connection(
     return dr.select(ok, contrib * w_patch, 0.0)
 
 
-def _russian_roulette(sampler, beta, depth, rr_depth, active_next) -> mi.Bool:
+def _russian_roulette(
+    sampler: mi.Sampler, beta: mi.Spectrum, depth: mi.UInt32, rr_depth: int, active_next: mi.Bool
+) -> mi.Bool:
     """Russian roulette, as Mitsuba's path tracer: ends paths, rescales ``beta`` in place.
 
     Args:
@@ -226,9 +259,9 @@ class SunPatchPathIntegrator:
 
     def __init__(
         self,
-        corner_m,
-        edge_u_m,
-        edge_v_m,
+        corner_m: ArrayLike,
+        edge_u_m: ArrayLike,
+        edge_v_m: ArrayLike,
         *,
         max_depth: int,
         rr_depth: int = DEFAULT_RR_DEPTH,
@@ -274,14 +307,16 @@ class SunPatchPathIntegrator:
         self.patch_vertices = patch_vertices
 
     # -- window geometry (Dr.Jit arrays)
-    def _window(self):
+    def _window(self) -> tuple[mi.Point3f, mi.Vector3f, mi.Vector3f, mi.Vector3f]:
         c, eu, ev, n = (
             mi.Vector3f(*(float(x) for x in v))
             for v in (self.corner_m, self.edge_u_m, self.edge_v_m, self.normal)
         )
         return mi.Point3f(c), eu, ev, n
 
-    def _patch_density(self, y: mi.Point3f, n_y: mi.Vector3f, sun_d: mi.Vector3f, active):
+    def _patch_density(
+        self, y: mi.Point3f, n_y: mi.Vector3f, sun_d: mi.Vector3f, active: mi.Bool
+    ) -> mi.Float:
         """Area density at ``y`` of the patch strategy (0 if its sun ray misses the window)."""
         c, eu, ev, n = self._window()
         cos_w = dr.dot(sun_d, n)
@@ -293,7 +328,18 @@ class SunPatchPathIntegrator:
         return dr.select(inside, dr.abs(dr.dot(n_y, sun_d)) / (self.area_m2 * cos_w), 0.0)
 
     def _sun_direct(
-        self, scene, ctx, si, bsdf, ray, s, sun_irr, beta, pdf_prev, patch_prev, smooth
+        self,
+        scene: mi.Scene,
+        ctx: mi.BSDFContext,
+        si: mi.SurfaceInteraction3f,
+        bsdf: mi.BSDFPtr,
+        ray: mi.Ray3f,
+        s: mi.Vector3f,
+        sun_irr: mi.Spectrum,
+        beta: mi.Spectrum,
+        pdf_prev: mi.Float,
+        patch_prev: mi.Bool,
+        smooth: mi.Bool,
     ) -> mi.Spectrum:
         """The sun at vertex ``si``, weighed against the previous vertex's patch strategy.
 
@@ -322,7 +368,14 @@ class SunPatchPathIntegrator:
         return dr.select(lit, beta * w_sun * f_s * sun_irr, 0.0)
 
     @dr.syntax
-    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f, active=True, **kwargs):
+    def sample(
+        self,
+        scene: mi.Scene,
+        sampler: mi.Sampler,
+        ray: mi.Ray3f,
+        active: bool | mi.Bool = True,
+        **kwargs: Any,
+    ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
         """Radiance (W m^-2 sr^-1) arriving along ``ray``: ``(L, valid, [])``.
 
         The sun is sampled at every vertex, apart from the scene's choice of
@@ -399,7 +452,7 @@ class SunPatchPathIntegrator:
 
 
 @contextmanager
-def sun_sampled_apart(scene: mi.Scene):
+def sun_sampled_apart(scene: mi.Scene) -> Iterator[None]:
     """Leave the scene's sun out of its emitter sampling for the duration (for the integrator).
 
     :class:`SunPatchPathIntegrator` samples the sun itself at every vertex, so
@@ -463,7 +516,14 @@ def _plugin_class(variant: str) -> type:
                 patch_vertices=int(props.get("patch_vertices", DEFAULT_PATCH_VERTICES)),
             )
 
-        def sample(self, scene, sampler, ray, medium=None, active=True):
+        def sample(
+            self,
+            scene: mi.Scene,
+            sampler: mi.Sampler,
+            ray: mi.RayDifferential3f,
+            medium: mi.Medium | None = None,
+            active: bool | dr.auto.ad.Bool = True,
+        ) -> tuple[mi.Spectrum, dr.auto.ad.Bool, list[dr.auto.ad.Float]]:
             """Radiance along ``ray``: ``(L, valid, [])`` (``medium`` unused)."""
             return self.impl.sample(scene, sampler, mi.Ray3f(ray), active)
 

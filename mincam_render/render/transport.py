@@ -43,7 +43,7 @@ import math
 import re
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -345,7 +345,7 @@ def render_transport(
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
     parallax: bool = True,
-    sun_window=None,
+    sun_window: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Render the transport images of every detector of ``camera`` in ``scene``.
 
@@ -393,7 +393,7 @@ def render_transport(
 
 
 def render_transport_with_noise(
-    scene: SceneInput, camera: FreeformCamera, **options
+    scene: SceneInput, camera: FreeformCamera, **options: Any
 ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`render_transport` and each detector's relative standard error.
 
@@ -419,15 +419,15 @@ def render_transport_with_noise(
 
 
 def _render(
-    scene,
-    camera,
+    scene: SceneInput,
+    camera: FreeformCamera,
     *,
     spp: int = 16,
     seed: int = 0,
     max_depth: int | None = None,
     max_rays_per_pass: int = DEFAULT_MAX_RAYS_PER_PASS,
     parallax: bool = True,
-    sun_window=None,
+    sun_window: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     second_moment: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Per texel (flat, float64): the transport mean (W) and, if asked, its variance (W^2)."""
@@ -474,7 +474,7 @@ def _render(
     return mean, np.maximum(total_sq / spp - mean * mean, 0.0) / spp
 
 
-def _check_render_args(spp, seed, max_depth, camera) -> None:
+def _check_render_args(spp: int, seed: int, max_depth: int | None, camera: FreeformCamera) -> None:
     if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 24:
         raise ValueError(
             f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]"

@@ -128,7 +128,7 @@ def sensor_pose(scene: mi.Scene, sensor_id: str | None = None) -> Pose:
     return Pose(position=position, look_at=look_at, up=up)
 
 
-def _vector(value) -> tuple[float, float, float]:
+def _vector(value: mi.Point3f | mi.Vector3f) -> tuple[float, float, float]:
     x, y, z = (float(np.asarray(dr.ravel(c))[0]) for c in (value.x, value.y, value.z))
     return x, y, z
 
@@ -240,7 +240,9 @@ def check_transport(transport: np.ndarray) -> list[str]:
     return [message]
 
 
-def spp_for_noise(spp: int, relative_noise: np.ndarray, target: float = TARGET_RELATIVE_NOISE):
+def spp_for_noise(
+    spp: int, relative_noise: np.ndarray, target: float = TARGET_RELATIVE_NOISE
+) -> int:
     """Samples per texel that bring the worst detector's relative error to ``target``.
 
     Monte Carlo error falls as 1/sqrt(spp); dark detectors (NaN noise) are ignored.

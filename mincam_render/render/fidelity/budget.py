@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from mincam_render.render.fidelity.constants import PILOT_SPP
@@ -30,7 +31,12 @@ def round_up_spp(need: float, cap: int, steps_per_octave: int = 4) -> int:
     return int(min(cap, n))
 
 
-def split_noise_budget(target, biases, difference, background) -> dict[str, Any]:
+def split_noise_budget(
+    target: float,
+    biases: Mapping[str, float],
+    difference: tuple[float, float, int | None],
+    background: tuple[float, float, int | None],
+) -> dict[str, Any]:
     """Share the error left by ``biases`` between the noises of ``X - C`` and of ``B``.
 
     Errors add in quadrature: ``target^2 = sum(bias^2) + x^2 + y^2`` with ``x``

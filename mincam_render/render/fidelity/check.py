@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,9 @@ from mincam_render.render.fidelity.constants import (
     REFERENCE_SPP_FACTOR,
 )
 from mincam_render.render.fidelity.probes import Probes
+
+if TYPE_CHECKING:
+    from mincam_render.render.fidelity.probes import PlanRequest
 
 log = logging.getLogger(__name__)
 
@@ -136,8 +139,17 @@ def _reference_settings(p: Probes, draft: Draft) -> tuple[int, int]:
     return ref_spp, draft.background["max_depth"]
 
 
-def _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen) -> np.ndarray:
+def _raise_differential_spp(
+    p: Probes,
+    decisions: dict[str, Any],
+    draft: Draft,
+    ref: np.ndarray,
+    ref_noise: float,
+    check: dict[str, Any],
+    chosen: np.ndarray,
+) -> np.ndarray:
     """Raise the differential spp the request left to us while the check misses the target."""
+    assert draft.background is not None  # called only with differential rendering
     request, diff, background = p.request, decisions["differential"], draft.background
     raises = []
     own_spp = request.spp is None, request.background_spp is None
@@ -168,7 +180,9 @@ def _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen) 
     return chosen
 
 
-def _per_detector_error(p: Probes, chosen, ref, ref_noise: float) -> list[float]:
+def _per_detector_error(
+    p: Probes, chosen: np.ndarray, ref: np.ndarray, ref_noise: float
+) -> list[float]:
     """Each detector's measurement error vs the reference (its noise out in quadrature)."""
     errors = []
     for k in range(chosen.shape[1]):
@@ -179,7 +193,13 @@ def _per_detector_error(p: Probes, chosen, ref, ref_noise: float) -> list[float]
     return errors
 
 
-def achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
+def achieved(
+    check: dict[str, Any],
+    ref_noise: float,
+    decisions: dict[str, Any],
+    request: PlanRequest,
+    spp: int,
+) -> dict[str, Any]:
     """The plan's error against the reference vs the target; a warning naming the knob if missed.
 
     The reference's own Monte Carlo error is taken out in quadrature. The
@@ -188,7 +208,7 @@ def achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
     Monte Carlo rest with the spp that brings it to the target.
     """
     found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
-    record = {"error_rms": found, "target_error": request.target_error}
+    record: dict[str, Any] = {"error_rms": found, "target_error": request.target_error}
     record["met"] = found <= request.target_error
     if record["met"]:
         return record
@@ -205,7 +225,9 @@ def achieved(check, ref_noise, decisions, request, spp) -> dict[str, Any]:
     return record
 
 
-def _knobs_to_turn(found, decisions, request, spp) -> list[tuple[str, float]]:
+def _knobs_to_turn(
+    found: float, decisions: dict[str, Any], request: PlanRequest, spp: int
+) -> list[tuple[str, float]]:
     """``[(flag, its part of the error)]``: those above the target, else the largest."""
     shared = decisions["shared_render"]
     parts = {}

@@ -11,7 +11,7 @@ over the dataset) decides. ``X - C`` is traced at the plain depth.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,9 +31,12 @@ from mincam_render.render.fidelity.constants import (
 )
 from mincam_render.render.fidelity.probes import Probes
 
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
+
 
 def decide_differential(
-    p: Probes, auto: bool, render_cam, max_depth: int, plain_spp: int
+    p: Probes, auto: bool, render_cam: FreeformCamera, max_depth: int, plain_spp: int
 ) -> dict[str, Any]:
     """The decision record of differential rendering (see the module doc).
 
@@ -86,7 +89,9 @@ def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str,
     return None
 
 
-def _difference_pair(p: Probes, depth, seed_offset: int, spp: int, camera):
+def _difference_pair(
+    p: Probes, depth: int | None, seed_offset: int, spp: int, camera: FreeformCamera
+) -> tuple[np.ndarray, np.ndarray]:
     """``(X, C)`` per probe with one seed each (common random numbers)."""
     interval = p.request.background_interval_s
     xs, cs = [], []
@@ -99,7 +104,9 @@ def _difference_pair(p: Probes, depth, seed_offset: int, spp: int, camera):
     return np.stack(xs), np.stack(cs)
 
 
-def _pilots(p: Probes, render_cam, deep, record: dict) -> dict[str, Any]:
+def _pilots(
+    p: Probes, render_cam: FreeformCamera, deep: int | None, record: dict
+) -> dict[str, Any]:
     """Noises and biases of the differential estimator on the probes (see the module doc).
 
     Adds ``record["shared_difference"]`` where there is more than one detector.
@@ -135,7 +142,7 @@ def _pilots(p: Probes, render_cam, deep, record: dict) -> dict[str, Any]:
     }
 
 
-def _frames_in_window(p: Probes, render_cam, deep) -> np.ndarray:
+def _frames_in_window(p: Probes, render_cam: FreeformCamera, deep: int | None) -> np.ndarray:
     """The probes' ``X`` that relative errors of ``X - C`` are taken against."""
     x_ref = []
     for i in p.indices:
@@ -152,7 +159,9 @@ def _frames_in_window(p: Probes, render_cam, deep) -> np.ndarray:
     return np.stack(x_ref)
 
 
-def _shared_difference(p: Probes, render_cam, deep, x_ref, record: dict) -> bool:
+def _shared_difference(
+    p: Probes, render_cam: FreeformCamera, deep: int | None, x_ref: np.ndarray, record: dict
+) -> bool:
     """One render of ``X - C`` from the board centre for all detectors?
 
     Its parallax error ``p`` is measured against the noise of independent seeds:
@@ -186,7 +195,7 @@ def _shared_difference(p: Probes, render_cam, deep, x_ref, record: dict) -> bool
     return parallax_error < bound
 
 
-def _background_noise(p: Probes, camera, depth) -> float:
+def _background_noise(p: Probes, camera: FreeformCamera, depth: int | None) -> float:
     """Monte Carlo error of the probes' backgrounds, piloted at BACKGROUND_PILOT_SPP.
 
     Two seeds per probe; reported at PILOT_SPP (times sqrt(BACKGROUND_PILOT_SPP /
@@ -214,7 +223,7 @@ def _background_noise(p: Probes, camera, depth) -> float:
     return error * math.sqrt(BACKGROUND_PILOT_SPP / PILOT_SPP)
 
 
-def _interpolation_error(p: Probes, camera, depth) -> dict[str, Any]:
+def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -> dict[str, Any]:
     """Error of the background halfway through the probes' windows, interpolated from its ends.
 
     ``B`` at the start, the middle and the end of each probe frame's window with

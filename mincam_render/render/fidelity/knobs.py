@@ -9,7 +9,7 @@ are the errors the choice was made from.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from mincam_render.render.fidelity.constants import (
 )
 from mincam_render.render.fidelity.probes import Probes
 from mincam_render.render.precision import decode_transport, encode_transport
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
 
 
 def decide_shared_render(p: Probes, auto: bool) -> dict[str, Any]:
@@ -106,13 +109,18 @@ def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tu
     return False, f"{change} >= bound {bound:.3g} (a share of the target error); {geometry}"
 
 
-def decide_max_depth(p: Probes, auto: bool, render_cam, shared: bool) -> dict[str, Any]:
+def decide_max_depth(
+    p: Probes, auto: bool, render_cam: FreeformCamera, shared: bool
+) -> dict[str, Any]:
     """The shallowest path depth whose missing bounces change measurements < the bound."""
     from mincam_render.render.transport import scene_max_depth
 
     request = p.request
     scene_depth = scene_max_depth(p.scene)
-    measured = {"scene_integrator_max_depth": scene_depth, "bound": request.indirect_fraction}
+    measured: dict[str, Any] = {
+        "scene_integrator_max_depth": scene_depth,
+        "bound": request.indirect_fraction,
+    }
     if request.max_depth is not None:
         reason = "set by --max-depth"
         return {"value": request.max_depth, "source": "flag", "reason": reason, **measured}
@@ -142,7 +150,9 @@ def decide_max_depth(p: Probes, auto: bool, render_cam, shared: bool) -> dict[st
     return {"value": max_depth, "source": "auto", "reason": reason, **measured}
 
 
-def _depth_changes(p: Probes, render_cam, shared: bool, scene_depth) -> tuple[int, dict]:
+def _depth_changes(
+    p: Probes, render_cam: FreeformCamera, shared: bool, scene_depth: int | None
+) -> tuple[int, dict]:
     """``(chosen depth, {depth: change vs a deep reference})`` with common random numbers.
 
     Same seeds: paths agree up to the truncation, so each difference is the light
@@ -166,7 +176,7 @@ def _depth_changes(p: Probes, render_cam, shared: bool, scene_depth) -> tuple[in
 
 
 def decide_spp(
-    p: Probes, auto: bool, render_cam, max_depth: int, shared: bool
+    p: Probes, auto: bool, render_cam: FreeformCamera, max_depth: int, shared: bool
 ) -> tuple[dict[str, Any], float | None]:
     """Samples per texel for the target error (plain estimator); also the pilot error.
 

@@ -55,7 +55,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import logging
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from mincam_render.render.fidelity.check import Draft, check_against_reference
 from mincam_render.render.fidelity.differential_choice import decide_differential
@@ -68,6 +68,18 @@ from mincam_render.render.fidelity.knobs import (
 )
 from mincam_render.render.fidelity.probes import Probes, Stages
 from mincam_render.render.precision import DTYPES
+
+if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.fidelity.probes import PlanRequest, ProbedFamily
+
+    class FidelityRequest(PlanRequest, Protocol):
+        """A render request as :func:`decide_fidelity` reads it (``RenderRequest`` has it)."""
+
+        @property
+        def fidelity(self) -> Fidelity:
+            """AUTO measures each choice left None; FULL takes full-fidelity defaults."""
+
 
 log = logging.getLogger(__name__)
 
@@ -133,7 +145,13 @@ class FidelityPlan:
         return cls(**settings, decisions=decisions)
 
 
-def decide_fidelity(family, camera, request, *, progress: bool = False) -> FidelityPlan:
+def decide_fidelity(
+    family: ProbedFamily,
+    camera: FreeformCamera,
+    request: FidelityRequest,
+    *,
+    progress: bool = False,
+) -> FidelityPlan:
     """Choose render settings for ``family`` seen by ``camera`` (see the module doc).
 
     Args:
@@ -190,7 +208,7 @@ def decide_fidelity(family, camera, request, *, progress: bool = False) -> Fidel
 _PLAN_STAGES = 6
 
 
-def _adopt_differential(decisions: dict[str, Any], draft: Draft, request) -> None:
+def _adopt_differential(decisions: dict[str, Any], draft: Draft, request: PlanRequest) -> None:
     """With differential rendering, frames take its spp and depth; backgrounds get settings."""
     diff = decisions["differential"]
     if not diff["value"]:

@@ -3,13 +3,99 @@
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.render.fidelity.constants import DEPTH_GRID, PROBE_FRAMES
 from mincam_render.render.precision import measurement_relative_error
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.differential import BackgroundFamily
+
+    # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
+    # and does not import them.
+    class ProbedFamily(BackgroundFamily, Protocol):
+        """What the planner needs of a scene family (``SceneFamily`` has it)."""
+
+        num_frames: int
+
+        @property
+        def name(self) -> str:
+            """The family's name."""
+
+        @property
+        def needs_history(self) -> bool:
+            """Whether the family's labels need earlier frames."""
+
+        def build_scene(self) -> mi.Scene:
+            """The family's Mitsuba scene."""
+
+        def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
+            """Set ``scene`` to frame ``index``; return its labels."""
+
+    class PlanRequest(Protocol):
+        """What the planner reads of a render request (``RenderRequest`` has it)."""
+
+        @property
+        def seed(self) -> int:
+            """Dataset seed, >= 0."""
+
+        @property
+        def spp(self) -> int | None:
+            """Samples per texel, or None to decide."""
+
+        @property
+        def max_depth(self) -> int | None:
+            """Path depth (2 = direct light), 0 = the scene's integrator, or None to decide."""
+
+        @property
+        def shared_render(self) -> bool | None:
+            """One render for all detectors, or None to decide."""
+
+        @property
+        def mask_res(self) -> int | None:
+            """Mask texels per side, or None for the family camera's."""
+
+        @property
+        def dtype(self) -> str | None:
+            """``"float16"``/``"float32"`` storage, or None to decide."""
+
+        @property
+        def target_error(self) -> float:
+            """Target relative measurement error (Monte Carlo)."""
+
+        @property
+        def dtype_error_bound(self) -> float:
+            """Largest relative measurement error float16 may add."""
+
+        @property
+        def indirect_fraction(self) -> float:
+            """Drop indirect light when it changes measurements less."""
+
+        @property
+        def parallax_fraction(self) -> float:
+            """Share one render when parallax is below this many texels."""
+
+        @property
+        def differential(self) -> bool | None:
+            """Render frames as background plus difference, or None to decide."""
+
+        @property
+        def background_interval_s(self) -> float:
+            """Scene time (s) one background's daylight stands for."""
+
+        @property
+        def background_spp(self) -> int | None:
+            """Samples per texel of backgrounds, or None to decide."""
+
+        @property
+        def shared_difference(self) -> bool | None:
+            """Render ``X - C`` once from the board centre, or None to decide."""
 
 
 def probe_indices(num_frames: int) -> list[int]:
@@ -29,7 +115,7 @@ class Probes:
         lo_hi: printable transmittance range of the masks errors are measured with.
     """
 
-    def __init__(self, family, camera, request) -> None:
+    def __init__(self, family: ProbedFamily, camera: FreeformCamera, request: PlanRequest) -> None:
         self.family, self.camera, self.request = family, camera, request
         self.scene = family.build_scene()
         self.indices = probe_indices(family.num_frames)
@@ -41,7 +127,14 @@ class Probes:
         return (frame_seed(self.request.seed, index) + 7919 * offset) % 2**63
 
     def render(
-        self, cam, *, spp, seed_offset=0, max_depth=None, shared=False, parallax=True
+        self,
+        cam: FreeformCamera,
+        *,
+        spp: int,
+        seed_offset: int = 0,
+        max_depth: int | None = None,
+        shared: bool = False,
+        parallax: bool = True,
     ) -> np.ndarray:
         """``T[probe, detector, row, col]`` (W); ``shared``: one render copied to every detector."""
         out = []
@@ -71,7 +164,7 @@ class Probes:
         return {"min": min(d["min"] for d in depths), "max": max(d["max"] for d in depths)}
 
 
-def nearest_depth_m(scene, camera) -> dict[str, float]:
+def nearest_depth_m(scene: mi.Scene, camera: FreeformCamera) -> dict[str, float]:
     """Nearest and farthest scene depth (m, along the board normal) seen from the board centre.
 
     Casts a ``DEPTH_GRID^2`` grid of rays from the board centre through the mask's
