@@ -191,7 +191,7 @@ class PeopleLayout:
         """Vertex range of slot ``s``."""
         return slice(s * self.slot_size, (s + 1) * self.slot_size)
 
-    def shape(self) -> dict[str, Any]:
+    def shape(self) -> mi.Mesh:
         """The people mesh with every slot parked, for a scene dict."""
         v, albedo = self.empty()
         return ms.mesh(
