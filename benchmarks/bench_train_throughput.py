@@ -159,7 +159,7 @@ def measure_row(data, pixels, batch, steps, repeats, config) -> dict:
     v_ours = ours.measure(**b.inputs(), noise=False)
     v_peer = peer.volts(idx, None, False, None)
     torch.testing.assert_close(v_ours, v_peer, rtol=2e-5, atol=1e-7)  # the same camera
-    opt = tr._optimizer(ours, config)
+    opt = tr.build_optimizer(ours, config)
     src = tr.DatasetBatches(data, batch)
     g_ours, g_peer = torch.Generator().manual_seed(0), torch.Generator().manual_seed(0)
 
@@ -200,7 +200,7 @@ def evaluation_share(train, val, steps: int) -> dict:
     """Evaluation's share of training wall time with ``TrainConfig()`` defaults."""
     cfg = tr.TrainConfig()
     model = tr.build_mincam(train, 8)
-    opt = tr._optimizer(model, cfg)
+    opt = tr.build_optimizer(model, cfg)
     src = tr.DatasetBatches(train, cfg.batch_size)
     g = torch.Generator().manual_seed(0)
     for _ in range(10):

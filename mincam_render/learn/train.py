@@ -69,9 +69,6 @@ from mincam_render.learn.sweep import (
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.learn.training_data import WIDEN_MAX_BYTES, Batch, GatherBuffer, TrainingData
 
-#: The optimiser of a camera, by its name before the split (tests and benchmarks use it).
-_optimizer = build_optimizer
-
 __all__ = [
     "LOG_EVERY",
     "PAPER_COUNT_LOSS",

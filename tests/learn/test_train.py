@@ -371,7 +371,7 @@ def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):
 def _trained_state(data: tr.TrainingData, step, steps: int = 4):
     """Model and optimiser state after ``steps`` of ``step(model, source, opt, g)``."""
     model = tr.build_mincam(data, data.camera.num_detectors)
-    opt = tr._optimizer(model, tr.TrainConfig())
+    opt = tr.build_optimizer(model, tr.TrainConfig())
     src, g = tr.DatasetBatches(data, 8), torch.Generator().manual_seed(0)
     for _ in range(steps):
         step(model, src, opt, g)
