@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import math
 import pickle
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -92,15 +92,8 @@ def save_checkpoint(
             "optimizer": opt.state_dict(),
             "generator": generator.get_state(),
             "source": source.state(),
-            "step": state.step,
-            "best_step": state.best_step,
-            "bad": state.bad,
-            "best_loss": state.best_loss,
-            "best_state": state.best_state,
-            "history": state.history,
-            "snapshots": state.snapshots,
-            "elapsed": state.elapsed,
-            "stopped_early": state.stopped_early,
+            # every field of the state (not asdict: it would deep-copy the tensors)
+            **{f.name: getattr(state, f.name) for f in fields(TrainingState)},
         },
         path,
     )
@@ -129,14 +122,4 @@ def restore_checkpoint(
     opt.load_state_dict(ck["optimizer"])
     generator.set_state(ck["generator"])
     source.load_state(ck["source"])
-    return TrainingState(
-        step=ck["step"],
-        best_step=ck["best_step"],
-        bad=ck["bad"],
-        best_loss=ck["best_loss"],
-        best_state=ck["best_state"],
-        history=ck["history"],
-        snapshots=ck["snapshots"],
-        elapsed=ck["elapsed"],
-        stopped_early=ck["stopped_early"],
-    )
+    return TrainingState(**{f.name: ck[f.name] for f in fields(TrainingState)})

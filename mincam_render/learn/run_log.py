@@ -87,7 +87,7 @@ class RunLog:
         self.loss_sum += loss
         self.loss_n += 1
         if step % LOG_EVERY == 0:
-            wall = clock.wall_start + time.perf_counter() - clock.t_start
+            wall = clock.wall_start + clock.elapsed()
             self.writer.add_scalar(
                 "loss/train", float(self.loss_sum) / self.loss_n, step, walltime=wall
             )

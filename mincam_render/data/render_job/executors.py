@@ -201,10 +201,5 @@ def _collect_ray(ray: ModuleType, shard_of: dict, finish: Callable[[tuple, bool]
 def _ray_render_shard(
     job: dict, shard: int, threads: int, backgrounds: dict | None
 ) -> tuple[int, np.ndarray, dict, float]:
-    import drjit as dr
-
-    from mincam_render.render.backend import use_variant
-
-    use_variant()
-    dr.set_thread_count(max(1, int(threads)))
+    _worker_init(threads, None)
     return render_shard(job, shard, backgrounds)

@@ -74,7 +74,7 @@ def render_shard(
     start = shard * job["shard_frames"]
     stop = min(job["num_frames"], start + job["shard_frames"])
     images, frames, labels = _render_frames(job, start, stop, backgrounds, on_progress)
-    stored, scales = precision.encode_transport(np.stack(images), job["render"]["dtype"])
+    stored, scales = precision.encode_transport(images, job["render"]["dtype"])
     for f, s in zip(frames, scales, strict=True):
         f["scale"] = float(s)
     meta = {
@@ -113,12 +113,12 @@ def _render_frames(
     stop: int,
     backgrounds: dict | None,
     on_progress: Callable[[int], None] | None,
-) -> tuple[list[np.ndarray], list[dict], dict[str, list]]:
+) -> tuple[np.ndarray, list[dict], dict[str, list]]:
     """Frames ``start``..``stop - 1`` of ``job``, rendered in order.
 
     Returns:
-        ``(images, frame records, labels)``: ``images[frame]`` is the numpy
-        ``T[detector, row, col]`` (W) of each frame.
+        ``(images, frame records, labels)``: ``images`` is the numpy
+        ``T[frame, detector, row, col]`` (W) of the frames.
     """
     family, scene, camera, render_cam = _cached_scene(job)
     delay = float(os.environ.get(FRAME_DELAY_ENV, "0") or 0)
@@ -129,8 +129,6 @@ def _render_frames(
             os._exit(1)  # the render was killed: do not linger as an orphan
         background = _frame_background(job, family, i, backgrounds)
         t, lab, seed = _render_frame(job, family, scene, render_cam, i, background)
-        if job["render"]["shared_render"]:
-            t = np.repeat(t, camera.num_detectors, axis=0)
         images.append(t)
         for name in labels:
             labels[name].append(np.asarray(lab[name], dtype=np.float32).reshape(-1).tolist())
@@ -142,7 +140,10 @@ def _render_frames(
             on_progress(1)
         if delay:
             time.sleep(delay)
-    return images, frames, labels
+    stacked = np.stack(images)
+    if job["render"]["shared_render"]:  # one copy to every detector, once per shard
+        stacked = np.repeat(stacked, camera.num_detectors, axis=1)
+    return stacked, frames, labels
 
 
 def _frame_background(

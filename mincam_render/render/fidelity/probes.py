@@ -121,6 +121,7 @@ class Probes:
         self.indices = probe_indices(family.num_frames)
         self.k = camera.num_detectors
         self.lo_hi = camera.transmittance_range
+        self._renders: dict[tuple, np.ndarray] = {}
 
     def seed(self, index: int, offset: int) -> int:
         """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own)."""
@@ -136,7 +137,29 @@ class Probes:
         shared: bool = False,
         parallax: bool = True,
     ) -> np.ndarray:
-        """``T[probe, detector, row, col]`` (W); ``shared``: one render copied to every detector."""
+        """``T[probe, detector, row, col]`` (W); ``shared``: one render copied to every detector.
+
+        Renders are kept: the same arguments (a render at the same seed, so the
+        same samples) return the kept array instead of rendering again, e.g. the
+        pilot at the depth the depth decision already rendered. Do not modify it.
+        """
+        key = (cam, spp, seed_offset, max_depth or None, shared, parallax)
+        kept = self._renders.get(key)
+        if kept is None:
+            kept = self._renders[key] = self._render(
+                cam, spp, seed_offset, max_depth, shared, parallax
+            )
+        return kept
+
+    def _render(
+        self,
+        cam: FreeformCamera,
+        spp: int,
+        seed_offset: int,
+        max_depth: int | None,
+        shared: bool,
+        parallax: bool,
+    ) -> np.ndarray:
         out = []
         for i in self.indices:
             self.family.set_frame(self.scene, i)
