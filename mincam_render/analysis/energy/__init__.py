@@ -16,6 +16,7 @@ from mincam_render.analysis.energy.config import (
     load_energy_config,
 )
 from mincam_render.analysis.energy.consumption import FrameBudget, head_flops
+from mincam_render.analysis.energy.report import headline, write_energy_report
 from mincam_render.analysis.energy.storage import StorageTrace, simulate_storage
 from mincam_render.analysis.energy.study import analyze_energy, threshold_lux
 
@@ -27,7 +28,9 @@ __all__ = [
     "StorageTrace",
     "analyze_energy",
     "head_flops",
+    "headline",
     "load_energy_config",
     "simulate_storage",
     "threshold_lux",
+    "write_energy_report",
 ]
