@@ -22,9 +22,6 @@ from mincam_render.core.config import ConfigError, load_toml, spec
 
 #: The shipped description (``scenes/energy.toml`` at the repository root).
 ENERGY_TOML = Path(__file__).resolve().parents[3] / "scenes" / "energy.toml"
-#: One PowerFilm MP3-37 module: 114 mm x 37 mm (PowerFilm MP3-37 product sheet);
-#: the paper's prototype carries four (paper, supplement Table "components").
-MP3_37_AREA_M2 = 0.114 * 0.037
 
 
 def check_ranges(obj: object) -> None:
@@ -51,7 +48,7 @@ class PanelConfig:
     """The photovoltaic panel beside the camera board and its power path to the capacitor."""
 
     area_m2: float = spec(
-        4 * MP3_37_AREA_M2,
+        0.016872,  # 4 x 0.114 m x 0.037 m
         unit="m^2",
         range=(1e-6, 10.0),
         doc="active area: 4 x PowerFilm MP3-37 (114 x 37 mm each), as on the paper's prototype",

@@ -13,12 +13,16 @@ from __future__ import annotations
 import logging
 import math
 import time
+import tomllib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.analysis.energy.config import EnergyConfig, PanelConfig, ScheduleConfig
+from mincam_render.core.config import ConfigError
+from mincam_render.scenes.registry import FAMILY_NAMES
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -99,20 +103,38 @@ def day_family(family: str, config: EnergyConfig) -> SceneFamily:
     """Family ``family`` with daylight in real time from midnight and the render depth set.
 
     Frame time ``t`` seconds is local solar hour ``t / 3600``.
-    """
-    from mincam_render.scenes.registry import load_family
 
+    Raises:
+        ConfigError: an unknown family or a bad description.
+        ValueError: a family that is not an indoor scene (no rig).
+    """
+    from mincam_render.scenes.indoor import IndoorFamily
+    from mincam_render.scenes.registry import family_class, load_family
+
+    name = family if family in FAMILY_NAMES else _family_key(Path(family))
+    if not issubclass(family_class(name), IndoorFamily):
+        raise ValueError(
+            f"family {name!r} is not an indoor scene (no lights or window to schedule): "
+            "the energy study needs one (workspace, lighting)"
+        )
     daylight: dict[str, float] = {"start_hour": 0.0, "hours_per_second": 1.0 / SECONDS_PER_HOUR}
     if config.schedule.overcast is not None:
         daylight["overcast"] = config.schedule.overcast
-    overrides: dict = {"max_depth": config.render.max_depth}
+    # nobody is rendered (components are lit rooms, empty): no burn-in of the people
+    overrides = {"max_depth": config.render.max_depth, "burn_in_s": 0.0, "daylight": daylight}
     fam = load_family(family, seed=config.render.seed, num_frames=1, overrides=overrides)
-    if getattr(fam, "rig", None) is None:
-        raise ValueError(f"family {family!r} has no indoor rig: the energy study needs one")
-    if fam.rig.window is not None:  # type: ignore[attr-defined]
-        overrides["daylight"] = daylight
-        fam = load_family(family, seed=config.render.seed, num_frames=1, overrides=overrides)
     return fam
+
+
+def _family_key(path: Path) -> str:
+    """The ``family`` key of a scene description (TOML); ConfigError if unreadable."""
+    try:
+        family = tomllib.loads(path.read_text()).get("family")
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"{path}: cannot read the scene description ({err})") from None
+    if not isinstance(family, str):
+        raise ConfigError(f'{path}: missing top-level key family = "<name>"')
+    return family
 
 
 def render_panel_light(fam: SceneFamily, config: EnergyConfig) -> tuple[PanelPose, PanelLight]:
