@@ -338,3 +338,15 @@ def test_simulation_rejects_negative_harvest_and_time_step():
         simulate_storage(np.array([1e-3]), dt_s=0.0, load_w=0.0, storage=LOSSLESS)
     with pytest.raises(ValueError, match="pixels"):
         mincam_frame_budget(ConsumptionConfig(), pixels=0, flops=0, outputs=1)
+
+
+def test_importing_the_package_loads_neither_torch_nor_mitsuba():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, mincam_render.analysis.energy; "
+        "print(sorted(m for m in ('torch', 'mitsuba', 'drjit') if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

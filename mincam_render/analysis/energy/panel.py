@@ -22,7 +22,6 @@ import numpy as np
 
 from mincam_render.analysis.energy.config import EnergyConfig, PanelConfig, ScheduleConfig
 from mincam_render.core.config import ConfigError
-from mincam_render.scenes.registry import FAMILY_NAMES
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -109,7 +108,7 @@ def day_family(family: str, config: EnergyConfig) -> SceneFamily:
         ValueError: a family that is not an indoor scene (no rig).
     """
     from mincam_render.scenes.indoor import IndoorFamily
-    from mincam_render.scenes.registry import family_class, load_family
+    from mincam_render.scenes.registry import FAMILY_NAMES, family_class, load_family
 
     name = family if family in FAMILY_NAMES else _family_key(Path(family))
     if not issubclass(family_class(name), IndoorFamily):

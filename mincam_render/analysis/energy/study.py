@@ -37,7 +37,6 @@ from mincam_render.analysis.energy.panel import (
 from mincam_render.analysis.energy.storage import simulate_storage
 from mincam_render.core.config import to_dict
 from mincam_render.core.photometry import WHITE_LIGHT_EFFICACY_LM_PER_W, irradiance_to_lux
-from mincam_render.scenes.registry import FAMILY_NAMES, load_family
 
 log = logging.getLogger(__name__)
 #: Days simulated; the last is reported (the first charges the capacitor from its initial state).
@@ -231,6 +230,7 @@ def analyze_energy(
             study table.
     """
     from mincam_render.analysis.energy.panel import day_family
+    from mincam_render.scenes.registry import FAMILY_NAMES, load_family
 
     if not families:
         raise ValueError("families is empty: name at least one indoor scene family")
