@@ -70,22 +70,18 @@ def _fps_figure(result: dict[str, Any]) -> tuple[Figure, str]:
     fig, axes = plt.subplots(1, len(fams), figsize=(5.5 * len(fams), 3.8), squeeze=False)
     for ax, (name, fam) in zip(axes[0], fams, strict=True):
         fps = np.array([fam["sustainable_fps"][str(k)] for k in _pixels(result)])
+        hours = np.asarray(fam["hours"])
+        half = 0.5 * (hours[1] - hours[0])  # each column centred on its sample hour
         im = ax.imshow(
             np.maximum(fps, 0.1),
             aspect="auto",
             origin="lower",
-            extent=(0, 24, 0.5, len(fps) + 0.5),
+            extent=(hours[0] - half, hours[-1] + half, 0.5, len(fps) + 0.5),
             norm=LogNorm(vmin=0.1, vmax=max(float(fps.max()), 1.0)),
             cmap="viridis",
         )
-        ax.contour(
-            np.array(fam["hours"]) + 0.5 * (fam["hours"][1] - fam["hours"][0]),
-            _pixels(result),
-            fps,
-            levels=[result["config"]["fps"]],
-            colors="w",
-            linewidths=1,
-        )
+        if len(fps) > 1 and fps.min() < result["config"]["fps"] < fps.max():
+            ax.contour(hours, _pixels(result), fps, levels=[result["config"]["fps"]], colors="w")
         ax.set_xlabel("local solar time (h)")
         ax.set_ylabel("freeform pixels K")
         ax.set_title(f"{name}: sustainable frame rate (white: {result['config']['fps']:g} fps)")

@@ -100,7 +100,10 @@ def _family_table(page: Report, result: dict[str, Any]) -> None:
         ],
         rows,
         caption="Per scene and pixel count: hours of operation at the configured frame rate with "
-        "the supercapacitor, the peak sustainable rate, the rate the day's mean harvest pays for.",
+        "the supercapacitor (cumulative: below the threshold light the camera runs down to "
+        "brown-out, recharges to the restart voltage and runs again), the peak sustainable rate, "
+        "the rate the day's mean harvest pays for, and the hours whose light alone pays for the "
+        "configured rate.",
     )
 
 
