@@ -350,3 +350,14 @@ def test_importing_the_package_loads_neither_torch_nor_mitsuba():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_a_schedule_naming_an_unknown_light_is_rejected():
+    from mincam_render.analysis.energy.panel import check_light_names
+
+    schedule = ScheduleConfig(
+        lights=(LightSchedule(name="lamp_wset", on_hour=17.0, off_hour=23.0),)
+    )
+    with pytest.raises(ValueError, match=r"schedule.lights\[0\].name = 'lamp_wset'.*lamp_west"):
+        check_light_names(schedule, ["overhead_south", "lamp_west"])
+    check_light_names(schedule, ["lamp_wset"])  # a known name passes

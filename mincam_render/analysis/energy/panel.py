@@ -159,6 +159,7 @@ def render_panel_light(fam: SceneFamily, config: EnergyConfig) -> tuple[PanelPos
         fam.set_background_component(scene, key)
         return measure_irradiance(scene, meter, spp=r.spp, batches=r.batches, seed=r.seed)
 
+    check_light_names(config.schedule, [li.name for li in rig.lights])
     lights = {li.name: measure(f"light={li.key}") for li in rig.lights}
     hours = day_hours(config.schedule)
     days: list[IrradianceEstimate | None] = []
@@ -185,6 +186,16 @@ def _sun_elevation_deg(daylight_config: object, hour: float) -> float:
     c = daylight_config
     sun = solar_direction(c.day_of_year, hour % 24.0, c.latitude_deg)  # type: ignore[attr-defined]
     return math.degrees(math.asin(max(-1.0, min(1.0, float(sun[2])))))
+
+
+def check_light_names(schedule: ScheduleConfig, names: list[str]) -> None:
+    """Raise ``ValueError`` if a per-light schedule names a light the scene does not have."""
+    for i, light in enumerate(schedule.lights):
+        if light.name not in names:
+            raise ValueError(
+                f"schedule.lights[{i}].name = {light.name!r}: the scene's lights are "
+                f"{', '.join(names) or '(none)'}"
+            )
 
 
 def day_hours(schedule: ScheduleConfig) -> np.ndarray:
