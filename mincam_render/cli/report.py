@@ -1,4 +1,4 @@
-"""``mincam-render report``: reports comparing simulation with measurements."""
+"""``mincam-render report``: reports comparing simulation with measurements, and energy."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from .options import out_option
 
 @click.group("report")
 def report_group() -> None:
-    """Reports comparing simulation with measurements."""
+    """Reports: simulation against measurements (sim2real), the self-powered budget (energy)."""
 
 
 @report_group.command("sim2real")
@@ -94,3 +94,71 @@ def report_sim2real_cmd(
         raise user_error(err) from None
     click.echo(result["verdict"]["summary"])
     click.echo(f"wrote {paths['json']} and {paths['html']}")
+
+
+@report_group.command("energy")
+@click.option(
+    "--family",
+    "families",
+    multiple=True,
+    default=("workspace", "lighting"),
+    show_default=True,
+    help="Indoor scene family (name or TOML path) to render the day in; repeat for several.",
+)
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="Energy description (TOML); default: the shipped scenes/energy.toml.",
+)
+@click.option(
+    "--spp",
+    type=click.IntRange(1, 1 << 24),
+    default=None,
+    help="Samples per batch of the panel's irradiance meter (default: the description's).",
+)
+@click.option(
+    "--studies",
+    "studies_dir",
+    type=click.Path(file_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="Directory of study_<family>.json tables for the module at equal task error "
+    "(default: the paper's matches).",
+)
+@out_option("Output directory (created): energy.json, energy.html, energy.png.", "runs/energy")
+def report_energy_cmd(
+    families: tuple[str, ...],
+    config_path: Path | None,
+    spp: int | None,
+    studies_dir: Path | None,
+    out: Path,
+) -> None:
+    """Can the camera run from the light its panel sees? Lux, frame rates, hours, margins.
+
+    Renders the panel's light over a day in each scene, then reports the
+    sustainable frame rate for 1..24 pixels, the hours at 30 fps, and the
+    illuminance 24 pixels need at 30 fps beside the paper's ~600 lux.
+
+    \b
+    Example:
+      mincam-render report energy --family workspace --spp 1024 --out runs/energy
+      mincam-render report energy --studies benchmarks/results --out runs/energy
+    """
+    from mincam_render.analysis.energy import (
+        analyze_energy,
+        headline,
+        load_energy_config,
+        write_energy_report,
+    )
+    from mincam_render.core.config import ConfigError
+
+    try:
+        overrides = {"render": {"spp": spp}} if spp is not None else None
+        config = load_energy_config(config_path, overrides)
+        result = analyze_energy(families, config, studies_dir=studies_dir)
+        paths = write_energy_report(result, out)
+    except (ValueError, ConfigError, OSError) as err:
+        raise user_error(err) from None
+    click.echo(headline(result))
+    click.echo(f"wrote {paths['json']}, {paths['html']} and {paths['png']}")

@@ -261,6 +261,60 @@ def with_mask_geometry(
     return out
 
 
+def irradiance_meter(
+    center_m: Sequence[float] | np.ndarray,
+    normal: Sequence[float] | np.ndarray,
+    tangent: Sequence[float] | np.ndarray,
+    size_m: tuple[float, float],
+) -> dict[str, Any]:
+    """A flat rectangular ``irradiancemeter`` (a panel or a lux meter), not part of any scene.
+
+    Rendered with ``mi.render(scene, sensor=loaded.sensor())`` it measures the mean
+    irradiance (W/m^2) over its front face: cosine-weighted rays into the
+    hemisphere around ``normal``. It casts no shadow (it is not in the scene).
+
+    Args:
+        center_m: centre of the rectangle (m, world), shape (3,).
+        normal: direction the front face looks toward (world), shape (3,), any length.
+        tangent: direction of the first side (world), not parallel to ``normal``.
+        size_m: ``(width, height)`` (m) along ``tangent`` and ``normal x tangent``.
+
+    Raises:
+        ValueError: a side <= 0, or ``tangent`` parallel to ``normal``.
+    """
+    import numpy as np
+
+    use_variant()
+    width, height = (float(v) for v in size_m)
+    if not (width > 0 and height > 0):
+        raise ValueError(f"size_m = {size_m!r}: both sides must be > 0 (m)")
+    z = np.asarray(normal, dtype=np.float64)
+    z = z / np.linalg.norm(z)
+    t = np.asarray(tangent, dtype=np.float64)
+    x = t - (t @ z) * z
+    if np.linalg.norm(x) < 1e-9 * max(1.0, float(np.linalg.norm(t))):
+        raise ValueError(f"tangent {list(t)} is parallel to normal {list(z)}")
+    x = x / np.linalg.norm(x)
+    m = np.eye(4)
+    # rectangle: [-1, 1]^2 in local x, y, front face toward local +z
+    m[:3, :3] = np.column_stack([x * width / 2, np.cross(z, x) * height / 2, z])
+    m[:3, 3] = np.asarray(center_m, dtype=np.float64)
+    return {
+        "type": "rectangle",
+        "to_world": mi.ScalarTransform4f(m),
+        "sensor": {
+            "type": "irradiancemeter",
+            "film": {
+                "type": "hdrfilm",
+                "width": 1,
+                "height": 1,
+                "rfilter": {"type": "box"},
+                "pixel_format": "luminance",
+            },
+        },
+    }
+
+
 #: Name of a mesh's per-vertex albedo attribute (see :func:`mesh`).
 VERTEX_ALBEDO = "vertex_albedo"
 

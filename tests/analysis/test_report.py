@@ -126,3 +126,37 @@ def test_fidelity_rows_tiny(variant, tmp_path):
     assert res["statements"] and all("patches" in s for s in res["statements"])
     paths = write_fidelity_report([res], tmp_path)
     assert Path(paths["html"]).read_text().count("data:image/png;base64,") == 1
+
+
+@pytest.fixture(scope="module")
+def energy_page(tmp_path_factory, variant):
+    from mincam_render.analysis.energy import (
+        analyze_energy,
+        load_energy_config,
+        write_energy_report,
+    )
+
+    config = load_energy_config(
+        None,
+        {
+            "max_pixels": 3,
+            "schedule": {"step_min": 120.0},
+            "render": {"spp": 16, "batches": 2, "max_depth": 2},
+        },
+    )
+    result = analyze_energy(["workspace"], config)
+    return Path(write_energy_report(result, tmp_path_factory.mktemp("energy"))["html"])
+
+
+@needs_chromium
+def test_energy_report_loads_its_figures_in_a_headless_browser(tmp_path, energy_page):
+    text = energy_page.read_text()
+    assert not re.search(r'src="(?!data:)', text), "external resources would break the page"
+    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", energy_page.as_uri())
+    dom = proc.stdout
+    assert "Self-powered budget" in dom, proc.stderr[-2000:]
+    loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
+    total = re.search(r'data-figures-total="(\d+)"', dom)
+    assert loaded and total, f"the page script did not run: {dom[:500]}"
+    assert int(total.group(1)) == 3 and int(loaded.group(1)) == 3
+    assert "paper: ~600 lx" in dom and "HM01B0" in dom

@@ -1,0 +1,171 @@
+"""Self-powered budget of the workspace and lighting scenes, as ``mincam-render report energy`` runs it.
+
+Usage:
+    PYTHONPATH=. python benchmarks/bench_energy.py [--family workspace --family lighting]
+        [--config scenes/energy.toml] [--out benchmarks/results/energy.json]
+
+1. **Depth check.** The panel sees lit walls, so its irradiance needs
+   interreflections: one component of the first family (its first ceiling light
+   alone, and the noon daylight if it has a window) is rendered at path depths
+   3, 6, 12 and 24 with the description's samples, and the depth used is held to
+   within 1 % of depth 24.
+2. **The day.** :func:`analyze_energy` with the shipped description (daylight
+   every 15 min, office lights 08:00-18:00) and the study tables of
+   ``benchmarks/results`` for the matched module. Reported per family: lux over
+   the day, sustainable fps for 1..24 pixels, hours at 30 fps, the largest
+   Monte Carlo standard error of the day's total irradiance (from 8 independent
+   batches) and the render time; and the illuminance 24 pixels need at 30 fps
+   beside the paper's ~600 lux.
+
+Writes ``--out`` (JSON: machine, git revision, git_dirty, the full result) and
+``energy.png`` beside it (the README's figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import subprocess
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+DEPTHS = (3, 6, 12, 24)
+
+
+def machine() -> dict:
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", *args], capture_output=True, text=True, cwd=REPO, check=False
+        ).stdout.strip()
+
+    return {
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+        "load_average_1min": os.getloadavg()[0],
+        "python": platform.python_version(),
+        "git_revision": git("rev-parse", "HEAD"),
+        "git_dirty": bool(git("status", "--porcelain")),
+    }
+
+
+def depth_check(family: str, config) -> dict:
+    """Irradiance of one light alone (and noon daylight) at several depths, vs the deepest."""
+    from mincam_render.analysis.energy.panel import day_family, panel_pose
+    from mincam_render.render.irradiance import measure_irradiance
+    from mincam_render.render.mitsuba_scene import irradiance_meter
+
+    rows = []
+    for depth in DEPTHS:
+        cfg = dataclasses.replace(
+            config, render=dataclasses.replace(config.render, max_depth=depth)
+        )
+        fam = day_family(family, cfg)
+        cam = fam.camera()
+        pose = panel_pose(cam.position, cam.frame, cfg.panel)
+        side = cfg.panel.area_m2**0.5
+        meter = irradiance_meter(pose.center_m, pose.normal, pose.tangent, (side, side))
+        scene = fam.build_scene()
+        keys = [f"light={fam.rig.lights[0].key}"]
+        if fam.rig.window is not None:
+            keys.append("daylight_s=43200")
+        for key in keys:
+            fam.set_background_component(scene, key)
+            r = cfg.render
+            est = measure_irradiance(scene, meter, spp=r.spp, batches=r.batches, seed=r.seed)
+            rows.append(
+                {
+                    "depth": depth,
+                    "component": key,
+                    "irradiance_w_m2": est.mean_w_m2,
+                    "stderr_w_m2": est.stderr_w_m2,
+                }
+            )
+    for row in rows:
+        ref = next(
+            r for r in rows if r["depth"] == DEPTHS[-1] and r["component"] == row["component"]
+        )
+        row["relative_to_deepest"] = row["irradiance_w_m2"] / ref["irradiance_w_m2"] - 1.0
+    return {"family": family, "rows": rows}
+
+
+def main() -> None:
+    import logging
+
+    from mincam_render.analysis.energy import analyze_energy, headline, load_energy_config
+    from mincam_render.analysis.energy.figures import summary_figure
+    from mincam_render.analysis.report import figure_png
+
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--family", action="append", default=None)
+    ap.add_argument("--config", default=None)
+    ap.add_argument("--out", default=str(REPO / "benchmarks/results/energy.json"))
+    args = ap.parse_args()
+    families = args.family or ["workspace", "lighting"]
+    config = load_energy_config(args.config)
+    info = machine()
+
+    start = time.perf_counter()
+    depth = depth_check(families[0], config)
+    depth_s = time.perf_counter() - start
+    for row in depth["rows"]:
+        print(
+            f"depth {row['depth']:2d} {row['component']:18s} {row['irradiance_w_m2']:.4f} W/m^2 "
+            f"({100 * row['relative_to_deepest']:+.2f} % vs depth {DEPTHS[-1]})"
+        )
+
+    start = time.perf_counter()
+    result = analyze_energy(families, config, studies_dir=REPO / "benchmarks/results")
+    seconds = time.perf_counter() - start
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    (out.parent / "energy.png").write_bytes(figure_png(summary_figure(result)))
+
+    summary = {
+        "headline": headline(result),
+        "threshold_lux_24px_30fps": result["threshold"]["threshold_lux"],
+        "paper_lux": result["threshold"]["paper_lux"],
+        "power_24px_30fps_w": result["threshold"]["power_at_fps_w"],
+        "families": {
+            name: {
+                "peak_lux": max(fam["lux"]),
+                "hours_at_30fps": {k: fam["hours_at_fps"][k] for k in ("1", "8", "16", "24")},
+                "max_relative_error_total": fam["render"]["max_relative_error_total"],
+                "render_seconds": fam["render"]["seconds"],
+            }
+            for name, fam in result["families"].items()
+        },
+        "comparisons": {
+            name: {
+                "grid": comp["match"]["grid"],
+                "pixels": comp["mincam"]["pixels"],
+                "source": comp["match"]["source"],
+                "mincam_power_w": comp["mincam"]["power_at_fps_w"],
+                "module_power_w": comp["module"]["power_at_fps_w"],
+                "module_outputs_only_power_w": comp["module_outputs_only"]["power_at_fps_w"],
+                "mincam_lux": comp["mincam"]["threshold_lux"],
+                "module_lux": comp["module"]["threshold_lux"],
+                "module_outputs_only_lux": comp["module_outputs_only"]["threshold_lux"],
+            }
+            for name, comp in result["comparisons"].items()
+        },
+    }
+    print(json.dumps(summary, indent=1))
+    payload = {
+        "machine": info,
+        "command": "PYTHONPATH=. python benchmarks/bench_energy.py",
+        "seconds": {"depth_check": depth_s, "analysis": seconds},
+        "summary": summary,
+        "depth_check": depth,
+        "result": result,
+    }
+    out.write_text(json.dumps(payload, indent=1) + "\n")
+    print(f"wrote {out} and {out.parent / 'energy.png'}")
+
+
+if __name__ == "__main__":
+    main()
