@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
 from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
 from mincam_render.learn.checkpoint import load_checkpoint
@@ -114,16 +115,7 @@ def describe_run(
         "config": asdict(config),
         "fps": train.fps,
         "history": train.history,
-        "label_specs": [
-            {
-                "name": s.name,
-                "kind": s.kind.value,
-                "size": s.size,
-                "unit": s.unit,
-                "median_filter_s": s.median_filter_s,
-            }
-            for s in train.label_specs
-        ],
+        "label_specs": [label_spec_to_dict(s) for s in train.label_specs],
     }
 
 
