@@ -43,6 +43,7 @@ its own gain and noise, exactly as if its frames had been stacked.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from typing import cast
 
@@ -452,21 +453,41 @@ class MincamCamera(CameraModel):
         return detector_voltage(power, e, noise=noise, generator=generator)
 
 
+@functools.lru_cache(maxsize=64)
+def area_weights(texels: int, pixels: int) -> torch.Tensor:
+    """``W[pixel, texel]``: the length (in texels) of texel ``j`` inside pixel ``i`` (float64).
+
+    Pixel ``i`` spans ``[i, i + 1) * texels / pixels`` of the texel axis, so each
+    texel's column sums to 1 (every texel's power goes somewhere, once) and each
+    pixel's row sums to ``texels / pixels`` (equal areas).
+    """
+    edges = torch.arange(pixels + 1, dtype=torch.float64) * (texels / pixels)
+    left = torch.arange(texels, dtype=torch.float64)
+    lo = torch.maximum(edges[:-1, None], left[None, :])
+    hi = torch.minimum(edges[1:, None], left[None, :] + 1.0)
+    return torch.clamp(hi - lo, min=0.0)
+
+
 def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     """Box-sum ``image[..., row, col]`` into ``grid = (R, C)`` pixels (sums power; torch).
 
-    Rows/columns that do not divide evenly use adaptive pooling (overlapping
-    boxes at the seams) scaled by the mean box area, so totals hold only
-    approximately; even divisions are exact box sums.
+    Area-correct for any grid: a pixel boundary inside a texel splits that
+    texel's power by area (:func:`area_weights`), so the total power is
+    conserved and a uniform image gives equal pixels (e.g. 32 texels onto 28
+    columns). Even divisions are plain box sums.
     """
     rows, cols = image.shape[-2:]
     r, c = grid
     if not (1 <= r <= rows and 1 <= c <= cols):
         raise ValueError(f"baseline grid {r}x{c} must lie within the transport's {rows}x{cols}")
     lead = image.shape[:-2]
-    flat = image.reshape(-1, 1, rows, cols)
-    pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
-    return pooled.reshape(*lead, r, c)
+    if rows % r == 0 and cols % c == 0:
+        flat = image.reshape(-1, 1, rows, cols)
+        pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
+        return pooled.reshape(*lead, r, c)
+    wr = area_weights(rows, r).to(image.dtype)
+    wc = area_weights(cols, c).to(image.dtype)
+    return wr @ image @ wc.T
 
 
 class BaselineCamera(CameraModel):
