@@ -135,7 +135,7 @@ def _rmse(a: np.ndarray, b: np.ndarray) -> float:
 def _label_metrics(
     s: LabelSpec, pred: np.ndarray, filtered: np.ndarray, scored: np.ndarray, y: np.ndarray
 ) -> dict[str, Any]:
-    """One label's figures: ``pred`` raw, ``filtered`` post-processed, ``scored`` after the rules."""
+    """One label's figures: ``pred`` raw, ``filtered`` post-processed, ``scored`` ruled."""
     if s.kind is LabelKind.BINARY:
         acc = (scored == y).mean(axis=0)
         return {"accuracy": float(acc.mean()), "accuracy_per_element": acc.tolist(), "unit": ""}
