@@ -192,7 +192,7 @@ class Head(nn.Module):
         BINARY labels give one logit per element; a classified count gives class
         logits ``[batch, size * classes]`` (element-major, see :meth:`class_logits`).
         """
-        y = self.out(self.body(self.input_norm(x)))
+        y = self.out(self.features(x))
         return dict(
             zip(
                 [s.name for s in self.label_specs],
@@ -200,6 +200,17 @@ class Head(nn.Module):
                 strict=True,
             )
         )
+
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """Hidden features ``[batch, hidden]`` of inputs ``x[batch, in_features]``."""
+        return self.body(self.input_norm(x))
+
+    def input_running_mean(self) -> torch.Tensor:
+        """``[in_features]`` running mean of every input (what pruning holds a pixel at)."""
+        mean = self.input_norm.running_mean
+        if mean is None:  # BatchNorm1d tracks running statistics by default
+            raise RuntimeError("the head's input norm keeps no running mean")
+        return mean
 
     def class_logits(self, name: str, outputs: torch.Tensor) -> torch.Tensor:
         """Raw outputs of a classified count -> logits ``[batch, size, classes]``."""
