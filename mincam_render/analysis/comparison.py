@@ -178,7 +178,7 @@ def _design_runs(
             splits["val"],
             None,
             run_dir,
-            config=dataclasses.replace(cfg.train, seed=seed),
+            config=dataclasses.replace(cfg.train, seed=seed, head=design.head),
             episodes=splits["tests"],
             progress=progress,
             **design.train_kwargs(),
@@ -332,17 +332,23 @@ def run_comparison(
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
     """Pixel reduction of design ``reference`` at equal error (the paper's 256x, 2048x).
 
-    The smallest baseline whose 95 % interval overlaps or lies below the
-    reference's (its lower bound at most the reference's upper bound); the
-    factor is its pixel count over the reference's. None when no baseline of
-    the study comes that close (the factor then exceeds the largest tried).
+    The smallest baseline (with the reference's head) whose 95 % interval
+    overlaps or lies below the reference's (its lower bound at most the
+    reference's upper bound); the factor is its pixel count over the
+    reference's. None when no baseline of the study comes that close (the
+    factor then exceeds the largest tried).
     """
     designs = result["designs"]
     if reference not in designs:
         raise ValueError(f"reference design {reference!r} not in the study: {sorted(designs)}")
     ref = designs[reference]
+    head = ref["model"].get("head", "mlp")  # baselines with the reference's head
     baselines = sorted(
-        (d for n, d in designs.items() if n.startswith("baseline-")),
+        (
+            d
+            for n, d in designs.items()
+            if n.startswith("baseline-") and d["model"].get("head", "mlp") == head
+        ),
         key=lambda d: d["model"]["pixels"],
     )
     match = next((d for d in baselines if d["error"]["ci95"][0] <= ref["error"]["ci95"][1]), None)

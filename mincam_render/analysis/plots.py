@@ -69,9 +69,9 @@ def plot_transport_grid(
 
 
 def _series_name(design: str) -> str:
-    """``mincam``, ``mincam-nosensor`` or ``baseline`` of a design name (``mincam-8px``)."""
-    kind = design.split("-", 1)[0]
-    return f"{kind}-nosensor" if design.endswith("-nosensor") else kind
+    """``mincam``, ``mincam-nosensor``, ``baseline`` (``-tcn`` heads apart) of a design name."""
+    parts = design.split("-")
+    return "-".join([parts[0], *(p for p in parts[2:] if p in ("nosensor", "tcn"))])
 
 
 def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
@@ -165,5 +165,12 @@ def _plot_label(ax: Axes, name: str, lab: dict[str, Any]) -> None:
     ax.set_title(name, fontsize=9)
 
 
-#: Design kinds, each drawn in its own colour (C0, C1, C2) in every panel.
-_SERIES = ("mincam", "mincam-nosensor", "baseline")
+#: Design kinds, each drawn in its own colour (C0, C1, ...) in every panel.
+_SERIES = (
+    "mincam",
+    "mincam-nosensor",
+    "baseline",
+    "mincam-tcn",
+    "mincam-nosensor-tcn",
+    "baseline-tcn",
+)

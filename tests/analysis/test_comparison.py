@@ -17,6 +17,7 @@ from mincam_render.analysis.comparison import (
 )
 from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
+from mincam_render.learn.train_config import HeadKind
 
 
 def _design(pixels, mean, lo, hi, grid=None):
@@ -64,6 +65,22 @@ def test_reduction_factor_without_a_match_says_it_exceeds_the_largest_tried():
         reduction_factor(res, "mincam-3px")
 
 
+def test_reduction_factor_compares_with_baselines_of_the_references_head():
+    res = _result()
+    tcn = _design(4, 1.0, 0.9, 1.1, (2, 2))
+    tcn["model"]["head"] = "tcn"
+    res["designs"]["baseline-2x2-tcn"] = tcn  # would match at 1x, but is another head
+    assert reduction_factor(res, "mincam-4px")["baseline"] == "4x4"
+
+
+@pytest.mark.parametrize("heads", ["lstm", "mlp,mlp", ","])
+def test_cli_study_refuses_unknown_or_repeated_heads(tmp_path, heads):
+    args = ["study", "--family", "patches", "--heads", heads, "--out", str(tmp_path / "s")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2 and "--heads" in res.output, res.output
+    assert not (tmp_path / "s").exists()
+
+
 def test_study_table_lists_every_design_and_the_trivial_predictor():
     res = _result()
     res["reduction_factor"] = reduction_factor(res, "mincam-4px")
@@ -78,6 +95,11 @@ def test_designs_are_named_and_validated():
     assert Design(pixels=8).name == "mincam-8px"
     assert Design(pixels=8, sensor_model=False).name == "mincam-8px-nosensor"
     assert Design(grid=(4, 6)).name == "baseline-4x6"
+    assert Design(pixels=8, head="tcn").name == "mincam-8px-tcn"
+    assert Design(grid=(8, 14), head=HeadKind.TCN).name == "baseline-8x14-tcn"
+    assert Design(pixels=8, sensor_model=False, head="tcn").name == "mincam-8px-nosensor-tcn"
+    with pytest.raises(ValueError, match="lstm"):
+        Design(pixels=8, head="lstm")
     with pytest.raises(ValueError, match="exactly one"):
         Design(pixels=4, grid=(2, 2))
     with pytest.raises(ValueError, match="at least two"):

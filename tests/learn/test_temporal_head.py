@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -9,6 +11,7 @@ from support import temporal_task
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn import train as tr
+from mincam_render.learn.runs import config_record
 from mincam_render.learn.temporal_head import TemporalConvHead, tcn_dilations
 
 SPECS = (
@@ -88,3 +91,14 @@ def test_the_head_is_a_choice_of_the_recipe_recorded_in_the_model():
     assert tr.TrainConfig(head="tcn").head is tr.HeadKind.TCN
     with pytest.raises(ValueError, match="TrainConfig.head"):
         tr.TrainConfig(head="lstm")
+
+
+def test_train_run_records_the_head_and_resumes_runs_written_before_the_choice(tmp_path):
+    data = temporal_task(n=120, seed=2)
+    train, val = data.subset(0, 80, "train"), data.subset(80, 120, "val")
+    cfg = tr.TrainConfig(max_steps=4, eval_every=2, batch_size=8, head="tcn")
+    metrics = tr.train_run(train, val, None, tmp_path / "tcn", pixels=1, config=cfg)
+    run = json.loads((tmp_path / "tcn" / "run.json").read_text())
+    assert run["config"]["head"] == "tcn" and metrics["model"]["head"] == "tcn"
+    # the paper's MLP: run.json's recipe as before the head was a choice
+    assert "head" not in config_record(tr.TrainConfig())
