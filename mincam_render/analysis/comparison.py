@@ -16,8 +16,9 @@
    over seeds and test episodes (:mod:`mincam_render.analysis.statistics`), whether
    each run converged, and a verdict only where intervals separate.
 5. Keep the masks of each minimalist design's best run (lowest validation
-   loss) with a sidecar holding the figures above; write ``metrics.json`` and
-   ``comparison.png``.
+   loss) with a sidecar holding the figures above; write ``metrics.json``
+   (with the label coverage of every split and what each misses,
+   :mod:`mincam_render.analysis.coverage`) and ``comparison.png``.
 
 The main job compares two designs (:class:`Design`); a study passes more (a
 pixel-count sweep against baselines of several resolutions).
@@ -37,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.analysis.coverage import coverage_table, study_coverage
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
@@ -309,6 +311,7 @@ def run_comparison(
             | {"trivial": [trivial]},
             seed=cfg.seed,
         ),
+        "coverage": study_coverage({"train": train, "val": data["val-0"], **tests}),
         "figure": str(out / "comparison.png"),
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
@@ -413,6 +416,8 @@ def study_table(result: Mapping[str, Any]) -> str:
                 else f"above {rf['largest_tried_factor']:g}x (no baseline tried matches it)"
             )
         )
+    if "coverage" in result:
+        lines += ["", coverage_table(result["coverage"])]
     return "\n".join(lines)
 
 

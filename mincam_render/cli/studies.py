@@ -144,6 +144,8 @@ def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
         click.echo(f"  verdict: {result['verdict']}")
     for name, against in result["versus_trivial"].items():
         click.echo(f"  {name} against the trivial predictor: {against}")
+    for warning in result["coverage"]["warnings"]:
+        click.echo(f"  label coverage: {warning}")
 
 
 @click.command("pipeline")
