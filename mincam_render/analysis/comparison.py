@@ -423,8 +423,8 @@ def study_summary(result: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
 
 def _headline_unit(result: Mapping[str, Any]) -> str:
     """The unit of the headline's labels (``""`` when unknown or unitless)."""
-    episodes = result.get("trivial", {}).get("episodes") or {}
-    first = next(iter(episodes.values()), {})
+    episodes: Mapping[str, Any] = result.get("trivial", {}).get("episodes") or {}
+    first: Mapping[str, Any] = next(iter(episodes.values()), {})
     names = first.get("headline", {}).get("labels", [])
     units = {result.get("labels", {}).get(n, {}).get("unit", "") for n in names}
     return units.pop() if len(units) == 1 else ""

@@ -105,8 +105,9 @@ def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
 def _label_panels(result: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
     """``(title, label figures)`` of every label, and of each element of a headline label."""
     labels = result.get("labels") or {}
-    episodes = result.get("trivial", {}).get("episodes") or {}
-    headline = next(iter(episodes.values()), {}).get("headline", {}).get("labels", [])
+    episodes: dict[str, Any] = result.get("trivial", {}).get("episodes") or {}
+    first: dict[str, Any] = next(iter(episodes.values()), {})
+    headline = first.get("headline", {}).get("labels", [])
     panels = list(labels.items())
     for label in headline:
         names = result.get("element_names", {}).get(label, [])
@@ -136,7 +137,7 @@ def _plot_error_vs_pixels(ax: Axes, result: dict[str, Any]) -> None:
     shown, ylabel = _headline_axis(result)
     lo, hi = sorted(shown(result["trivial"]["error"]["ci95"]))
     ax.axhspan(lo, hi, color="0.85", label="trivial predictor (95 % CI)")
-    ax.axhline(shown(result["trivial"]["error"]["mean"]), color="0.5", lw=1, ls="--")
+    ax.axhline(float(shown(result["trivial"]["error"]["mean"])), color="0.5", lw=1, ls="--")
     series: dict[str, list] = {}
     for name, d in result["designs"].items():
         series.setdefault(_series_name(name), []).append(d)

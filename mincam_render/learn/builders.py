@@ -71,14 +71,26 @@ def build_head(
     """
     mean, std = data.target_stats()
     steps = max(data.history - 1, 1)
-    kw = {"target_mean": mean, "target_std": std, "count_classes": count_classes}
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         if HeadKind(kind) is HeadKind.TCN:
             if in_features % steps:
                 raise ValueError(f"in_features = {in_features} is not pixels x {steps} steps")
-            return TemporalConvHead(in_features // steps, steps, data.label_specs, **kw)
-        return Head(in_features, data.label_specs, **kw)
+            return TemporalConvHead(
+                in_features // steps,
+                steps,
+                data.label_specs,
+                target_mean=mean,
+                target_std=std,
+                count_classes=count_classes,
+            )
+        return Head(
+            in_features,
+            data.label_specs,
+            target_mean=mean,
+            target_std=std,
+            count_classes=count_classes,
+        )
 
 
 def head_kind(head: Head) -> HeadKind:
