@@ -178,6 +178,11 @@ class Head(nn.Module):
         """Number of inputs."""
         return cast(nn.Linear, self.body[0]).in_features
 
+    @property
+    def fan_in(self) -> int:
+        """Inputs of one unit of the first layer (sets the learning rate): every input."""
+        return self.in_features
+
     def count_loss(self, name: str) -> CountLoss:
         """How label ``name`` is learned if it is a COUNT label."""
         return CountLoss.CROSS_ENTROPY if name in self.count_classes else CountLoss.MSE

@@ -15,6 +15,7 @@ MLP's are over the batch). Tensors are torch.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import cast
 
 import numpy as np
 import torch
@@ -113,6 +114,12 @@ class TemporalConvHead(Head):
     def in_features(self) -> int:
         """Number of inputs: ``steps * pixels``."""
         return self.steps * self.pixels
+
+    @property
+    def fan_in(self) -> int:
+        """Inputs of one unit of the first convolution: ``pixels * kernel``."""
+        first = cast(CausalConv1d, self.temporal[0])
+        return self.pixels * first.kernel_size[0]
 
     def sequence(self, x: torch.Tensor) -> torch.Tensor:
         """Convolution features ``[batch, channels, steps]`` of ``x[batch, steps * pixels]``."""

@@ -34,6 +34,7 @@ def test_shapes_and_refused_inputs():
     assert out["speed"].shape == (5, 2) and out["lights"].shape == (5, 3)
     assert head.sequence(x).shape == (5, 32, 29)
     assert head.input_running_mean().shape == (4 * 29,)
+    assert head.fan_in == 4 * 3  # the first convolution's inputs per unit
     with pytest.raises(ValueError, match="29 steps x 4 pixels"):
         head(torch.randn(5, 4 * 28))
     with pytest.raises(ValueError, match="pixels"):
@@ -102,3 +103,12 @@ def test_train_run_records_the_head_and_resumes_runs_written_before_the_choice(t
     assert run["config"]["head"] == "tcn" and metrics["model"]["head"] == "tcn"
     # the paper's MLP: run.json's recipe as before the head was a choice
     assert "head" not in config_record(tr.TrainConfig())
+
+
+def test_the_default_learning_rate_follows_the_first_layers_fan_in():
+    data = temporal_task(n=80, seed=3)  # history 12: 11 differenced steps
+    cfg = tr.TrainConfig()
+    mlp = tr.build_optimizer(tr.build_mincam(data, 2), cfg).param_groups[0]["lr"]
+    tcn = tr.build_optimizer(tr.build_mincam(data, 2, head="tcn"), cfg).param_groups[0]["lr"]
+    assert mlp == pytest.approx(tr.learning_rate_for(2 * 11))
+    assert tcn == pytest.approx(tr.learning_rate_for(2 * 3))
