@@ -317,6 +317,8 @@ def run_comparison(
     train = TrainingData.concat([v for k, v in data.items() if k.startswith("train-")])
     splits = {"train": train, "val": data["val-0"], "tests": tests}
     task = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
+    # before training: a split that misses part of the label space is logged at once
+    coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
     runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
     intervals = {
@@ -347,7 +349,7 @@ def run_comparison(
             seed=cfg.seed,
         ),
         "element_names": {s.name: list(s.element_names) for s in train.label_specs},
-        "coverage": study_coverage({"train": train, "val": data["val-0"], **tests}),
+        "coverage": coverage,
         "figure": str(out / "comparison.png"),
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
