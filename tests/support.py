@@ -19,6 +19,7 @@ from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
 
 REPO = Path(__file__).resolve().parents[1]
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
+CHANGE = LabelSpec(name="change", kind=LabelKind.REGRESSION, median_filter_s=0.0)
 
 
 def linear_task(
@@ -69,4 +70,33 @@ def cli_process(args: list[str], env: dict | None = None, **kw) -> subprocess.Po
         stderr=subprocess.PIPE,
         text=True,
         **kw,
+    )
+
+
+def temporal_task(
+    n: int = 400, k: int = 2, res: int = 4, seed: int = 0, *, history: int = 12, lag: int = 6
+) -> tr.TrainingData:
+    """Frames whose label is how much a scene brightness changed over the last ``lag`` frames.
+
+    The brightness ``s[t]`` is a smooth random walk lighting all of detector 0's
+    image; the REGRESSION label at frame ``t`` is ``s[t] - s[t - lag]``, which no
+    single frame shows: a head must read the history (``history > lag``).
+    """
+    rng = np.random.default_rng(seed)
+    cam = FreeformCamera(
+        mask_resolution=(res, res), layout=DetectorLayout.row(count=k, pitch_m=20 * MM)
+    )
+    s = 1.0 + 0.5 * np.sin(np.cumsum(rng.normal(0.0, 0.3, n)))
+    t = np.repeat(s[:, None, None, None], k, axis=1) * np.ones((1, 1, res, res))
+    t = (t * 2e-8 + rng.uniform(0, 2e-10, (n, k, res, res))).astype(np.float32)
+    change = np.zeros(n, np.float32)
+    change[lag:] = s[lag:] - s[:-lag]
+    return tr.TrainingData(
+        transport=t,
+        labels={"change": change[:, None]},
+        label_specs=(CHANGE,),
+        camera=cam,
+        fps=30.0,
+        history=history,
+        source={"family": "synthetic-temporal"},
     )

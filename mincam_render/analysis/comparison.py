@@ -16,8 +16,9 @@
    over seeds and test episodes (:mod:`mincam_render.analysis.statistics`), whether
    each run converged, and a verdict only where intervals separate.
 5. Keep the masks of each minimalist design's best run (lowest validation
-   loss) with a sidecar holding the figures above; write ``metrics.json`` and
-   ``comparison.png``.
+   loss) with a sidecar holding the figures above; write ``metrics.json``
+   (with the label coverage of every split and what each misses,
+   :mod:`mincam_render.analysis.coverage`) and ``comparison.png``.
 
 The main job compares two designs (:class:`Design`); a study passes more (a
 pixel-count sweep against baselines of several resolutions).
@@ -30,13 +31,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.analysis.coverage import coverage_table, study_coverage
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
@@ -112,6 +115,33 @@ def _pooling(error_name: str) -> str:
     return "rms" if error_name.endswith("RMSE") else "mean"
 
 
+def _intervals(
+    per_config: Mapping[str, list[Mapping[str, Mapping[str, Any]]]],
+    figure: Callable[[Mapping[str, Any]], float],
+    pooling: str,
+    seed: int,
+) -> dict[str, dict[str, Any]]:
+    """``{configuration: {"mean", "ci95"}}`` of ``figure(episode metrics)`` per configuration."""
+    configs = {}
+    for name, per_seed in per_config.items():
+        names = sorted(per_seed[0])
+        errors = EpisodeErrors(
+            error=np.array([[figure(s[e]) for e in names] for s in per_seed]),
+            frames=np.array([per_seed[0][e]["samples"] for e in names]),
+            pooling=pooling,
+        )
+        configs[name] = bootstrap_interval(errors, seed=seed).as_dict()
+    return configs
+
+
+def _figure(
+    episode: Mapping[str, Any], *, label: str, key: str, element: int | None = None
+) -> float:
+    """``episode["labels"][label][key]`` (its ``element``-th entry if given)."""
+    value = episode["labels"][label][key]
+    return float(value if element is None else value[element])
+
+
 def label_intervals(
     per_config: Mapping[str, list[Mapping[str, Mapping[str, Any]]]], seed: int
 ) -> dict[str, dict[str, Any]]:
@@ -126,22 +156,29 @@ def label_intervals(
         ``{label: {"metric": "rmse"|"accuracy", "unit": str, "configs": {name:
         {"mean", "ci95"}}}}``: RMSE pooled as a root mean square over test frames,
         accuracy as a mean (higher is better); intervals resample seeds and episodes.
+        A BINARY label of several elements (lighting's five lights) also has
+        ``"elements": {index: {"configs": ...}}``: each element's accuracy.
     """
     first = next(iter(per_config.values()))[0]
     some = first[next(iter(first))]["labels"]
     out: dict[str, dict[str, Any]] = {}
     for label, m in some.items():
         metric = "rmse" if "rmse" in m else "accuracy"
-        configs = {}
-        for name, per_seed in per_config.items():
-            names = sorted(per_seed[0])
-            errors = EpisodeErrors(
-                error=np.array([[s[e]["labels"][label][metric] for e in names] for s in per_seed]),
-                frames=np.array([per_seed[0][e]["samples"] for e in names]),
-                pooling="rms" if metric == "rmse" else "mean",
-            )
-            configs[name] = bootstrap_interval(errors, seed=seed).as_dict()
+        pooling = "rms" if metric == "rmse" else "mean"
+        configs = _intervals(per_config, partial(_figure, label=label, key=metric), pooling, seed)
         out[label] = {"metric": metric, "unit": m.get("unit", ""), "configs": configs}
+        if len(m.get("accuracy_per_element", ())) > 1:
+            out[label]["elements"] = {
+                str(i): {
+                    "configs": _intervals(
+                        per_config,
+                        partial(_figure, label=label, key="accuracy_per_element", element=i),
+                        "mean",
+                        seed,
+                    )
+                }
+                for i in range(len(m["accuracy_per_element"]))
+            }
     return out
 
 
@@ -178,7 +215,7 @@ def _design_runs(
             splits["val"],
             None,
             run_dir,
-            config=dataclasses.replace(cfg.train, seed=seed),
+            config=dataclasses.replace(cfg.train, seed=seed, head=design.head),
             episodes=splits["tests"],
             progress=progress,
             **design.train_kwargs(),
@@ -280,6 +317,8 @@ def run_comparison(
     train = TrainingData.concat([v for k, v in data.items() if k.startswith("train-")])
     splits = {"train": train, "val": data["val-0"], "tests": tests}
     task = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
+    # before training: a split that misses part of the label space is logged at once
+    coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
     runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
     intervals = {
@@ -309,6 +348,8 @@ def run_comparison(
             | {"trivial": [trivial]},
             seed=cfg.seed,
         ),
+        "element_names": {s.name: list(s.element_names) for s in train.label_specs},
+        "coverage": coverage,
         "figure": str(out / "comparison.png"),
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
@@ -332,17 +373,23 @@ def run_comparison(
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
     """Pixel reduction of design ``reference`` at equal error (the paper's 256x, 2048x).
 
-    The smallest baseline whose 95 % interval overlaps or lies below the
-    reference's (its lower bound at most the reference's upper bound); the
-    factor is its pixel count over the reference's. None when no baseline of
-    the study comes that close (the factor then exceeds the largest tried).
+    The smallest baseline (with the reference's head) whose 95 % interval
+    overlaps or lies below the reference's (its lower bound at most the
+    reference's upper bound); the factor is its pixel count over the
+    reference's. None when no baseline of the study comes that close (the
+    factor then exceeds the largest tried).
     """
     designs = result["designs"]
     if reference not in designs:
         raise ValueError(f"reference design {reference!r} not in the study: {sorted(designs)}")
     ref = designs[reference]
+    head = ref["model"].get("head", "mlp")  # baselines with the reference's head
     baselines = sorted(
-        (d for n, d in designs.items() if n.startswith("baseline-")),
+        (
+            d
+            for n, d in designs.items()
+            if n.startswith("baseline-") and d["model"].get("head", "mlp") == head
+        ),
         key=lambda d: d["model"]["pixels"],
     )
     match = next((d for d in baselines if d["error"]["ci95"][0] <= ref["error"]["ci95"][1]), None)
@@ -357,17 +404,69 @@ def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any
 
 
 def study_summary(result: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    """Per design: ``rmse_mean``/``rmse_ci95`` (or ``error_rate_*``), ``seeds``, ``converged``."""
+    """Per design: ``rmse_mean``/``rmse_ci95`` (or ``error_rate_*``), ``seeds``, ``converged``.
+
+    An error rate also gives ``accuracy_mean``/``accuracy_ci95`` (one minus it);
+    an RMSE in a unit also ``rmse_<unit>_mean``/``rmse_<unit>_ci95`` (traffic: mph).
+    """
     kind = "rmse" if result["error_name"].endswith("RMSE") else "error_rate"
-    return {
-        name: {
-            f"{kind}_mean": d["error"]["mean"],
-            f"{kind}_ci95": d["error"]["ci95"],
-            "seeds": len(d["error_per_seed"]),
-            "converged": d["converged"],
-        }
-        for name, d in result["designs"].items()
-    }
+    unit = _headline_unit(result) if kind == "rmse" else ""
+    out = {}
+    for name, d in result["designs"].items():
+        mean, (lo, hi) = d["error"]["mean"], d["error"]["ci95"]
+        row: dict[str, Any] = {f"{kind}_mean": mean, f"{kind}_ci95": [lo, hi]}
+        if kind == "error_rate":
+            row |= {"accuracy_mean": 1.0 - mean, "accuracy_ci95": [1.0 - hi, 1.0 - lo]}
+        elif unit:
+            row |= {f"rmse_{unit}_mean": mean, f"rmse_{unit}_ci95": [lo, hi]}
+        out[name] = row | {"seeds": len(d["error_per_seed"]), "converged": d["converged"]}
+    return out
+
+
+def _headline_unit(result: Mapping[str, Any]) -> str:
+    """The unit of the headline's labels (``""`` when unknown or unitless)."""
+    episodes: Mapping[str, Any] = result.get("trivial", {}).get("episodes") or {}
+    first: Mapping[str, Any] = next(iter(episodes.values()), {})
+    names = first.get("headline", {}).get("labels", [])
+    units = {result.get("labels", {}).get(n, {}).get("unit", "") for n in names}
+    return units.pop() if len(units) == 1 else ""
+
+
+def label_table(result: Mapping[str, Any], element_names: Mapping[str, Sequence[str]]) -> str:
+    """Markdown: every label's figure per design (mean [95 % CI]), per element where several.
+
+    Args:
+        result: :func:`run_comparison`'s output with ``labels``.
+        element_names: ``{label: names}`` for the element columns (lighting's lights);
+            missing: element indices.
+    """
+    columns: list[tuple[str, Mapping[str, Any], str]] = []
+    for label, lab in result["labels"].items():
+        what = (
+            "RMSE" + (f" ({lab['unit']})" if lab["unit"] else "")
+            if lab["metric"] == "rmse"
+            else "accuracy"
+        )
+        columns.append((f"{label} {what}", lab["configs"], label))
+        names = list(element_names.get(label, ()))
+        for i, el in (lab.get("elements") or {}).items():
+            title = names[int(i)] if int(i) < len(names) else i
+            columns.append((f"{label}: {title}", el["configs"], label))
+    lines = [
+        "## Every label (mean over seeds [95 % CI])",
+        "",
+        "| design | " + " | ".join(c[0] for c in columns) + " |",
+        "|---|" + "---|" * len(columns),
+    ]
+    for name in [*result["designs"], "trivial"]:
+        cells = []
+        for _, configs, _ in columns:
+            c = configs.get(name)
+            cells.append(
+                "" if c is None else f"{c['mean']:.3f} [{c['ci95'][0]:.3f}, {c['ci95'][1]:.3f}]"
+            )
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 def study_table(result: Mapping[str, Any]) -> str:
@@ -407,6 +506,10 @@ def study_table(result: Mapping[str, Any]) -> str:
                 else f"above {rf['largest_tried_factor']:g}x (no baseline tried matches it)"
             )
         )
+    if "labels" in result:
+        lines += ["", label_table(result, result.get("element_names", {}))]
+    if "coverage" in result:
+        lines += ["", coverage_table(result["coverage"])]
     return "\n".join(lines)
 
 

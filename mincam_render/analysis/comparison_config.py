@@ -9,7 +9,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import HeadKind, TrainConfig
 
 
 @dataclass(frozen=True)
@@ -21,11 +21,13 @@ class Design:
         grid: ``(rows, cols)`` of a conventional camera, or None.
         sensor_model: train the minimalist camera with the detector model (noise,
             saturation); False is the paper's supplement-A ablation.
+        head: the inference network (replaces the recipe's ``TrainConfig.head``).
     """
 
     pixels: int | None = None
     grid: tuple[int, int] | None = None
     sensor_model: bool = True
+    head: HeadKind = HeadKind.MLP
 
     def __post_init__(self) -> None:
         if (self.pixels is None) == (self.grid is None):
@@ -34,13 +36,15 @@ class Design:
             raise ValueError(f"pixels = {self.pixels}: need at least 1")
         if self.grid is not None:
             object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
+        object.__setattr__(self, "head", HeadKind(self.head))
 
     @property
     def name(self) -> str:
-        """``mincam-8px``, ``mincam-8px-nosensor`` or ``baseline-8x8``."""
+        """``mincam-8px``, ``mincam-8px-nosensor``, ``baseline-8x8``; ``-tcn`` for that head."""
+        suffix = "" if self.head is HeadKind.MLP else f"-{self.head.value}"
         if self.grid is not None:
-            return f"baseline-{self.grid[0]}x{self.grid[1]}"
-        return f"mincam-{self.pixels}px" + ("" if self.sensor_model else "-nosensor")
+            return f"baseline-{self.grid[0]}x{self.grid[1]}{suffix}"
+        return f"mincam-{self.pixels}px" + ("" if self.sensor_model else "-nosensor") + suffix
 
     @property
     def is_mincam(self) -> bool:
@@ -69,7 +73,8 @@ class ComparisonConfig:
         test_episodes: number of test episodes (>= 2 for an interval over episodes).
         seeds: training seeds per design (>= 2 for an interval over seeds).
         designs: the camera designs; with two, the verdict compares them.
-        train: the training recipe (its ``seed`` is replaced per training seed).
+        train: the training recipe (its ``seed`` is replaced per training seed, its
+            ``head`` by each design's).
         fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
     """
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from mincam_render.analysis.comparison_config import ComparisonConfig as C
+from mincam_render.learn.train_config import HeadKind
 
 from .errors import user_error
 from .options import FiniteFloat, apply_options, grid, grid_list, int_list, out_option
@@ -60,6 +61,18 @@ episode_options = apply_options([
                  show_default=True, help="Frame rate of the episodes (overrides the "
                  "family's): at 2 fps, 1,200 frames cover 10 minutes of activity."),
 ])  # fmt: skip
+
+
+def _head_list(value: str) -> list[HeadKind]:
+    """``"mlp,tcn"`` -> ``[HeadKind.MLP, HeadKind.TCN]`` (each once, in order)."""
+    try:
+        heads = [HeadKind(v.strip().lower()) for v in value.split(",") if v.strip()]
+    except ValueError:
+        allowed = ",".join(h.value for h in HeadKind)
+        raise click.BadParameter(f"{value!r}: allowed a list of {allowed}") from None
+    if not heads or len(set(heads)) != len(heads):
+        raise click.BadParameter(f"{value!r}: give each head once, e.g. mlp,tcn")
+    return heads
 
 
 def _family_detectors(family: str) -> int:
@@ -131,6 +144,8 @@ def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
         click.echo(f"  verdict: {result['verdict']}")
     for name, against in result["versus_trivial"].items():
         click.echo(f"  {name} against the trivial predictor: {against}")
+    for warning in result["coverage"]["warnings"]:
+        click.echo(f"  label coverage: {warning}")
 
 
 @click.command("pipeline")
@@ -199,6 +214,14 @@ def pipeline_cmd(
     help="Also train every minimalist camera without the detector model (supplement A).",
 )
 @click.option(
+    "--heads",
+    default=HeadKind.MLP.value,
+    show_default=True,
+    callback=lambda ctx, param, value: _head_list(value),
+    help="Inference networks, each trained for every design: mlp (the paper's stacked "
+    "history), tcn (temporal convolutions), or mlp,tcn for both side by side.",
+)
+@click.option(
     "--reference-pixels",
     type=click.IntRange(1),
     default=4,
@@ -210,6 +233,7 @@ def study_cmd(
     pixels: list[int] | None,
     baseline_grids: list[tuple[int, int]],
     ablation: bool,
+    heads: list[HeadKind],
     reference_pixels: int,
     **episode: Any,
 ) -> None:
@@ -225,6 +249,8 @@ def study_cmd(
     \b
     Example:
       mincam-render study --family patches --out runs/study-patches --spp 16
+      mincam-render study --family traffic --fps 30 --train-episodes 1 --pixels 1,2,4,8 \\
+          --baseline-grids 2x4,4x7,8x14 --heads mlp,tcn --out runs/study-traffic
     """
     from mincam_render.analysis.comparison import Design, study_table, summarise_study
     from mincam_render.learn.train import default_pixel_counts
@@ -234,13 +260,14 @@ def study_cmd(
         raise click.BadParameter(
             f"{reference_pixels} is not among --pixels {pixels}", param_hint="--reference-pixels"
         )
-    designs = [Design(pixels=k) for k in pixels]
-    if ablation:
-        designs += [Design(pixels=k, sensor_model=False) for k in pixels]
-    designs += [Design(grid=g) for g in baseline_grids]
-    result = summarise_study(
-        _compare(out, tuple(designs), **episode), f"mincam-{reference_pixels}px"
-    )
+    designs = []
+    for head in heads:
+        designs += [Design(pixels=k, head=head) for k in pixels]
+        if ablation:
+            designs += [Design(pixels=k, sensor_model=False, head=head) for k in pixels]
+        designs += [Design(grid=g, head=head) for g in baseline_grids]
+    reference = Design(pixels=reference_pixels, head=heads[0]).name
+    result = summarise_study(_compare(out, tuple(designs), **episode), reference)
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     (out / "study.md").write_text(study_table(result) + "\n")
     click.echo(study_table(result))

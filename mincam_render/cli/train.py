@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import HeadKind, TrainConfig
 
 from . import __name__ as _pkg
 from .errors import InputError, user_error
@@ -86,6 +86,12 @@ _RECIPE_OPTIONS = {
         "--patience",
         click.IntRange(1),
         "Evaluations without validation improvement before stopping.",
+    ),
+    "head": (
+        "--head",
+        click.Choice(HeadKind, case_sensitive=False),
+        "Inference network: mlp (the paper's stacked history) or tcn (causal temporal "
+        "convolutions over the history); prune keeps the run's.",
     ),
     "seed": ("--seed", click.IntRange(0), None),
 }
@@ -393,6 +399,7 @@ def _restored_mincam(
         detectors=run["model"]["detectors"],
         sensor_model=run["model"]["sensor_model"],
         count_loss=loss,
+        head=HeadKind(run["model"].get("head", HeadKind.MLP.value)),
     )
     model.load_state_dict(state)
     return model

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import enum
+import math
+import operator
 from dataclasses import dataclass
 
 
@@ -26,6 +28,18 @@ class LabelSpec:
         element_names: a name per element (zones, lights).
         median_filter_s: temporal median filter at evaluation (s): 2 s for counts
             and speeds, 0.5 s for states, as in the paper.
+        zero_below_true: evaluation rule of a REGRESSION label: after the median
+            filter, the prediction is set to 0 wherever the true value is below
+            this (in ``unit``); None = no such rule. The paper's traffic
+            evaluation uses 3 mph (supplement, "Traffic Monitoring").
+        headline: name of the task's headline metric this label is pooled into
+            ("" = not part of one). Labels sharing a headline must share a kind;
+            without any, the headline is the first label's figure.
+
+    Raises:
+        ValueError: a size below 1, a negative or non-finite filter length, a
+            ``zero_below_true`` on a label that is not REGRESSION or not finite,
+            or ``element_names`` of the wrong length.
     """
 
     name: str
@@ -34,3 +48,30 @@ class LabelSpec:
     unit: str = ""
     element_names: tuple[str, ...] = ()
     median_filter_s: float = 2.0
+    zero_below_true: float | None = None
+    headline: str = ""
+
+    def __post_init__(self) -> None:
+        try:
+            size = operator.index(self.size)
+        except TypeError:
+            size = 0
+        if isinstance(self.size, bool) or size < 1:
+            raise ValueError(f"LabelSpec {self.name!r}: size = {self.size!r}, allowed >= 1")
+        if self.element_names and len(self.element_names) != self.size:
+            raise ValueError(
+                f"LabelSpec {self.name!r}: {len(self.element_names)} element_names for "
+                f"size {self.size}"
+            )
+        if not (math.isfinite(self.median_filter_s) and self.median_filter_s >= 0):
+            raise ValueError(
+                f"LabelSpec {self.name!r}: median_filter_s = {self.median_filter_s!r} s, "
+                "allowed a finite value >= 0"
+            )
+        if self.zero_below_true is not None and (
+            self.kind is not LabelKind.REGRESSION or not math.isfinite(self.zero_below_true)
+        ):
+            raise ValueError(
+                f"LabelSpec {self.name!r}: zero_below_true = {self.zero_below_true!r} "
+                f"{self.unit}: allowed a finite value on a REGRESSION label, or None"
+            )

@@ -174,8 +174,12 @@ def npy_bytes(array: np.ndarray) -> bytes:
 
 
 def label_spec_to_dict(spec: LabelSpec) -> dict:
-    """JSON-ready description of a label."""
-    return {
+    """JSON-ready description of a label.
+
+    The evaluation rules ``zero_below_true`` and ``headline`` are written only
+    when set, so manifests of labels without them are unchanged.
+    """
+    out: dict[str, Any] = {
         "name": spec.name,
         "kind": spec.kind.value,
         "size": int(spec.size),
@@ -183,6 +187,11 @@ def label_spec_to_dict(spec: LabelSpec) -> dict:
         "element_names": list(spec.element_names),
         "median_filter_s": float(spec.median_filter_s),
     }
+    if spec.zero_below_true is not None:
+        out["zero_below_true"] = float(spec.zero_below_true)
+    if spec.headline:
+        out["headline"] = spec.headline
+    return out
 
 
 def label_spec_from_dict(d: dict) -> LabelSpec:
@@ -194,6 +203,8 @@ def label_spec_from_dict(d: dict) -> LabelSpec:
         unit=d.get("unit", ""),
         element_names=tuple(d.get("element_names", ())),
         median_filter_s=float(d.get("median_filter_s", 2.0)),
+        zero_below_true=d.get("zero_below_true"),
+        headline=str(d.get("headline", "")),
     )
 
 

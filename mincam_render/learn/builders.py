@@ -16,6 +16,8 @@ import torch
 
 from mincam_render.core.labels import LabelKind
 from mincam_render.learn.models import BaselineCamera, CountLoss, Head, MincamCamera, Model
+from mincam_render.learn.temporal_head import TemporalConvHead
+from mincam_render.learn.train_config import HeadKind
 from mincam_render.learn.training_data import TrainingData
 
 #: The paper's loss for COUNT labels by scene family (``TrainingData.source["family"]``):
@@ -59,15 +61,29 @@ def build_head(
     *,
     count_classes: dict[str, int] | None = None,
     seed: int = 0,
+    kind: HeadKind = HeadKind.MLP,
 ) -> Head:
-    """A :class:`Head` for ``data``'s labels (targets standardised by its statistics).
+    """A head of ``kind`` for ``data``'s labels (targets standardised by its statistics).
 
-    Its initial weights come from ``seed``; torch's global RNG (used by
-    ``nn.Linear``) is restored afterwards.
+    ``in_features`` is pixels x time steps (``max(history - 1, 1)`` steps after
+    forward differencing). Its initial weights come from ``seed``; torch's
+    global RNG (used by ``nn.Linear``) is restored afterwards.
     """
     mean, std = data.target_stats()
+    steps = max(data.history - 1, 1)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
+        if HeadKind(kind) is HeadKind.TCN:
+            if in_features % steps:
+                raise ValueError(f"in_features = {in_features} is not pixels x {steps} steps")
+            return TemporalConvHead(
+                in_features // steps,
+                steps,
+                data.label_specs,
+                target_mean=mean,
+                target_std=std,
+                count_classes=count_classes,
+            )
         return Head(
             in_features,
             data.label_specs,
@@ -75,6 +91,11 @@ def build_head(
             target_std=std,
             count_classes=count_classes,
         )
+
+
+def head_kind(head: Head) -> HeadKind:
+    """The :class:`HeadKind` of a built head."""
+    return HeadKind.TCN if isinstance(head, TemporalConvHead) else HeadKind.MLP
 
 
 def build_mincam(
@@ -85,6 +106,7 @@ def build_mincam(
     sensor_model: bool = True,
     count_loss: CountLoss | None = None,
     seed: int = 0,
+    head: HeadKind = HeadKind.MLP,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
 
@@ -92,7 +114,8 @@ def build_mincam(
     (None: every rendered detector). More pixels than rendered detectors is an
     error: reusing a detector's transport for a second mask must be asked for
     with an explicit ``detectors`` list.
-    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
+    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
+    ``head`` chooses the inference network.
     """
     k_data = data.transport.shape[1]
     if detectors is None:
@@ -109,15 +132,16 @@ def build_mincam(
     detectors = list(detectors)
     if any(not 0 <= d < k_data for d in detectors):
         raise ValueError(f"detectors {detectors} outside the data's [0, {k_data})")
-    head = build_head(
+    net = build_head(
         data,
         len(detectors) * max(data.history - 1, 1),
         count_classes=count_classes_for(data, count_loss),
         seed=seed,
+        kind=head,
     )
     return MincamCamera(
         data.camera,
-        head,
+        net,
         detectors=detectors,
         sensor_model=sensor_model,
         history=data.history,
@@ -131,20 +155,23 @@ def build_baseline(
     *,
     count_loss: CountLoss | None = None,
     seed: int = 0,
+    head: HeadKind = HeadKind.MLP,
 ) -> BaselineCamera:
     """A baseline camera of ``grid`` box pixels for ``data``'s task (exposure from ``data``).
 
-    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data).
+    COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
+    ``head`` chooses the inference network.
     """
-    head = build_head(
+    net = build_head(
         data,
         grid[0] * grid[1] * max(data.history - 1, 1),
         count_classes=count_classes_for(data, count_loss),
         seed=seed,
+        kind=head,
     )
     return BaselineCamera(
         grid,
-        head,
+        net,
         exposure_w=BaselineCamera.exposure_from(data.frames_np(0, 2048), grid),
         history=data.history,
     )
@@ -153,8 +180,9 @@ def build_baseline(
 def describe_model(model: Model) -> dict[str, Any]:
     """A JSON-ready description of a model (kind, pixels, options).
 
-    ``count_classes`` appears only for classified counts, so descriptions (and the
-    resume check against checkpoints) of regressing models are unchanged.
+    ``count_classes`` appears only for classified counts and ``head`` only for a
+    head other than the paper's MLP, so descriptions (and the resume check
+    against checkpoints) of the paper's models are unchanged.
     """
     if isinstance(model, MincamCamera):
         desc = {
@@ -174,4 +202,6 @@ def describe_model(model: Model) -> dict[str, Any]:
         }
     if model.head.count_classes:
         desc["count_classes"] = dict(model.head.count_classes)
+    if head_kind(model.head) is not HeadKind.MLP:
+        desc["head"] = head_kind(model.head).value
     return desc

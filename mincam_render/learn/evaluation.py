@@ -3,7 +3,11 @@
 Post-processing runs in time order over a split: counts are rounded (and
 clipped at 0), states thresholded at 0.5, then every label is median filtered
 over ``LabelSpec.median_filter_s`` at the data's frame rate (2 s for counts and
-speeds, 0.5 s for states). Arrays are numpy unless a docstring says torch.
+speeds, 0.5 s for states). Then the labels' evaluation rules: the paper's
+traffic evaluation sets a predicted speed to 0 where the true speed is below
+3 mph (``LabelSpec.zero_below_true``). The headline figure pools the labels the
+task names as its headline (:func:`headline`). Arrays are numpy unless a
+docstring says torch.
 """
 
 from __future__ import annotations
@@ -103,13 +107,92 @@ def evaluate(
 ) -> dict[str, Any]:
     """Test metrics after post-processing (every sample of ``data``, in time order).
 
-    Returns ``{"loss": ..., "labels": {name: {...}}, "error": primary error}`` where
-    COUNT/REGRESSION report ``rmse`` (post-processed), ``rmse_raw`` and ``mae`` in the
-    label's unit, BINARY ``accuracy`` (mean over elements) and ``accuracy_per_element``;
-    ``error`` is the first label's ``rmse`` or ``1 - accuracy``.
+    Returns :func:`metrics` of :func:`predict`'s output.
     """
     pred, lab, loss = predict(model, data, noise=noise, seed=seed)
     return metrics(pred, lab, loss, data)
+
+
+def zero_where_true_below(
+    post: Mapping[str, np.ndarray], lab: Mapping[str, np.ndarray], specs: Sequence[LabelSpec]
+) -> dict[str, np.ndarray]:
+    """The paper's traffic rule: prediction 0 where the true value < ``spec.zero_below_true``.
+
+    Applied after :func:`postprocess` (the paper filters, then zeroes); labels
+    without the rule are returned unchanged. Arrays ``{name: [time, size]}``.
+    """
+    out = dict(post)
+    for s in specs:
+        if s.zero_below_true is not None:
+            out[s.name] = np.where(lab[s.name] < s.zero_below_true, 0.0, post[s.name])
+    return out
+
+
+def _rmse(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
+
+
+def _label_metrics(
+    s: LabelSpec, pred: np.ndarray, filtered: np.ndarray, scored: np.ndarray, y: np.ndarray
+) -> dict[str, Any]:
+    """One label's figures: ``pred`` raw, ``filtered`` post-processed, ``scored`` ruled."""
+    if s.kind is LabelKind.BINARY:
+        acc = (scored == y).mean(axis=0)
+        return {"accuracy": float(acc.mean()), "accuracy_per_element": acc.tolist(), "unit": ""}
+    out: dict[str, Any] = {
+        "rmse": _rmse(scored, y),
+        "rmse_raw": _rmse(pred, y),
+        "mae": float(np.mean(np.abs(scored - y))),
+        "unit": s.unit,
+    }
+    if s.zero_below_true is not None:
+        out["zero_below_true"] = s.zero_below_true
+        out["rmse_without_zero_rule"] = _rmse(filtered, y)
+    return out
+
+
+def headline(res: Mapping[str, Any], specs: Sequence[LabelSpec]) -> dict[str, Any]:
+    """The task's headline figure from per-label metrics ``res["labels"]``.
+
+    The labels sharing a ``LabelSpec.headline`` name are pooled over every test
+    frame and every element of every such label: an RMSE as the root of the
+    mean squared error over all (frame, label element) pairs, i.e.
+    ``sqrt(sum_l size_l * rmse_l**2 / sum_l size_l)`` (for traffic, the RMSE over
+    frames and both directions: ``sqrt((rmse_left**2 + rmse_right**2) / 2)``); an
+    accuracy as the mean over those pairs. Without a headline label, the first
+    label's figure (unchanged behaviour for patches, workspace and lighting).
+
+    Returns:
+        ``{"error", "error_name", "headline": {"name", "labels", "pooling"}}``;
+        ``error`` is an RMSE or ``1 - accuracy``.
+
+    Raises:
+        ValueError: more than one headline name, or labels of one headline of
+            mixed kinds (RMSE with accuracy).
+    """
+    group = [s for s in specs if s.headline]
+    names = {s.headline for s in group}
+    if len(names) > 1:
+        raise ValueError(f"labels name several headlines {sorted(names)}: a task has one")
+    group = group or [specs[0]]
+    figures = [res["labels"][s.name] for s in group]
+    binary = ["accuracy" in m for m in figures]
+    if any(binary) and not all(binary):
+        raise ValueError(f"headline {group[0].headline!r} mixes RMSE and accuracy labels")
+    w = np.array([s.size for s in group], np.float64)
+    w /= w.sum()
+    name = group[0].headline or group[0].name
+    if binary[0]:
+        error = 1.0 - float(np.dot(w, [m["accuracy"] for m in figures]))
+        pooling, kind = "mean accuracy over frames and label elements", "error rate"
+    else:
+        error = float(np.sqrt(np.dot(w, [m["rmse"] ** 2 for m in figures])))
+        pooling, kind = "root mean square over frames and label elements", "RMSE"
+    return {
+        "error": error,
+        "error_name": f"{name} {kind}",
+        "headline": {"name": name, "labels": [s.name for s in group], "pooling": pooling},
+    }
 
 
 def metrics(
@@ -118,29 +201,24 @@ def metrics(
     loss: float,
     data: TrainingData,
 ) -> dict[str, Any]:
-    """:func:`evaluate`'s metrics of :func:`predict`'s output (time-ordered samples of ``data``)."""
+    """Metrics of :func:`predict`'s output (time-ordered samples of ``data``).
+
+    Post-processing (:func:`postprocess`), then the evaluation rules of the
+    labels (:func:`zero_where_true_below`). Returns ``{"loss", "samples",
+    "labels": {name: {...}}, "error", "error_name", "headline"}`` where
+    COUNT/REGRESSION report ``rmse`` (post-processed, rules applied),
+    ``rmse_raw`` (neither) and ``mae`` in the label's unit (with a zero rule
+    also ``zero_below_true`` and ``rmse_without_zero_rule``), BINARY
+    ``accuracy`` (mean over elements) and ``accuracy_per_element``; every label
+    its ``median_filter_frames`` (1 = not filtered at this frame rate).
+    ``error`` and ``error_name`` are the :func:`headline`.
+    """
     post = postprocess(pred, data.label_specs, data.fps)
-    n = len(next(iter(lab.values())))
-    res: dict[str, Any] = {"loss": loss, "samples": n, "labels": {}}
+    y = {s.name: np.asarray(lab[s.name], np.float64) for s in data.label_specs}
+    scored = zero_where_true_below(post, y, data.label_specs)
+    res: dict[str, Any] = {"loss": loss, "samples": len(next(iter(lab.values()))), "labels": {}}
     for s in data.label_specs:
-        y = lab[s.name].astype(np.float64)
-        if s.kind is LabelKind.BINARY:
-            acc = (post[s.name] == y).mean(axis=0)
-            res["labels"][s.name] = {
-                "accuracy": float(acc.mean()),
-                "accuracy_per_element": acc.tolist(),
-                "unit": "",
-            }
-        else:
-            raw = pred[s.name].astype(np.float64)
-            res["labels"][s.name] = {
-                "rmse": float(np.sqrt(np.mean((post[s.name] - y) ** 2))),
-                "rmse_raw": float(np.sqrt(np.mean((raw - y) ** 2))),
-                "mae": float(np.mean(np.abs(post[s.name] - y))),
-                "unit": s.unit,
-            }
-    first = data.label_specs[0]
-    m = res["labels"][first.name]
-    res["error"] = m["rmse"] if "rmse" in m else 1.0 - m["accuracy"]
-    res["error_name"] = f"{first.name} " + ("RMSE" if "rmse" in m else "error rate")
-    return res
+        m = _label_metrics(s, pred[s.name], post[s.name], scored[s.name], y[s.name])
+        m["median_filter_frames"] = median_filter_window(s.median_filter_s, data.fps)
+        res["labels"][s.name] = m
+    return res | headline(res, data.label_specs)

@@ -43,6 +43,7 @@ its own gain and noise, exactly as if its frames had been stacked.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from typing import cast
 
@@ -177,6 +178,11 @@ class Head(nn.Module):
         """Number of inputs."""
         return cast(nn.Linear, self.body[0]).in_features
 
+    @property
+    def fan_in(self) -> int:
+        """Inputs of one unit of the first layer (sets the learning rate): every input."""
+        return self.in_features
+
     def count_loss(self, name: str) -> CountLoss:
         """How label ``name`` is learned if it is a COUNT label."""
         return CountLoss.CROSS_ENTROPY if name in self.count_classes else CountLoss.MSE
@@ -191,7 +197,7 @@ class Head(nn.Module):
         BINARY labels give one logit per element; a classified count gives class
         logits ``[batch, size * classes]`` (element-major, see :meth:`class_logits`).
         """
-        y = self.out(self.body(self.input_norm(x)))
+        y = self.out(self.features(x))
         return dict(
             zip(
                 [s.name for s in self.label_specs],
@@ -199,6 +205,17 @@ class Head(nn.Module):
                 strict=True,
             )
         )
+
+    def features(self, x: torch.Tensor) -> torch.Tensor:
+        """Hidden features ``[batch, hidden]`` of inputs ``x[batch, in_features]``."""
+        return self.body(self.input_norm(x))
+
+    def input_running_mean(self) -> torch.Tensor:
+        """``[in_features]`` running mean of every input (what pruning holds a pixel at)."""
+        mean = self.input_norm.running_mean
+        if mean is None:  # BatchNorm1d tracks running statistics by default
+            raise RuntimeError("the head's input norm keeps no running mean")
+        return mean
 
     def class_logits(self, name: str, outputs: torch.Tensor) -> torch.Tensor:
         """Raw outputs of a classified count -> logits ``[batch, size, classes]``."""
@@ -452,21 +469,41 @@ class MincamCamera(CameraModel):
         return detector_voltage(power, e, noise=noise, generator=generator)
 
 
+@functools.lru_cache(maxsize=64)
+def area_weights(texels: int, pixels: int) -> torch.Tensor:
+    """``W[pixel, texel]``: the length (in texels) of texel ``j`` inside pixel ``i`` (float64).
+
+    Pixel ``i`` spans ``[i, i + 1) * texels / pixels`` of the texel axis, so each
+    texel's column sums to 1 (every texel's power goes somewhere, once) and each
+    pixel's row sums to ``texels / pixels`` (equal areas).
+    """
+    edges = torch.arange(pixels + 1, dtype=torch.float64) * (texels / pixels)
+    left = torch.arange(texels, dtype=torch.float64)
+    lo = torch.maximum(edges[:-1, None], left[None, :])
+    hi = torch.minimum(edges[1:, None], left[None, :] + 1.0)
+    return torch.clamp(hi - lo, min=0.0)
+
+
 def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
     """Box-sum ``image[..., row, col]`` into ``grid = (R, C)`` pixels (sums power; torch).
 
-    Rows/columns that do not divide evenly use adaptive pooling (overlapping
-    boxes at the seams) scaled by the mean box area, so totals hold only
-    approximately; even divisions are exact box sums.
+    Area-correct for any grid: a pixel boundary inside a texel splits that
+    texel's power by area (:func:`area_weights`), so the total power is
+    conserved and a uniform image gives equal pixels (e.g. 32 texels onto 28
+    columns). Even divisions are plain box sums.
     """
     rows, cols = image.shape[-2:]
     r, c = grid
     if not (1 <= r <= rows and 1 <= c <= cols):
         raise ValueError(f"baseline grid {r}x{c} must lie within the transport's {rows}x{cols}")
     lead = image.shape[:-2]
-    flat = image.reshape(-1, 1, rows, cols)
-    pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
-    return pooled.reshape(*lead, r, c)
+    if rows % r == 0 and cols % c == 0:
+        flat = image.reshape(-1, 1, rows, cols)
+        pooled = F.adaptive_avg_pool2d(flat, (r, c)) * (rows * cols / (r * c))
+        return pooled.reshape(*lead, r, c)
+    wr = area_weights(rows, r).to(image.dtype)
+    wc = area_weights(cols, c).to(image.dtype)
+    return wr @ image @ wc.T
 
 
 class BaselineCamera(CameraModel):

@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from mincam_render.learn.builders import build_head
+from mincam_render.learn.builders import build_head, head_kind
 from mincam_render.learn.evaluation import evaluate, even_indices, predict
 from mincam_render.learn.loop import train_model
 from mincam_render.learn.models import MincamCamera, task_loss
@@ -29,9 +29,7 @@ def _val_loss_without(model: MincamCamera, data: TrainingData, pixel: int, limit
     for a in range(0, len(idx), 1024):
         b = data.sample(torch.from_numpy(idx[a : a + 1024]))
         x = temporal_features(model.measure(**b.inputs(), noise=True, generator=g))
-        means = model.head.input_norm.running_mean
-        assert means is not None  # BatchNorm1d tracks running statistics by default
-        x[:, cols] = means[cols]
+        x[:, cols] = model.head.input_running_mean()[cols]
         loss, _ = task_loss(model.head, model.head(x), b.labels)
         total += float(loss) * len(b)
     return total / max(1, len(idx))
@@ -105,6 +103,7 @@ def _pruned_camera(
         len(keep) * max(train.history - 1, 1),
         count_classes=model.head.count_classes,
         seed=config.seed + len(keep),
+        kind=head_kind(model.head),
     )
     nxt = MincamCamera(
         model.camera,

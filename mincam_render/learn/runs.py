@@ -17,13 +17,14 @@ from typing import Any
 import numpy as np
 import torch
 
+from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
 from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import Model
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import HeadKind, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
 
@@ -82,13 +83,16 @@ def _build_model(
 ) -> Model:
     """A baseline camera of ``baseline_grid``, else a minimalist camera of ``pixels`` pixels."""
     if baseline_grid is not None:
-        return build_baseline(train, baseline_grid, count_loss=config.count_loss, seed=config.seed)
+        return build_baseline(
+            train, baseline_grid, count_loss=config.count_loss, seed=config.seed, head=config.head
+        )
     return build_mincam(
         train,
         pixels,
         sensor_model=sensor_model,
         count_loss=config.count_loss,
         seed=config.seed,
+        head=config.head,
     )
 
 
@@ -111,19 +115,10 @@ def describe_run(
             "train_samples": len(train),
             "on_the_fly": on_the_fly,
         },
-        "config": asdict(config),
+        "config": config_record(config),
         "fps": train.fps,
         "history": train.history,
-        "label_specs": [
-            {
-                "name": s.name,
-                "kind": s.kind.value,
-                "size": s.size,
-                "unit": s.unit,
-                "median_filter_s": s.median_filter_s,
-            }
-            for s in train.label_specs
-        ],
+        "label_specs": [label_spec_to_dict(s) for s in train.label_specs],
     }
 
 
@@ -148,6 +143,19 @@ def _run_metrics(
         "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
         "history": res.history,
     }
+
+
+def config_record(config: TrainConfig) -> dict[str, Any]:
+    """``run.json``'s recipe: the fields of ``config``, ``head`` only when not the paper's MLP.
+
+    Runs written before the head was a choice then resume (their recipe compares equal).
+    """
+    record = asdict(config)
+    if config.head is HeadKind.MLP:
+        del record["head"]
+    else:
+        record["head"] = config.head.value
+    return record
 
 
 def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:

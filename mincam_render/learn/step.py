@@ -19,8 +19,12 @@ from mincam_render.learn.train_config import TrainConfig
 
 
 def build_optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
-    """Adam over the head (``config.lr`` or :func:`learning_rate_for`) and the mask logits."""
-    lr = config.lr if config.lr is not None else learning_rate_for(model.head.in_features)
+    """Adam over the head (``config.lr`` or :func:`learning_rate_for`) and the mask logits.
+
+    The default rate follows the fan-in of the head's first layer: every input
+    for the paper's MLP, ``pixels x kernel`` for the temporal convolution head.
+    """
+    lr = config.lr if config.lr is not None else learning_rate_for(model.head.fan_in)
     groups = [{"params": [p for p in model.head.parameters() if p.requires_grad], "lr": lr}]
     if isinstance(model, MincamCamera) and model.logits.requires_grad:
         groups.append({"params": [model.logits], "lr": config.mask_lr})

@@ -99,7 +99,12 @@ def _sweep_jobs(
             (
                 f"mincam_{k}px",
                 functools.partial(
-                    build_mincam, train, k, count_loss=config.count_loss, seed=config.seed
+                    build_mincam,
+                    train,
+                    k,
+                    count_loss=config.count_loss,
+                    seed=config.seed,
+                    head=config.head,
                 ),
             )
         )
@@ -109,7 +114,12 @@ def _sweep_jobs(
             (
                 f"baseline_{grid[0]}x{grid[1]}",
                 functools.partial(
-                    build_baseline, train, grid, count_loss=config.count_loss, seed=config.seed
+                    build_baseline,
+                    train,
+                    grid,
+                    count_loss=config.count_loss,
+                    seed=config.seed,
+                    head=config.head,
                 ),
             )
         )

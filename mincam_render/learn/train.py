@@ -9,6 +9,8 @@ in its own module:
   :class:`GatherBuffer`);
 * :mod:`~mincam_render.learn.batches` -- batch sources of the loop
   (:class:`DatasetBatches`, :class:`RenderedBatches` on the fly);
+* :mod:`~mincam_render.learn.temporal_head` -- the temporal convolution head
+  (:class:`TemporalConvHead`, ``TrainConfig(head=HeadKind.TCN)``);
 * :mod:`~mincam_render.learn.builders` -- cameras and heads built for a task,
   the paper's count loss and learning rate, :func:`describe_model`;
 * :mod:`~mincam_render.learn.evaluation` -- :func:`predict`, the paper's
@@ -35,6 +37,7 @@ from mincam_render.learn.builders import (
     count_classes_for,
     count_loss_for,
     describe_model,
+    head_kind,
     learning_rate_for,
 )
 from mincam_render.learn.evaluation import (
@@ -66,7 +69,8 @@ from mincam_render.learn.sweep import (
     sweep_table,
     write_sweep,
 )
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.temporal_head import TemporalConvHead
+from mincam_render.learn.train_config import HeadKind, TrainConfig
 from mincam_render.learn.training_data import WIDEN_MAX_BYTES, Batch, GatherBuffer, TrainingData
 
 __all__ = [
@@ -79,9 +83,11 @@ __all__ = [
     "DatasetBatches",
     "GatherBuffer",
     "Head",
+    "HeadKind",
     "MincamCamera",
     "Model",
     "RenderedBatches",
+    "TemporalConvHead",
     "TrainConfig",
     "TrainResult",
     "TrainingData",
@@ -95,6 +101,7 @@ __all__ = [
     "describe_model",
     "evaluate",
     "greedy_prune",
+    "head_kind",
     "learning_rate_for",
     "load_run",
     "median_filter",

@@ -18,6 +18,21 @@ class CountLoss(enum.Enum):
     CROSS_ENTROPY = "cross_entropy"
 
 
+class HeadKind(enum.Enum):
+    """The inference network behind the pixels.
+
+    * ``MLP``: the paper's head: the (forward-differenced) history of every
+      pixel stacked into one vector, two hidden layers of 128 units.
+    * ``TCN``: a temporal convolution head: causal 1-D convolutions over the
+      history of the pixels (forward-differenced), then the same two hidden
+      layers on the last time step's features. For a static task (history 1)
+      it is a per-frame network like the MLP.
+    """
+
+    MLP = "mlp"
+    TCN = "tcn"
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """Training recipe (the paper's, with the choices documented in the module).
@@ -34,6 +49,7 @@ class TrainConfig:
         count_loss: how COUNT labels are learned; None = the paper's choice for the
             data's scene family (:data:`PAPER_COUNT_LOSS`). Used where this module
             builds the models (:func:`sweep`, :func:`train_run`).
+        head: the inference network (:class:`HeadKind`); the paper's is ``MLP``.
         seed: seed of batches, noise and initialisation.
         torch_threads: intra-op threads while training (restored afterwards). The
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
@@ -51,6 +67,7 @@ class TrainConfig:
     gain_range: tuple[float, float] = (0.8, 1.2)
     max_eval_samples: int = 2048
     count_loss: CountLoss | None = None
+    head: HeadKind = HeadKind.MLP
     seed: int = 0
     torch_threads: int | None = 1
 
@@ -76,6 +93,13 @@ class TrainConfig:
             except ValueError:
                 raise ValueError(
                     f"TrainConfig.count_loss = {self.count_loss!r}: allowed {allowed} or None"
+                ) from None
+        if not isinstance(self.head, HeadKind):
+            try:
+                object.__setattr__(self, "head", HeadKind(self.head))
+            except ValueError:
+                raise ValueError(
+                    f"TrainConfig.head = {self.head!r}: allowed {[h.value for h in HeadKind]}"
                 ) from None
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:

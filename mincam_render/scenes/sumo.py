@@ -34,6 +34,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from mincam_render.core.seeds import stream_seed
+
 log = logging.getLogger(__name__)
 
 #: What to tell users who lack SUMO.
@@ -280,6 +282,25 @@ def _signal_state(time_s: float, road: SumoRoad, offset_s: float) -> str:
     return "r"
 
 
+#: SUMO's ``--seed`` is a C ``int``: seeds from 0 to this are passed as they are.
+SUMO_MAX_SEED = 2**31 - 1
+
+
+def sumo_seed(seed: int) -> int:
+    """SUMO's ``--seed`` for a scene seed >= 0: the seed itself up to :data:`SUMO_MAX_SEED`.
+
+    Larger seeds (a study's episode seeds lie in [0, 2^63)) are folded into
+    range through their own stream (:func:`~mincam_render.core.seeds.stream_seed`),
+    so distinct episodes keep distinct traffic; small seeds keep the traffic
+    they always had.
+    """
+    if seed < 0:
+        raise ValueError(f"seed = {seed}: allowed an integer >= 0")
+    if seed <= SUMO_MAX_SEED:
+        return int(seed)
+    return stream_seed(int(seed), "sumo") % (SUMO_MAX_SEED + 1)
+
+
 def _sumo_args(net: Path, routes: Path, step_s: float, seed: int) -> list[str]:
     """Command line of a SUMO run on ``net`` with demand ``routes`` (step in s, seed >= 0)."""
     return [
@@ -287,7 +308,7 @@ def _sumo_args(net: Path, routes: Path, step_s: float, seed: int) -> list[str]:
         "--net-file", str(net),
         "--route-files", str(routes),
         "--step-length", f"{step_s:.3f}",
-        "--seed", str(int(seed)),
+        "--seed", str(sumo_seed(seed)),
         "--step-method.ballistic", "true",  # position advances by the mean speed of a step
         "--lanechange.duration", "2",  # lateral motion over 2 s, not a jump
         "--time-to-teleport", "-1",  # no teleports out of jams
@@ -418,7 +439,7 @@ def simulate(
 
     Args:
         road: network, demand and vehicle types.
-        seed: SUMO's random seed (``--seed``), >= 0.
+        seed: the scene's seed, >= 0 (SUMO's ``--seed`` is :func:`sumo_seed` of it).
         duration_s: recorded time after the warm-up (s).
         warmup_s: simulated time before the first recorded step (s), so the
             road is populated and signal queues are established.

@@ -20,7 +20,9 @@ Labels (from the state, never by hand): among vehicles whose footprint-centre
 (at half height) projects inside the board's field of view and lies in front
 of it, the mean speed (mph) of those *travelling* left / right as seen from the
 camera (stopped vehicles count with speed 0; 0 when there are none) and their
-counts. The paper median-filters the speeds over 2 s at evaluation.
+counts. The paper median-filters the speeds over 2 s at evaluation, then sets
+predicted speeds to 0 where the true speed is below 3 mph; the task's headline
+is the speed RMSE pooled over both directions (``LabelSpec.headline``).
 """
 
 from __future__ import annotations
@@ -56,6 +58,11 @@ log = logging.getLogger(__name__)
 
 #: 1 m/s in miles per hour (1 mile = 1609.344 m).
 MPH_PER_M_S = 3600.0 / 1609.344
+#: The paper's evaluation sets predicted speeds to 0 where the true speed is below
+#: this (supplement, "Traffic Monitoring": its detector's labels were unreliable at
+#: the edge of the view). Our labels are exact, so the rule only makes the figures
+#: comparable with the paper's; metrics also give the RMSE without it.
+ZERO_BELOW_TRUE_MPH = 3.0
 
 _SUN_KEY = "sun"
 _SKY_KEY = "sky"
@@ -649,8 +656,16 @@ class TrafficFamily(SceneFamily):
     @property
     def labels(self) -> tuple[LabelSpec, ...]:
         return (
-            LabelSpec(name="speed_left_mph", kind=LabelKind.REGRESSION, unit="mph"),
-            LabelSpec(name="speed_right_mph", kind=LabelKind.REGRESSION, unit="mph"),
+            *(
+                LabelSpec(
+                    name=f"speed_{side}_mph",
+                    kind=LabelKind.REGRESSION,
+                    unit="mph",
+                    zero_below_true=ZERO_BELOW_TRUE_MPH,
+                    headline="mean speed",
+                )
+                for side in ("left", "right")
+            ),
             LabelSpec(name="count_left", kind=LabelKind.COUNT),
             LabelSpec(name="count_right", kind=LabelKind.COUNT),
         )

@@ -10,13 +10,16 @@ from mincam_render.analysis.comparison import (
     Design,
     episode_requests,
     label_intervals,
+    label_table,
     reduction_factor,
     reference_verdicts,
+    study_summary,
     study_table,
     training_state,
 )
 from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
+from mincam_render.learn.train_config import HeadKind
 
 
 def _design(pixels, mean, lo, hi, grid=None):
@@ -64,6 +67,22 @@ def test_reduction_factor_without_a_match_says_it_exceeds_the_largest_tried():
         reduction_factor(res, "mincam-3px")
 
 
+def test_reduction_factor_compares_with_baselines_of_the_references_head():
+    res = _result()
+    tcn = _design(4, 1.0, 0.9, 1.1, (2, 2))
+    tcn["model"]["head"] = "tcn"
+    res["designs"]["baseline-2x2-tcn"] = tcn  # would match at 1x, but is another head
+    assert reduction_factor(res, "mincam-4px")["baseline"] == "4x4"
+
+
+@pytest.mark.parametrize("heads", ["lstm", "mlp,mlp", ","])
+def test_cli_study_refuses_unknown_or_repeated_heads(tmp_path, heads):
+    args = ["study", "--family", "patches", "--heads", heads, "--out", str(tmp_path / "s")]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2 and "--heads" in res.output, res.output
+    assert not (tmp_path / "s").exists()
+
+
 def test_study_table_lists_every_design_and_the_trivial_predictor():
     res = _result()
     res["reduction_factor"] = reduction_factor(res, "mincam-4px")
@@ -78,6 +97,11 @@ def test_designs_are_named_and_validated():
     assert Design(pixels=8).name == "mincam-8px"
     assert Design(pixels=8, sensor_model=False).name == "mincam-8px-nosensor"
     assert Design(grid=(4, 6)).name == "baseline-4x6"
+    assert Design(pixels=8, head="tcn").name == "mincam-8px-tcn"
+    assert Design(grid=(8, 14), head=HeadKind.TCN).name == "baseline-8x14-tcn"
+    assert Design(pixels=8, sensor_model=False, head="tcn").name == "mincam-8px-nosensor-tcn"
+    with pytest.raises(ValueError, match="lstm"):
+        Design(pixels=8, head="lstm")
     with pytest.raises(ValueError, match="exactly one"):
         Design(pixels=4, grid=(2, 2))
     with pytest.raises(ValueError, match="at least two"):
@@ -188,3 +212,66 @@ def test_comparison_figure_has_a_panel_per_label_on_axes_from_zero(tmp_path, mon
     assert axes["door"].get_ylim() == (0.0, 1.0)
     assert [t.get_text() for t in axes["door"].get_xticklabels()] == ["mincam-4px", "trivial"]
     assert min(ax.get_ylim()[0] for ax in fig.axes) == 0.0  # the error-vs-pixels panel too
+
+
+def _lighting_episode(per_light, samples):
+    acc = sum(per_light) / len(per_light)
+    return {
+        "samples": samples,
+        "labels": {"lights": {"accuracy": acc, "accuracy_per_element": per_light, "unit": ""}},
+        "error": 1.0 - acc,
+        "error_name": "lights error rate",
+        "headline": {"name": "lights", "labels": ["lights"], "pooling": "mean"},
+    }
+
+
+def _lighting_result():
+    runs = [{"a": _lighting_episode([1.0, 0.5], 100), "b": _lighting_episode([0.8, 0.7], 300)}]
+    trivial = {"a": _lighting_episode([0.5, 0.5], 100), "b": _lighting_episode([0.5, 0.5], 300)}
+    res = {
+        "task": "lighting",
+        "error_name": "lights error rate",
+        "verdict": None,
+        "designs": {"mincam-2px": _design(2, 0.2, 0.15, 0.25)},
+        "trivial": {"error": {"mean": 0.5, "ci95": [0.5, 0.5]}, "episodes": trivial},
+        "element_names": {"lights": ["lamp", "bank"]},
+    }
+    res["labels"] = label_intervals({"mincam-2px": runs, "trivial": [trivial]}, seed=0)
+    return res
+
+
+def test_per_light_accuracy_is_pooled_per_element_and_tabled_with_light_names():
+    res = _lighting_result()
+    elements = res["labels"]["lights"]["elements"]
+    assert elements["0"]["configs"]["mincam-2px"]["mean"] == pytest.approx(0.25 * 1.0 + 0.75 * 0.8)
+    assert elements["1"]["configs"]["mincam-2px"]["mean"] == pytest.approx(0.25 * 0.5 + 0.75 * 0.7)
+    table = label_table(res, res["element_names"])
+    assert "| design | lights accuracy | lights: lamp | lights: bank |" in table
+    assert "| trivial | 0.500 [0.500, 0.500] | 0.500 [0.500, 0.500] |" in table
+
+
+def test_study_summary_gives_accuracy_for_error_rates_and_rmse_in_the_headline_unit():
+    acc = study_summary(_lighting_result())["mincam-2px"]
+    assert acc["accuracy_mean"] == pytest.approx(0.8)
+    assert acc["accuracy_ci95"] == pytest.approx([0.75, 0.85])
+    res = _result()
+    res["error_name"] = "mean speed RMSE"
+    res["labels"] = {"speed_left_mph": {"unit": "mph"}, "speed_right_mph": {"unit": "mph"}}
+    both = ["speed_left_mph", "speed_right_mph"]
+    res["trivial"]["episodes"] = {"t": {"headline": {"labels": both}}}
+    row = study_summary(res)["mincam-4px"]
+    assert row["rmse_mph_mean"] == row["rmse_mean"] == 1.0 and row["rmse_mph_ci95"] == [0.9, 1.1]
+
+
+def test_lighting_figure_shows_accuracy_against_pixels_and_a_panel_per_light(tmp_path, monkeypatch):
+    import matplotlib.figure
+
+    seen = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: seen.append(fig))
+    plot_comparison(_lighting_result(), tmp_path / "c.png")
+    (fig,) = seen
+    top = fig.axes[0]
+    assert top.get_ylabel() == "test lights accuracy"
+    assert top.lines[0].get_ydata()[0] == pytest.approx(0.5)  # the trivial line at 1 - 0.5
+    titles = [ax.get_title() for ax in fig.axes[1:]]
+    assert titles == ["lights", "lights: lamp", "lights: bank"]

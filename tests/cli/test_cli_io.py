@@ -185,9 +185,9 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
-        (("train",), [], TrainConfig, 7),
-        (("sweep",), [], TrainConfig, 7),
-        (("prune",), ["--run", "r"], TrainConfig, 7),
+        (("train",), [], TrainConfig, 8),
+        (("sweep",), [], TrainConfig, 8),
+        (("prune",), ["--run", "r"], TrainConfig, 8),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
         (("pipeline",), [], ComparisonConfig, 9),
         (("study",), ["--out", "o"], ComparisonConfig, 9),

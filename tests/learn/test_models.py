@@ -186,6 +186,36 @@ def test_box_pixels_preserve_power(rng, grid):
     torch.testing.assert_close(box_pixels(img, (2, 2))[:, 0, 0], img[:, :4, :4].sum((1, 2)))
 
 
+@pytest.mark.parametrize("grid", [(16, 28), (2, 4), (8, 14), (3, 5), (32, 32)])
+def test_box_pixels_are_area_correct_on_grids_that_do_not_divide(rng, grid):
+    # a 32x32 transport image (the traffic camera's masks) onto the paper's aspect
+    img = torch.from_numpy(rng.uniform(0, 1, (3, 32, 32)))
+    b = box_pixels(img, grid)
+    assert b.shape == (3, *grid)
+    torch.testing.assert_close(b.sum((1, 2)), img.sum((1, 2)), rtol=1e-12, atol=0)
+    # uniform radiance: every pixel gets its area's share, 32*32/(R*C) texels' worth
+    flat = box_pixels(torch.full((32, 32), 2.0, dtype=torch.float64), grid)
+    expected = torch.full(grid, 2.0 * 1024 / (grid[0] * grid[1]), dtype=torch.float64)
+    torch.testing.assert_close(flat, expected)
+
+
+def test_box_pixels_split_a_texel_by_area():
+    # 3 texels onto 2 columns: the middle texel is cut in half
+    img = torch.tensor([[1.0, 10.0, 100.0]], dtype=torch.float64)
+    expected = torch.tensor([[6.0, 105.0]], dtype=torch.float64)
+    torch.testing.assert_close(box_pixels(img, (1, 2)), expected)
+
+
+def test_baseline_of_a_non_square_grid_reads_every_pixel(rng):
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (4, 2, 32, 32)).astype(np.float32))
+    grid = (16, 28)
+    model = BaselineCamera(grid, Head(16 * 28, SPECS), exposure_w=1e-7)
+    v = model.measure(t, noise=False)
+    assert v.shape == (4, 1, 16 * 28)
+    ref = box_pixels(t.double().mean(dim=1), grid).reshape(4, -1) / 1e-7
+    torch.testing.assert_close(v[:, 0].double(), ref, rtol=1e-5, atol=1e-7)
+
+
 def test_baseline_shapes_and_8bit_range(rng):
     t = torch.from_numpy(rng.uniform(0, 1e-9, (6, 3, 8, 8)).astype(np.float32))
     exposure = BaselineCamera.exposure_from(t.numpy(), (2, 2))

@@ -13,7 +13,7 @@ from mincam_render import DetectorLayout, FreeformCamera, render_transport
 from mincam_render.core.config import ConfigError, parse
 from mincam_render.core.photometry import irradiance_to_lux
 from mincam_render.scenes import load_family, sky
-from mincam_render.scenes.sumo import MissingTrafficExtraError
+from mincam_render.scenes.sumo import SUMO_MAX_SEED, MissingTrafficExtraError, sumo_seed
 from mincam_render.scenes.traffic import (
     MPH_PER_M_S,
     PARKED_POINT_M,
@@ -197,6 +197,18 @@ def test_same_seed_same_sequence(family):
     assert len(other.trajectories.center_m) != len(
         family.trajectories.center_m
     ) or not np.array_equal(other.trajectories.center_m, family.trajectories.center_m)
+
+
+def test_a_study_episode_seed_beyond_sumos_int_runs_and_differs_from_others():
+    """Episode seeds lie in [0, 2^63); SUMO's --seed is a C int (it refused them)."""
+    pytest.importorskip("libsumo", reason="needs Eclipse SUMO")
+    assert [sumo_seed(s) for s in (0, 3, SUMO_MAX_SEED)] == [0, 3, SUMO_MAX_SEED]
+    big = [sumo_seed(s) for s in (2**62 + 1, 2**62 + 2, 7517301341756292723)]
+    assert all(0 <= s <= SUMO_MAX_SEED for s in big) and len(set(big)) == 3
+    with pytest.raises(ValueError, match="seed"):
+        sumo_seed(-1)
+    fam = load_family("traffic", seed=7517301341756292723, num_frames=30, overrides=SMALL)
+    assert len(fam.trajectories.center_m) > 0
 
 
 def test_sequence_has_traffic_both_ways(family):
