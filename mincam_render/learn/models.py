@@ -44,6 +44,7 @@ its own gain and noise, exactly as if its frames had been stacked.
 from __future__ import annotations
 
 import functools
+import logging
 from collections.abc import Mapping, Sequence
 from typing import cast
 
@@ -63,6 +64,8 @@ from mincam_render.optics.maskplane import (
     transmittance,
 )
 from mincam_render.optics.sensor import detector_voltage
+
+log = logging.getLogger(__name__)
 
 #: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
 INIT_TRANSMITTANCE = (0.08, 0.12)
@@ -103,6 +106,29 @@ def temporal_features(features: torch.Tensor) -> torch.Tensor:
     if features.shape[1] > 1:
         features = features[:, 1:] - features[:, :-1]
     return features.reshape(features.shape[0], -1)
+
+
+#: A training label spread below this (in the label's unit) counts as constant.
+CONSTANT_LABEL_STD = 1e-6
+
+
+def _label_scale(name: str, std: object) -> np.ndarray:
+    """Standardising scale of a regression/count label: its training spread, 1 where constant.
+
+    A label that never changes in training (no traffic in one direction) has no
+    spread to divide by; flooring it at a tiny value made every validation error
+    of that label explode (losses of order 1e14), so it is learned in its own
+    unit instead, with a warning.
+    """
+    arr = np.asarray(std, np.float32)
+    flat = arr < CONSTANT_LABEL_STD
+    if np.any(flat):
+        log.warning(
+            "label %r is constant in the training split (spread %s): learned unscaled",
+            name,
+            np.array2string(arr, precision=3),
+        )
+    return np.where(flat, np.float32(1.0), arr)
 
 
 class Head(nn.Module):
@@ -168,8 +194,7 @@ class Head(nn.Module):
                 if target_mean is not None and s.name in target_mean:
                     mean = np.asarray(target_mean[s.name], np.float32).reshape(s.size)
                 if target_std is not None and s.name in target_std:
-                    std = np.maximum(np.asarray(target_std[s.name], np.float32), 1e-6)
-                    std = std.reshape(s.size)
+                    std = _label_scale(s.name, target_std[s.name]).reshape(s.size)
             self.register_buffer(f"mean_{s.name}", torch.from_numpy(mean))
             self.register_buffer(f"std_{s.name}", torch.from_numpy(std))
 

@@ -292,3 +292,29 @@ def test_windows_of_shared_frames_equal_stacked_windows(variant, rng, camera_kin
         torch.testing.assert_close(a, b, rtol=1e-6, atol=1e-9)
     with pytest.raises(ValueError, match="with windows"):
         model.measure(stacked, windows=windows)
+
+
+def test_a_label_constant_in_training_is_learned_unscaled(caplog):
+    # no left traffic in training: a zero spread must not blow the loss up
+    with caplog.at_level("WARNING"):
+        head = Head(
+            2,
+            SPECS,
+            target_mean={"count": np.array([2.0]), "speed": np.array([0.0, 20.0])},
+            target_std={"count": np.array([2.0]), "speed": np.array([0.0, 5.0])},
+        )
+    assert "'speed' is constant in the training split" in caplog.text
+    out = {
+        "count": torch.tensor([[0.0]]),
+        "zones": torch.tensor([[0.0, 0.0, 0.0]]),
+        "speed": torch.tensor([[3.0, 0.0]]),
+    }
+    lab = {
+        "count": torch.tensor([[2.0]]),
+        "zones": torch.tensor([[0.0, 0.0, 0.0]]),
+        "speed": torch.tensor([[0.0, 20.0]]),
+    }
+    _, parts = task_loss(head, out, lab)
+    # left: (3 - 0)^2 in mph (scale 1); right: standardised 0 -> mean of [9, 0]
+    assert parts["speed"].item() == pytest.approx(4.5, rel=1e-6)
+    assert head.predict(out)["speed"][0, 0].item() == pytest.approx(3.0)
