@@ -67,7 +67,7 @@ from mincam_render.data.render_job import (
 )
 from mincam_render.render import backend
 from mincam_render.render import mitsuba_scene as ms
-from mincam_render.render.differential import BackgroundSettings, difference_camera
+from mincam_render.render.differential import BackgroundSettings
 from mincam_render.render.sun_patch import sun_sampled_apart
 from mincam_render.render.transport import render_transport
 from mincam_render.scenes.registry import FAMILY_NAMES
@@ -117,7 +117,7 @@ def time_backgrounds(job: dict, frames: int) -> tuple[dict | None, dict]:
     # C alone, to split the total
     scene = family.build_scene()
     family.set_background(scene, keys.index(needed[0]), settings.interval_s)
-    cam = difference_camera(_render_camera(job)[1], settings.shared_difference)
+    cam = _render_camera(job)[1].rendered_camera(settings.shared_difference)
     for _ in range(2):  # the first call may compile (a new scene object)
         t0 = time.perf_counter()
         render_transport(scene, cam, spp=r["spp"], seed=1, max_depth=r["max_depth"] or None)
@@ -175,7 +175,7 @@ def bench_family(name: str, frames: int, repeats: int, dataset_frames: int, work
     # the rays a frame traces: differential frames render X only, from the board
     # centre when the difference is shared
     background = r.get("background") or {}
-    traced_cam = difference_camera(render_cam, bool(background.get("shared_difference")))
+    traced_cam = render_cam.rendered_camera(bool(background.get("shared_difference")))
     rendered_texels = traced_cam.num_detectors * rows * cols
     detector_samples = camera.num_detectors * rows * cols * r["spp"]
 

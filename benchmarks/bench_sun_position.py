@@ -1,21 +1,18 @@
-r"""Our sun position and clear-sky irradiance (scenes/sky.py) against pvlib, before replacing them.
+r"""The hand-written sun position and clear-sky irradiance of format v3 against pvlib (v4).
 
-For several latitudes, days of the year and local solar hours: the sun's
-elevation and azimuth of :func:`mincam_render.scenes.sky.solar_direction`
-(declination by Cooper's formula, hour angle from the solar hour, no refraction)
-against pvlib's NREL SPA (``pvlib.solarposition.get_solarposition``, apparent
-elevation with refraction) at the UTC time whose apparent solar time at
-longitude 0 equals that solar hour (``equation_of_time_spencer71``); and the
-clear-sky global horizontal irradiance of
-:func:`~mincam_render.scenes.sky.direct_normal_irradiance` /
-:func:`~mincam_render.scenes.sky.diffuse_horizontal_irradiance` (visible band,
-divided by ``VISIBLE_FRACTION_OF_SUNLIGHT`` to compare with broadband) against
-pvlib's simplified Solis model (aerosol optical depth 0.1 at 700 nm, 1 cm of
-precipitable water) at the same SPA elevation. Writes
-``benchmarks/results/sun_position.json``: per-case values and the max and RMS
-differences.
-
-Needs pvlib (not a dependency of the package): ``.venv/bin/pip install pvlib``.
+Until dataset format 3, ``scenes/sky.py`` computed the sun's position by
+Cooper's declination and the hour angle of the solar hour (no refraction) and
+the clear-sky irradiance by Meinel's attenuation with the Kasten-Young air mass;
+those formulas are kept here (``v3_*``) as the "before". Since format 4 the
+package uses pvlib: :func:`mincam_render.scenes.sky.solar_position_deg` (NREL
+SPA, apparent elevation with refraction, at the UTC time whose apparent solar
+time at longitude 0 equals the solar hour) and
+:func:`~mincam_render.scenes.sky.clear_sky_irradiance` (simplified Solis,
+aerosol optical depth 0.1 at 700 nm, 1 cm of precipitable water). For several
+latitudes, days of the year and local solar hours this compares the two
+(visible-band irradiance divided by ``VISIBLE_FRACTION_OF_SUNLIGHT`` to compare
+broadband). Writes ``benchmarks/results/sun_position.json``: per-case values and
+the max and RMS differences.
 
 Usage:
     python benchmarks/bench_sun_position.py
@@ -35,9 +32,8 @@ from bench_patches_paper import machine  # noqa: E402
 
 from mincam_render.core.photometry import VISIBLE_FRACTION_OF_SUNLIGHT  # noqa: E402
 from mincam_render.scenes.sky import (  # noqa: E402
-    diffuse_horizontal_irradiance,
-    direct_normal_irradiance,
-    solar_direction,
+    clear_sky_irradiance,
+    solar_position_deg,
 )
 
 LATITUDES_DEG = (0.0, 40.8, 60.0, -33.9)
@@ -46,30 +42,41 @@ SOLAR_HOURS = (7.0, 9.0, 12.0, 15.0, 17.0)
 YEAR = 2026
 
 
+def v3_sun(day: int, hour: float, lat: float) -> tuple[float, float, float]:
+    """Elevation, azimuth (deg from north, clockwise) and up component, format v3."""
+    decl = math.radians(23.44) * math.sin(2.0 * math.pi * (284 + day) / 365.0)
+    hour_angle = math.radians(15.0 * (hour - 12.0))
+    la = math.radians(lat)
+    up = math.sin(la) * math.sin(decl) + math.cos(la) * math.cos(decl) * math.cos(hour_angle)
+    east = -math.cos(decl) * math.sin(hour_angle)
+    north = math.cos(la) * math.sin(decl) - math.sin(la) * math.cos(decl) * math.cos(hour_angle)
+    norm = math.sqrt(east**2 + north**2 + up**2)
+    return math.degrees(math.asin(up / norm)), math.degrees(math.atan2(east, north)) % 360.0, up
+
+
+def v3_clear_sky_ghi(elevation_rad: float) -> float:
+    """Broadband clear-sky GHI (W/m^2) of format v3: Meinel DNI, 15 % diffuse + 2 W/m^2."""
+    zenith_deg = 90.0 - math.degrees(elevation_rad)
+    if zenith_deg >= 90.0:
+        return 0.0
+    am = 1.0 / (math.cos(math.radians(zenith_deg)) + 0.50572 * (96.07995 - zenith_deg) ** -1.6364)
+    dni = 1361.0 * VISIBLE_FRACTION_OF_SUNLIGHT * 0.7 ** (am**0.678)
+    direct_h = dni * math.sin(elevation_rad)
+    return (direct_h + 0.15 * direct_h + 2.0) / VISIBLE_FRACTION_OF_SUNLIGHT
+
+
 def ours(day: int, hour: float, lat: float) -> tuple[float, float, float]:
-    """Elevation (deg), azimuth (deg from north, clockwise), broadband GHI (W/m^2)."""
-    east, north, up = solar_direction(day, hour, lat)
-    elevation = math.degrees(math.asin(up))
-    azimuth = math.degrees(math.atan2(east, north)) % 360.0
-    el = math.radians(elevation)
-    ghi_visible = direct_normal_irradiance(el, 0.0) * max(0.0, up)
-    ghi_visible += diffuse_horizontal_irradiance(el, 0.0) if up > 0 else 0.0
-    return elevation, azimuth, ghi_visible / VISIBLE_FRACTION_OF_SUNLIGHT
+    """Format v3: elevation (deg), azimuth (deg from north, clockwise), broadband GHI (W/m^2)."""
+    elevation, azimuth, up = v3_sun(day, hour, lat)
+    return elevation, azimuth, v3_clear_sky_ghi(math.radians(elevation)) if up > 0 else 0.0
 
 
 def pvlib_case(day: int, hour: float, lat: float) -> tuple[float, float, float]:
-    """The same quantities from pvlib (SPA position, simplified Solis clear sky)."""
-    import pandas as pd
-    import pvlib
-
-    eot_min = float(pvlib.solarposition.equation_of_time_spencer71(day))
-    utc_hour = hour - eot_min / 60.0
-    t = pd.Timestamp(f"{YEAR}-01-01", tz="UTC") + pd.Timedelta(days=day - 1, hours=utc_hour)
-    pos = pvlib.solarposition.get_solarposition(pd.DatetimeIndex([t]), lat, 0.0)
-    elevation = float(pos["apparent_elevation"].iloc[0])
-    azimuth = float(pos["azimuth"].iloc[0])
-    sky = pvlib.clearsky.simplified_solis(max(elevation, 0.0))
-    ghi = float(np.nan_to_num(sky["ghi"])) if elevation > 0 else 0.0
+    """Format v4, the package's pvlib functions (SPA position, simplified Solis clear sky)."""
+    elevation, azimuth = solar_position_deg(day, hour, lat)
+    el = math.radians(elevation)
+    dni, dhi = clear_sky_irradiance(el)
+    ghi = (dni * math.sin(el) + dhi) / VISIBLE_FRACTION_OF_SUNLIGHT if elevation > 0 else 0.0
     return elevation, azimuth, ghi
 
 

@@ -58,6 +58,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.core.seeds import stream_seed
+
 if TYPE_CHECKING:
     import os
     from pathlib import Path
@@ -312,8 +314,12 @@ class _Bench:
             scene=scene,
             frames=sorted({int(round(x)) for x in frames}),
             scene_depth=scene_max_depth(scene),
-            masks_random=random_masks(cfg.num_masks, shape, lo_hi, cfg.seed),
-            masks_trained=smooth_masks(cfg.num_masks, shape, lo_hi, cfg.seed + 1),
+            masks_random=random_masks(
+                cfg.num_masks, shape, lo_hi, stream_seed(cfg.seed, "fidelity_bench/random_masks")
+            ),
+            masks_trained=smooth_masks(
+                cfg.num_masks, shape, lo_hi, stream_seed(cfg.seed, "fidelity_bench/smooth_masks")
+            ),
             base_settings={
                 "spp": cfg.base_spp,
                 "mask_res": camera.mask_resolution[0],
@@ -352,7 +358,7 @@ class _Bench:
         out = []
         for i in self.frames[:1] if warm_up else self.frames:
             self.family.set_frame(self.scene, i)
-            seed = (self.cfg.seed * 1_000_003 + i * 7919 + seed_offset * 104_729) % 2**63
+            seed = stream_seed(self.cfg.seed, f"fidelity_bench/{seed_offset}", i)
             # the family's estimator (sun-patch sampling indoors), as datasets render
             t = self.family.render_transport(
                 self.scene, cam, spp=spp, seed=seed, max_depth=max_depth
@@ -516,7 +522,7 @@ def _bench_auto(bench: _Bench, family_name: str) -> dict[str, Any]:
     )
     shared = settings["shared_render"]
     auto_render = bench.setting(
-        bench.camera.centre_camera() if shared else bench.camera,
+        bench.camera.rendered_camera(shared),
         spp=settings["spp"],
         max_depth=depth,
         shared=shared,

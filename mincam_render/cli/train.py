@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train_config import HeadKind, TrainConfig
 
 from . import __name__ as _pkg
@@ -244,7 +245,7 @@ def _fresh_batches(
 
     if family is None:
         raise InputError("--on-the-fly needs --family (frames are rendered)")
-    seed = config.seed + 1
+    seed = stream_seed(config.seed, "train/on-the-fly")
     n = config.max_steps * config.batch_size * train.history
     return RenderedBatches(
         load_family(family, seed=seed, num_frames=n), config.batch_size, spp=spp, seed=seed

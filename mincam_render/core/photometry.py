@@ -15,8 +15,7 @@ import math
 #: 400-700 nm radiation). Daylight and white LEDs are both ~250-320 lm/W_vis;
 #: we use one value so lumens and lux convert consistently.
 WHITE_LIGHT_EFFICACY_LM_PER_W = 300.0
-#: Solar constant (W/m^2), and the fraction of it in the 400-700 nm band.
-SOLAR_CONSTANT_W_M2 = 1361.0
+#: Fraction of broadband sunlight (W/m^2) in the 400-700 nm band.
 VISIBLE_FRACTION_OF_SUNLIGHT = 0.43
 
 

@@ -56,7 +56,12 @@ FORMAT_NAME = "mincam_render.transport_dataset"
 #: 3: the same files; renders stratify each texel's samples and, for families with
 #: a window, sample the sun apart with sunlit-patch connections
 #: (mincam_render.render.sun_patch): a version-2 dataset resumed now would mix estimators.
-FORMAT_VERSION = 3
+#: 4: the same files; every derived seed comes from ``core.seeds.stream_seed``, daylight
+#: from pvlib (SPA sun, simplified Solis clear sky), people's paths from networkx, and
+#: the workspace, lighting and traffic cameras have the S9119-01 directional response:
+#: the same request renders other bytes, so a version-3 dataset is read and trained on
+#: but not resumed (docs/format_v4.md).
+FORMAT_VERSION = 4
 MANIFEST_NAME = "manifest.json"
 #: Key of the manifest's own checksum (sha256 of the canonical JSON of the rest).
 MANIFEST_CHECKSUM_KEY = "manifest_sha256"

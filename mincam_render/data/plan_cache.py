@@ -33,8 +33,10 @@ log = logging.getLogger(__name__)
 
 #: Seed of the planning episode (whatever the dataset's seed).
 PLAN_SEED = 0
-#: Version of the planner's decisions; part of every plan's key.
-PLANNER_VERSION = 3
+#: Version of the planner's decisions; part of every plan's key. 4: probe seeds
+#: from ``core.seeds.stream_seed``, pvlib daylight, paths by networkx and the
+#: S9119-01 diode of the families' cameras (dataset format 4).
+PLANNER_VERSION = 4
 #: Plans shipped with the repository.
 SHIPPED_DIR = SCENES_DIR / "plans"
 #: Environment variable naming the user's plan cache directory.

@@ -9,10 +9,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 import torch
 
-from mincam_render.learn.training_data import Batch, GatherBuffer, TrainingData
+from mincam_render.learn.training_data import Batch, GatherBuffer, TrainingData, render_frames
 from mincam_render.optics.camera import FreeformCamera
 
 
@@ -99,23 +98,15 @@ class RenderedBatches:
                 f"on-the-fly training ran out of frames: the family has {self.family.num_frames}; "
                 "create it with more num_frames"
             )
-        ts: list[np.ndarray] = []
-        labs: dict[str, list] = {s.name: [] for s in self.family.labels}
-        for b in range(self.batch_size):
-            for h in range(self.history):
-                i = self.next_frame + b * self.history + h
-                lab = self.family.set_frame(self._scene, i)
-                ts.append(  # the family's estimator, as its datasets are rendered
-                    self.family.render_transport(
-                        self._scene, self.camera, spp=self.spp, seed=self.seed * 1_000_003 + i
-                    )
-                )
-            for s in self.family.labels:
-                labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
+        frames = range(self.next_frame, self.next_frame + n_needed)
+        t, labels = render_frames(
+            self.family, self._scene, self.camera, frames, spp=self.spp, seed=self.seed
+        )
+        # labels of the last frame of each window
+        labels = {k: v[self.history - 1 :: self.history] for k, v in labels.items()}
         self.next_frame += n_needed
-        t = torch.from_numpy(np.stack(ts).astype(np.float32))
-        t = t.reshape(self.batch_size, self.history, *t.shape[1:])
-        return Batch(t, None, {k: torch.from_numpy(np.stack(v)) for k, v in labs.items()})
+        tt = torch.from_numpy(t).reshape(self.batch_size, self.history, *t.shape[1:])
+        return Batch(tt, None, {k: torch.from_numpy(v) for k, v in labels.items()})
 
     def state(self) -> dict[str, Any]:
         """Resumable state: the next frame to render."""

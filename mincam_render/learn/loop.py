@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.checkpoint import TrainingState, restore_checkpoint, save_checkpoint
 from mincam_render.learn.evaluation import predict
@@ -159,7 +160,7 @@ def _start(
     """The run's optimiser, generator and batches, resumed from its checkpoint if there is one."""
     source = DatasetBatches(train, config.batch_size) if isinstance(train, TrainingData) else train
     opt = build_optimizer(model, config)
-    gen = torch.Generator().manual_seed(config.seed + 7919)
+    gen = torch.Generator().manual_seed(stream_seed(config.seed, "train/batches"))
     ckpt_path = out / "checkpoint.pt" if out is not None else None
     if ckpt_path is not None and resume and ckpt_path.is_file():
         state = restore_checkpoint(ckpt_path, model, opt, gen, source)

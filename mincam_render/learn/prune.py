@@ -7,6 +7,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.builders import build_head, head_kind
 from mincam_render.learn.evaluation import evaluate, even_indices, predict
 from mincam_render.learn.loop import train_model
@@ -102,7 +103,7 @@ def _pruned_camera(
         train,
         len(keep) * max(train.history - 1, 1),
         count_classes=model.head.count_classes,
-        seed=config.seed + len(keep),
+        seed=stream_seed(config.seed, "prune/head", len(keep)),
         kind=head_kind(model.head),
     )
     nxt = MincamCamera(

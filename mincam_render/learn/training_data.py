@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from mincam_render.core.labels import LabelSpec
+from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
 
 #: Float16 transport is widened once to float32 in RAM up to this size (bytes of
@@ -176,21 +177,13 @@ class TrainingData:
         progress: bool = False,
     ) -> TrainingData:
         """Render ``frames`` of a scene family in memory (no dataset on disk)."""
-        from tqdm import tqdm
-
         cam = camera or family.camera()
-        scene = family.build_scene()
-        ts: list[np.ndarray] = []
-        labs: dict[str, list] = {s.name: [] for s in family.labels}
-        for i in tqdm(list(frames), desc=f"render {family.name}", disable=not progress):
-            lab = family.set_frame(scene, int(i))
-            # the family's estimator, as its datasets are rendered
-            ts.append(family.render_transport(scene, cam, spp=spp, seed=seed * 1_000_003 + int(i)))
-            for s in family.labels:
-                labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
+        transport, labels = render_frames(
+            family, family.build_scene(), cam, frames, spp=spp, seed=seed, progress=progress
+        )
         return cls(
-            transport=np.stack(ts).astype(np.float32),
-            labels={k: np.stack(v) for k, v in labs.items()},
+            transport=transport,
+            labels=labels,
             label_specs=tuple(family.labels),
             camera=cam,
             fps=float(family.fps),
@@ -382,3 +375,45 @@ class Batch:
     def __len__(self) -> int:
         """Number of samples."""
         return len(self.transport) if self.windows is None else len(self.windows)
+
+
+def render_frames(
+    family: Any,
+    scene: Any,
+    camera: FreeformCamera,
+    frames: Sequence[int],
+    *,
+    spp: int,
+    seed: int,
+    progress: bool = False,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Transport and labels of ``frames`` of a family, rendered in memory.
+
+    Frame ``i`` is rendered with the family's estimator (as its datasets are)
+    at seed ``stream_seed(seed, "render/in-memory", i)``.
+
+    Args:
+        family: the scene family.
+        scene: its built Mitsuba scene.
+        camera: the camera rendered.
+        frames: frame indices, in order.
+        spp: samples per texel.
+        seed: root seed of the render streams, >= 0.
+        progress: show a progress bar.
+
+    Returns:
+        ``(T[frame, detector, row, col]`` float32 (W), ``{label: values[frame, size]}``
+        float32).
+    """
+    from tqdm import tqdm
+
+    ts: list[np.ndarray] = []
+    labs: dict[str, list] = {s.name: [] for s in family.labels}
+    for i in tqdm(list(frames), desc=f"render {family.name}", disable=not progress):
+        lab = family.set_frame(scene, int(i))
+        seed_i = stream_seed(seed, "render/in-memory", int(i))
+        ts.append(family.render_transport(scene, camera, spp=spp, seed=seed_i))
+        for s in family.labels:
+            labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
+    transport = np.stack(ts).astype(np.float32)
+    return transport, {k: np.stack(v) for k, v in labs.items()}

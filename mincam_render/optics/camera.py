@@ -348,6 +348,10 @@ class FreeformCamera:
         """This camera with one detector at the board centre (shared renders)."""
         return replace(self, layout=DetectorLayout(positions_m=((0.0, 0.0),)))
 
+    def rendered_camera(self, shared: bool) -> FreeformCamera:
+        """The camera a render uses: :meth:`centre_camera` if ``shared``, else this one."""
+        return self.centre_camera() if shared else self
+
     @property
     def detector_centers_m(self) -> np.ndarray:
         """World positions of detector centres, shape (K, 3), metres."""

@@ -182,11 +182,6 @@ class Background:
         return total
 
 
-def difference_camera(camera: FreeformCamera, shared: bool) -> FreeformCamera:
-    """The camera ``X`` and ``C`` are rendered with: one detector at the board centre if shared."""
-    return camera.centre_camera() if shared else camera
-
-
 def background_seed(dataset_seed: int, key: str) -> int:
     """Seed ``s`` of a background: a hash of the dataset seed and the key, in [0, 2^63)."""
     digest = hashlib.sha256(f"{int(dataset_seed)}|{key}".encode()).digest()
@@ -231,7 +226,7 @@ def render_same_seed(
     family.set_background(scene, index, settings.interval_s)
     same_seed = family.render_transport(
         scene,
-        difference_camera(camera, settings.shared_difference),
+        camera.rendered_camera(settings.shared_difference),
         spp=spp,
         seed=seed,
         max_depth=max_depth,
@@ -337,7 +332,7 @@ def render_frame(
     labels = family.set_frame_in_window(scene, index, background.interval_s)
     x = family.render_transport(
         scene,
-        difference_camera(camera, background.shared_difference),
+        camera.rendered_camera(background.shared_difference),
         spp=spp,
         seed=background.seed,
         max_depth=max_depth,

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.render.backend import use_variant
 
 if TYPE_CHECKING:
@@ -40,6 +41,11 @@ class IrradianceEstimate:
         return self.stderr_w_m2 / self.mean_w_m2 if self.mean_w_m2 > 0 else 0.0
 
 
+def _batch_seed(seed: int, batch: int) -> int:
+    """Mitsuba's 32-bit sampler seed of batch ``batch`` under root ``seed``."""
+    return stream_seed(seed, "irradiance/batch", batch) % 2**32
+
+
 def measure_irradiance(
     scene: mi.Scene,
     meter: dict[str, Any],
@@ -55,7 +61,8 @@ def measure_irradiance(
         meter: a meter dict from :func:`mitsuba_scene.irradiance_meter`.
         spp: samples per batch (>= 1).
         batches: independent renders (>= 2, for the standard error).
-        seed: sampler seed of the first batch; batch ``b`` uses ``seed + b``.
+        seed: root seed; batch ``b`` renders with ``stream_seed(seed, "irradiance/batch", b)``
+            folded to Mitsuba's 32-bit sampler seed.
 
     Raises:
         ValueError: ``spp < 1`` or ``batches < 2``.
@@ -73,7 +80,7 @@ def measure_irradiance(
         [
             float(
                 np.asarray(
-                    mi.render(scene, sensor=sensor, spp=spp, seed=mi.UInt32(seed + b))
+                    mi.render(scene, sensor=sensor, spp=spp, seed=mi.UInt32(_batch_seed(seed, b)))
                 ).ravel()[0]
             )
             for b in range(batches)

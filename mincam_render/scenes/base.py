@@ -19,6 +19,7 @@ import numpy as np
 from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelSpec
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.optics.photodiode import DiodeResponse
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -30,6 +31,10 @@ class CameraMount:
     up: tuple[float, float, float] = spec((0.0, 0.0, 1.0), doc="world direction of mask row 0")
     detectors: int = spec(8, range=(1, 64), doc="number of freeform pixels")
     mask_resolution: int = spec(32, range=(1, 512), doc="texels per mask side")
+    diode_response: DiodeResponse = spec(
+        DiodeResponse.S9119_01,
+        doc="angular response of the photodiodes: S9119-01 (the prototype's) or cosine",
+    )
 
     def __post_init__(self) -> None:
         self.camera()  # validates the pose; FreeformCamera's ValueError names the field
@@ -48,6 +53,7 @@ class CameraMount:
             position=self.position,
             look_at=self.look_at,
             up=self.up,
+            directional_response=self.diode_response.directional_response(),
         )
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.scenes.base import CameraMount, SceneFamily, View
 
@@ -60,7 +61,11 @@ class PatchesConfig:
     )
     camera: CameraMount = spec(
         default_factory=lambda: CameraMount(
-            position=(0.0, 0.0, 0.0), look_at=(0.0, 0.0, 1.0), up=(0.0, 1.0, 0.0), detectors=4
+            position=(0.0, 0.0, 0.0),
+            look_at=(0.0, 0.0, 1.0),
+            up=(0.0, 1.0, 0.0),
+            detectors=4,
+            diode_response=DiodeResponse.COSINE,  # the paper's toy: an ideal diode
         ),
         doc="camera pose; the plane is placed in front of it",
     )

@@ -5,12 +5,15 @@ Used by outdoor scenes and by windows of indoor scenes, in place of Mitsuba's
 World frame: +z up, +y north, +x east. Irradiances and radiances are in the
 detector's visible band (see :mod:`mincam_render.core.photometry`).
 
-- Sun position: declination and hour angle (Cooper's formula), local solar time.
-- Direct normal irradiance: Meinel's clear-sky attenuation ``0.7^(AM^0.678)``
-  with the Kasten-Young air mass, scaled by ``1 - overcast``.
+- Sun position: pvlib's NREL SPA (apparent elevation, with refraction) at the
+  scene's latitude, longitude 0, for the scene's local apparent solar time
+  (:func:`solar_position_deg` states the time convention).
+- Clear-sky irradiance: pvlib's simplified Solis model (direct normal and
+  diffuse horizontal); clouds scale the direct sun by ``1 - overcast`` and blend
+  the diffuse part toward an overcast sky.
 - Sky radiance: the CIE standard general sky luminance distribution (ISO
-  15469), clear type 12 blended with overcast type 1 by ``overcast``, scaled so
-  its diffuse horizontal irradiance follows an empirical clear/overcast split.
+  15469), clear type 12 blended with overcast type 1 by ``overcast``, scaled to
+  the diffuse horizontal irradiance.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mincam_render.core.config import spec
-from mincam_render.core.photometry import SOLAR_CONSTANT_W_M2, VISIBLE_FRACTION_OF_SUNLIGHT
+from mincam_render.core.photometry import VISIBLE_FRACTION_OF_SUNLIGHT
 
 if TYPE_CHECKING:
     import mitsuba as mi
@@ -30,8 +33,7 @@ if TYPE_CHECKING:
 # CIE standard general sky parameters (a, b, c, d, e), ISO 15469:2004.
 _CIE_CLEAR = (-1.0, -0.32, 10.0, -3.0, 0.45)  # type 12, clear, low turbidity
 _CIE_OVERCAST = (4.0, -0.70, 0.0, -1.0, 0.0)  # type 1, overcast, steep gradation
-#: Diffuse / direct-horizontal ratio of a clear sky, and overcast global / clear global.
-_CLEAR_DIFFUSE_RATIO = 0.15
+#: Global horizontal irradiance of an overcast sky / that of the clear sky.
 _OVERCAST_TRANSMISSION = 0.3
 
 
@@ -52,46 +54,88 @@ class DaylightConfig:
     )
 
 
+#: Year of the calendar the scenes' ``day_of_year`` falls in (not a leap year).
+SOLAR_YEAR = 2026
+#: Clear-sky atmosphere of pvlib's simplified Solis model: aerosol optical depth
+#: at 700 nm, precipitable water (cm), pressure (Pa); a clean sea-level site.
+SOLIS_AOD700 = 0.1
+SOLIS_PRECIPITABLE_WATER_CM = 1.0
+SOLIS_PRESSURE_PA = 101325.0
+#: Diffuse horizontal irradiance (visible, W/m^2) of the sky at sunset, fading to 0
+#: at 6 degrees below the horizon (civil twilight).
+TWILIGHT_DIFFUSE_W_M2 = 2.0
+
+
+def solar_position_deg(
+    day_of_year: int, solar_hour: float, latitude_deg: float
+) -> tuple[float, float]:
+    """Apparent elevation and azimuth (deg, azimuth clockwise from north) of the sun.
+
+    pvlib's NREL SPA (``pvlib.solarposition.get_solarposition``) at latitude
+    ``latitude_deg``, longitude 0, sea level, with atmospheric refraction at
+    standard pressure and 12 C. ``solar_hour`` is local apparent solar time
+    (12 = the sun on the meridian): at longitude 0 it is the UTC time plus the
+    equation of time (Spencer 1971) of ``day_of_year`` in :data:`SOLAR_YEAR`, so
+    the instant passed to SPA is ``UTC = solar_hour - EoT``.
+    """
+    import pandas as pd
+    import pvlib
+
+    eot_min = float(pvlib.solarposition.equation_of_time_spencer71(day_of_year))
+    start = pd.Timestamp(f"{SOLAR_YEAR}-01-01", tz="UTC")
+    when = start + pd.Timedelta(days=day_of_year - 1, hours=solar_hour - eot_min / 60.0)
+    pos = pvlib.solarposition.get_solarposition(pd.DatetimeIndex([when]), latitude_deg, 0.0)
+    return float(pos["apparent_elevation"].iloc[0]), float(pos["azimuth"].iloc[0])
+
+
 def solar_direction(day_of_year: int, solar_hour: float, latitude_deg: float) -> np.ndarray:
-    """Unit vector toward the sun (+z up, +y north, +x east); z < 0 at night."""
-    decl = math.radians(23.44) * math.sin(2.0 * math.pi * (284 + day_of_year) / 365.0)
-    hour_angle = math.radians(15.0 * (solar_hour - 12.0))
-    lat = math.radians(latitude_deg)
-    # east, north, up components of the sun direction
-    up = math.sin(lat) * math.sin(decl) + math.cos(lat) * math.cos(decl) * math.cos(hour_angle)
-    east = -math.cos(decl) * math.sin(hour_angle)
-    north = math.cos(lat) * math.sin(decl) - math.sin(lat) * math.cos(decl) * math.cos(hour_angle)
-    v = np.array([east, north, up])
-    return v / np.linalg.norm(v)
+    """Unit vector toward the sun (+z up, +y north, +x east); z < 0 at night.
+
+    From :func:`solar_position_deg` (pvlib SPA, apparent elevation).
+    """
+    elevation_deg, azimuth_deg = solar_position_deg(day_of_year, solar_hour, latitude_deg)
+    el, az = math.radians(elevation_deg), math.radians(azimuth_deg)
+    return np.array([math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el)])
 
 
-def air_mass(elevation_rad: float) -> float:
-    """Kasten-Young relative optical air mass (infinite below the horizon)."""
-    zenith_deg = 90.0 - math.degrees(elevation_rad)
-    if zenith_deg >= 90.0:
-        return math.inf
-    return 1.0 / (math.cos(math.radians(zenith_deg)) + 0.50572 * (96.07995 - zenith_deg) ** -1.6364)
+def clear_sky_irradiance(elevation_rad: float) -> tuple[float, float]:
+    """Visible-band clear-sky ``(direct normal, diffuse horizontal)`` irradiance (W/m^2).
 
+    pvlib's simplified Solis model (``pvlib.clearsky.simplified_solis``, the
+    ``SOLIS_*`` atmosphere) at apparent elevation ``elevation_rad`` (rad), times
+    ``VISIBLE_FRACTION_OF_SUNLIGHT``; the diffuse part is at least the twilight
+    level at the horizon. Below the horizon: no direct sun, and the diffuse
+    twilight fading to 0 at -6 degrees.
+    """
+    import pvlib
 
-def direct_normal_irradiance(elevation_rad: float, overcast: float) -> float:
-    """Visible-band direct normal irradiance of the sun (W/m^2)."""
-    am = air_mass(elevation_rad)
-    if not math.isfinite(am):
-        return 0.0
-    return (
-        SOLAR_CONSTANT_W_M2 * VISIBLE_FRACTION_OF_SUNLIGHT * 0.7 ** (am**0.678) * (1.0 - overcast)
+    el_deg = math.degrees(elevation_rad)
+    if el_deg <= 0.0:
+        return 0.0, max(0.0, 1.0 + el_deg / 6.0) * TWILIGHT_DIFFUSE_W_M2
+    sky = pvlib.clearsky.simplified_solis(
+        el_deg,
+        aod700=SOLIS_AOD700,
+        precipitable_water=SOLIS_PRECIPITABLE_WATER_CM,
+        pressure=SOLIS_PRESSURE_PA,
     )
+    dni = float(np.nan_to_num(sky["dni"])) * VISIBLE_FRACTION_OF_SUNLIGHT
+    dhi = float(np.nan_to_num(sky["dhi"])) * VISIBLE_FRACTION_OF_SUNLIGHT
+    return dni, max(dhi, TWILIGHT_DIFFUSE_W_M2)
 
 
-def diffuse_horizontal_irradiance(elevation_rad: float, overcast: float) -> float:
-    """Visible-band diffuse irradiance of the sky on a horizontal plane (W/m^2)."""
+def sun_and_sky_irradiance(elevation_rad: float, overcast: float) -> tuple[float, float]:
+    """Visible-band ``(direct normal, diffuse horizontal)`` irradiance (W/m^2) under clouds.
+
+    The clear sky of :func:`clear_sky_irradiance` with the direct sun scaled by
+    ``1 - overcast`` and the diffuse part blended toward an overcast sky that
+    passes ``_OVERCAST_TRANSMISSION`` of the clear global horizontal irradiance.
+    """
+    dni, dhi = clear_sky_irradiance(elevation_rad)
     if elevation_rad <= 0:
-        # civil twilight: fade over 6 degrees below the horizon
-        return max(0.0, 1.0 + math.degrees(elevation_rad) / 6.0) * 2.0
-    clear_direct_h = direct_normal_irradiance(elevation_rad, 0.0) * math.sin(elevation_rad)
-    clear_diffuse = _CLEAR_DIFFUSE_RATIO * clear_direct_h + 2.0
-    overcast_diffuse = _OVERCAST_TRANSMISSION * (clear_direct_h + clear_diffuse)
-    return (1.0 - overcast) * clear_diffuse + overcast * overcast_diffuse
+        return 0.0, dhi
+    clear_global = dni * math.sin(elevation_rad) + dhi
+    diffuse = (1.0 - overcast) * dhi + overcast * _OVERCAST_TRANSMISSION * clear_global
+    return dni * (1.0 - overcast), diffuse
 
 
 def _cie_relative(
@@ -168,8 +212,7 @@ def daylight(
     c, s = math.cos(rot), math.sin(rot)
     sun = np.array([c * sun[0] - s * sun[1], s * sun[0] + c * sun[1], sun[2]])
     elevation = math.asin(max(-1.0, min(1.0, sun[2])))
-    dni = direct_normal_irradiance(elevation, config.overcast)
-    dhi = diffuse_horizontal_irradiance(elevation, config.overcast)
+    dni, dhi = sun_and_sky_irradiance(elevation, config.overcast)
 
     dirs = envmap_directions(height, width)
     zenith = np.arccos(np.clip(dirs[..., 2], -1.0, 1.0))

@@ -41,6 +41,7 @@ import numpy as np
 from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import irradiance_to_lux
+from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.scenes import sky
@@ -641,7 +642,7 @@ class TrafficFamily(SceneFamily):
         weights = weights / weights.sum()
         for i, t in enumerate(self.trajectories.vehicle_type):
             vt = config.vehicle_types[int(t)]
-            rng = np.random.default_rng([seed, 7, i])
+            rng = np.random.default_rng(stream_seed(seed, "traffic/vehicle", i))
             jitter = 1.0 + rng.uniform(-0.04, 0.04, size=3)
             self._dims[i] = np.array([vt.length_m, vt.width_m, vt.height_m]) * jitter
             self._albedo[i] = config.body_albedos[int(rng.choice(len(weights), p=weights))]
@@ -883,7 +884,7 @@ class TrafficFamily(SceneFamily):
             v, f = _boxes(walks)
             out["sidewalks"] = ms.mesh("sidewalks", v, f, reflectance=c.sidewalk_albedo)
         if c.buildings:
-            rng = np.random.default_rng([self.seed, 3])
+            rng = np.random.default_rng(stream_seed(self.seed, "traffic/buildings"))
             for side, sgn in (("south", -1.0), ("north", 1.0)):
                 x, k = -hx, 0
                 while x < hx:

@@ -109,15 +109,15 @@ def test_cross_entropy_count_trains_resumes_and_prunes(variant, tmp_path):
     train, val, test = linear_task(260, k=3).split((0.7, 0.15, 0.15))
     ce = CountLoss.CROSS_ENTROPY
     # at 150 steps this cross-entropy run learns for some seeds and stays at the
-    # constant prediction for others (1/3 of 12 seeds collapse, with the Dr.Jit
-    # step as with the torch step); seed 3 is one that learns
-    model = tr.build_mincam(train, 3, count_loss=ce, seed=3)
+    # constant prediction for others (3 of seeds 0-11 collapse to 1.00 x the std
+    # with the batch stream of core.seeds); seed 7 is one that learns (0.59 x)
+    model = tr.build_mincam(train, 3, count_loss=ce, seed=7)
     before = tr.predict(model, val)[2]
-    tr.train_model(model, train, val, replace_cfg(seed=3), out_dir=tmp_path)
+    tr.train_model(model, train, val, replace_cfg(seed=7), out_dir=tmp_path)
     after = tr.predict(model, val)[2]
     err = tr.evaluate(model, test)["error"]
     assert after < before  # cross-entropy over ~15 classes falls slower than MSE
-    assert err < 0.7 * float(test.labels["count"].std())  # measured 0.54 x
+    assert err < 0.7 * float(test.labels["count"].std())  # measured 0.59 x
     with pytest.raises(ValueError, match="written for"):  # an MSE head is another model
         tr.train_model(
             tr.build_mincam(train, 3, count_loss=CountLoss.MSE), train, val, CFG, out_dir=tmp_path
@@ -247,6 +247,11 @@ def test_rendered_patches_and_on_the_fly(variant):
         model, stream, val, tr.TrainConfig(max_steps=2, batch_size=4, eval_every=1)
     )
     assert res.steps == 2 and stream.next_frame == 20
+    # one render path: a batch is the in-memory render of the same frames and seed
+    batch = tr.RenderedBatches(fam, 4, spp=1, seed=5, start_frame=12).next(torch.Generator())
+    same = tr.TrainingData.render(fam, range(12, 16), spp=1, seed=5)
+    np.testing.assert_array_equal(batch.transport[:, 0].numpy(), same.transport)
+    np.testing.assert_array_equal(batch.labels["count"].numpy(), same.labels["count"])
 
 
 @pytest.fixture(scope="module")

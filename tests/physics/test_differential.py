@@ -169,15 +169,13 @@ def test_interpolated_background_tracks_the_drifting_daylight(variant):
 @pytest.mark.parametrize("shared", [False, True])
 def test_frame_is_background_plus_difference_per_detector_or_shared(variant, shared):
     """T_k = B_k + X - C, with X and C from the board centre for every k when shared."""
-    from mincam_render.render.differential import difference_camera
-
     fam = load_family("workspace", seed=0, num_frames=600)
     index = int(np.flatnonzero(fam.track.active.sum(axis=1) >= 2)[0])
     scene, cam = fam.build_scene(), _small(fam.camera())
     settings = BackgroundSettings(interval_s=60.0, spp=8, max_depth=3, shared_difference=shared)
     bg = render_background(fam, scene, cam, index, settings, dataset_seed=0, spp=2, max_depth=3)
     t, _ = render_frame(fam, scene, cam, index, bg, spp=2, max_depth=3)
-    diff_cam = difference_camera(cam, shared)
+    diff_cam = cam.rendered_camera(shared)
     assert all(c.shape == (cam.num_detectors, 8, 8) for c in bg.components.values())
     assert bg.same_seed_w.shape == (diff_cam.num_detectors, 8, 8)
     fam.set_frame_in_window(scene, index, settings.interval_s)

@@ -9,13 +9,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mincam_render.core.seeds import stream_seed
+
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
     from mincam_render.scenes.base import SceneFamily
-
-
-def _frame_seed(seed: int, index: int, stream: int) -> int:
-    return (seed * 1_000_003 + index * 7919 + stream * 104_729) % 2**63
 
 
 def simulate_volts(
@@ -51,7 +49,9 @@ def simulate_volts(
         if i not in cache:
             family.set_frame(scene, i)
             # the family's estimator, as its datasets are rendered (sun-patch sampling)
-            t = family.render_transport(scene, camera, spp=spp, seed=_frame_seed(seed, i, stream))
+            t = family.render_transport(
+                scene, camera, spp=spp, seed=stream_seed(seed, f"sim2real/{stream}", int(i))
+            )
             cache[i] = np.einsum("prc,prc->p", t[pixels].astype(np.float64), masks)
         power[n] = cache[i]
     volts = detector_voltage(torch.from_numpy(power), camera.electronics, noise=False).numpy()

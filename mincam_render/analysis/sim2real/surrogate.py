@@ -29,6 +29,7 @@ from mincam_render.analysis.sim2real.recording import (
     write_recording,
 )
 from mincam_render.analysis.sim2real.simulation import simulate_volts
+from mincam_render.core.seeds import stream_seed
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import DetectorElectronics, FreeformCamera
@@ -303,7 +304,7 @@ def make_surrogate(
     family = load_family(family_name, seed=seed, num_frames=num_frames)
     camera, design = _design(family, mask_resolution, seed)
     pixels = np.arange(camera.num_detectors)
-    rng = np.random.default_rng(seed + 0x5EED)
+    rng = np.random.default_rng(stream_seed(seed, "sim2real/surrogate"))
     printed, mounted = _mount_masks(design, camera, pert, rng)
     real_cam, board = _misplace_board(camera, pert, rng)
     frame_index = np.arange(num_frames)
@@ -390,7 +391,9 @@ def _design(
     if mask_resolution is not None:
         camera = dataclasses.replace(camera, mask_resolution=(mask_resolution, mask_resolution))
     shape = (camera.num_detectors, *camera.mask_resolution)
-    return camera, smooth_masks(1, shape, camera.transmittance_range, seed + 17)[0]
+    return camera, smooth_masks(
+        1, shape, camera.transmittance_range, stream_seed(seed, "sim2real/design")
+    )[0]
 
 
 def _expected_fit(

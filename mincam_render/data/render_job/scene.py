@@ -29,7 +29,5 @@ def _load_family(job: dict) -> SceneFamily:
 def _render_camera(job: dict) -> tuple[FreeformCamera, FreeformCamera]:
     """``(camera of the dataset, camera actually rendered)``; they differ for shared renders."""
     camera = ds.camera_from_dict(job["camera"])
-    if job["render"]["shared_render"]:
-        # one representative detector at the board centre, replicated to all K
-        return camera, camera.centre_camera()
-    return camera, camera
+    # shared: one representative detector at the board centre, replicated to all K
+    return camera, camera.rendered_camera(bool(job["render"]["shared_render"]))

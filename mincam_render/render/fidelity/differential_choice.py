@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mincam_render.core.seeds import frame_seed
+from mincam_render.core.seeds import frame_seed, stream_seed
 from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
 from mincam_render.render.fidelity.constants import (
     BACKGROUND_PILOT_SPP,
@@ -111,15 +111,13 @@ def _pilots(
 
     Adds ``record["shared_difference"]`` where there is more than one detector.
     """
-    from mincam_render.render.differential import difference_camera
-
     # X - C is traced as deep as the backgrounds: truncating it would bias the
     # movers' change and save little, since a path costs about the same at any
     # depth once Russian roulette and escapes through the window set in
     # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12).
     x_ref = _frames_in_window(p, render_cam, deep)
     shared_difference = _shared_difference(p, render_cam, deep, x_ref, record)
-    diff_cam = difference_camera(render_cam, True) if shared_difference else render_cam
+    diff_cam = render_cam.rendered_camera(shared_difference)
     x1, c1 = _difference_pair(p, deep, 1, DIFFERENCE_PILOT_SPP, diff_cam)
     x2, c2 = _difference_pair(p, deep, 2, DIFFERENCE_PILOT_SPP, diff_cam)
     # [N, 1, R, C] differences broadcast over the detectors when shared; the
@@ -167,8 +165,6 @@ def _shared_difference(
     Its parallax error ``p`` is measured against the noise of independent seeds:
     ``e_shared^2 ~ noise^2 + p^2`` and ``e_noise^2 ~ noise^2`` (same spp).
     """
-    from mincam_render.render.differential import difference_camera
-
     k = render_cam.num_detectors
     if k > 1 and p.request.shared_difference is not None:
         record["shared_difference"] = {"value": p.request.shared_difference, "source": "flag"}
@@ -177,7 +173,7 @@ def _shared_difference(
         return False
     xa, ca = _difference_pair(p, deep, 3, SHARED_DIFFERENCE_SPP, render_cam)
     xb, cb = _difference_pair(p, deep, 4, SHARED_DIFFERENCE_SPP, render_cam)
-    centre_cam = difference_camera(render_cam, True)
+    centre_cam = render_cam.centre_camera()
     xc, cc = _difference_pair(p, deep, 5, SHARED_DIFFERENCE_SPP, centre_cam)
     e_shared = p.error(xa + (xc - cc) - (xa - ca), xa)["rms"]
     e_noise = p.error(xa + (xb - cb) - (xa - ca), xa)["rms"]
@@ -238,7 +234,11 @@ def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -
             p.family.set_background(p.scene, i, p.request.background_interval_s, at=at)
             renders.append(
                 p.family.render_transport(
-                    p.scene, camera, spp=spp, seed=frame_seed(i, 17), max_depth=depth
+                    p.scene,
+                    camera,
+                    spp=spp,
+                    seed=stream_seed(p.request.seed, "fidelity/interpolation", i),
+                    max_depth=depth,
                 )
             )
         ends.append(0.5 * (renders[0] + renders[2]))

@@ -170,7 +170,7 @@ def decide_fidelity(
     decisions: dict[str, Any] = {}
     stages.start("parallax: one shared render vs one per detector")
     decisions["shared_render"] = shared = decide_shared_render(p, auto)
-    draft = Draft(shared["value"], camera.centre_camera() if shared["value"] else camera)
+    draft = Draft(shared["value"], camera.rendered_camera(shared["value"]))
     stages.start("path depth vs a deep reference")
     decisions["max_depth"] = decide_max_depth(p, auto, draft.render_cam, draft.shared)
     draft.max_depth = decisions["max_depth"]["value"]

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from mincam_render.core.seeds import frame_seed
+from mincam_render.core.seeds import frame_seed, stream_seed
 from mincam_render.render.fidelity.constants import DEPTH_GRID, PROBE_FRAMES
 from mincam_render.render.precision import measurement_relative_error
 
@@ -124,8 +124,14 @@ class Probes:
         self._renders: dict[tuple, np.ndarray] = {}
 
     def seed(self, index: int, offset: int) -> int:
-        """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own)."""
-        return (frame_seed(self.request.seed, index) + 7919 * offset) % 2**63
+        """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own).
+
+        Stream 0 is the seed the dataset renders frame ``index`` with; any other
+        stream is ``stream_seed(seed, "fidelity/probe/<offset>", index)``.
+        """
+        if offset == 0:
+            return frame_seed(self.request.seed, index)
+        return stream_seed(self.request.seed, f"fidelity/probe/{offset}", index)
 
     def render(
         self,

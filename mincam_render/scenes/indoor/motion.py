@@ -6,10 +6,10 @@ frame's state is a pure function of its index.
 
 from __future__ import annotations
 
-import heapq
 import math
 from dataclasses import dataclass, field
 
+import networkx as nx
 import numpy as np
 
 from mincam_render.scenes.indoor.config import FurnitureConfig, PeopleConfig, RoomConfig
@@ -25,6 +25,27 @@ TURN_RATE_RAD_S = 5.0
 SIT_RATE_PER_S = 1.0
 GAIT_RATE_PER_S = 3.0
 CYCLE_LENGTH_PER_HEIGHT = 0.8
+
+
+def walk_graph(free: np.ndarray) -> nx.Graph:
+    """8-connected graph of the free cells ``free[iy, ix]`` (bool).
+
+    Nodes are cells ``(iy, ix)``; edges join free neighbours, ``weight`` 1 cell
+    between side neighbours and sqrt(2) cells between diagonal ones.
+    """
+    graph = nx.Graph()
+    graph.add_nodes_from(map(tuple, np.argwhere(free).tolist()))
+    ny, nx_ = free.shape
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        x0, x1 = max(0, -dx), nx_ - max(0, dx)
+        both = free[: ny - dy, x0:x1] & free[dy:, x0 + dx : x1 + dx]
+        iy, ix = np.nonzero(both)
+        ix = ix + x0
+        w = math.hypot(dy, dx)
+        graph.add_weighted_edges_from(
+            ((y, x), (y + dy, x + dx), w) for y, x in zip(iy.tolist(), ix.tolist(), strict=True)
+        )
+    return graph
 
 
 class NavGrid:
@@ -48,6 +69,7 @@ class NavGrid:
         self.free_cells = np.argwhere(free)  # (iy, ix)
         if len(self.free_cells) == 0:
             raise ValueError("furniture: no free floor left to walk on")
+        self.graph = walk_graph(free)
 
     def cell(self, p: np.ndarray) -> tuple[int, int]:
         ix = min(max(int(p[0] / NAV_CELL_M), 0), self.nx - 1)
@@ -62,7 +84,8 @@ class NavGrid:
         if self.free[iy, ix]:
             return iy, ix
         d = np.abs(self.free_cells - [iy, ix]).sum(axis=1)
-        return tuple(self.free_cells[int(np.argmin(d))])
+        iy, ix = self.free_cells[int(np.argmin(d))]
+        return int(iy), int(ix)
 
     def random_point(self, rng: np.random.Generator) -> np.ndarray:
         c = self.free_cells[rng.integers(len(self.free_cells))]
@@ -76,35 +99,39 @@ class NavGrid:
                 return False
         return True
 
+    def cell_path(self, start: tuple[int, int], goal: tuple[int, int]) -> list[tuple[int, int]]:
+        """Shortest 8-connected path of free cells ``(iy, ix)`` from ``start`` to ``goal``.
+
+        ``networkx.astar_path`` on :func:`walk_graph` with the Euclidean distance
+        (cells) as heuristic, so the path is a shortest one.
+
+        Raises:
+            ValueError: no free path joins the two cells (furniture closes the way).
+        """
+        try:
+            return nx.astar_path(
+                self.graph, start, goal, heuristic=lambda u, v: math.dist(u, v), weight="weight"
+            )
+        except nx.NetworkXNoPath:
+            a, b = (np.round(self.point(c), 2).tolist() for c in (start, goal))
+            raise ValueError(
+                f"furniture: no walkable path from {a} m to {b} m (the free floor at "
+                f"{NAV_CLEARANCE_M} m clearance is split); move the furniture apart"
+            ) from None
+
     def plan(self, a: np.ndarray, b: np.ndarray) -> list[np.ndarray]:
-        """Waypoints from ``a`` to ``b`` (x, y), around obstacles (A*, 8-connected, smoothed)."""
+        """Waypoints from ``a`` to ``b`` (x, y, m) around obstacles.
+
+        :meth:`cell_path` between the free cells nearest ``a`` and ``b``,
+        string-pulled: a cell is kept only where the straight line to a later one
+        would cross an obstacle.
+
+        Raises:
+            ValueError: no free path joins the two cells.
+        """
         a, b = np.asarray(a, float), np.asarray(b, float)
-        s, g = self.nearest_free(a), self.nearest_free(b)
-        came: dict[tuple[int, int], tuple[int, int] | None] = {s: None}
-        cost = {s: 0.0}
-        heap = [(0.0, s)]
-        while heap:
-            _, cur = heapq.heappop(heap)
-            if cur == g:
-                break
-            for dy in (-1, 0, 1):
-                for dx in (-1, 0, 1):
-                    if dx == 0 and dy == 0:
-                        continue
-                    nb = (cur[0] + dy, cur[1] + dx)
-                    if not (0 <= nb[0] < self.ny and 0 <= nb[1] < self.nx) or not self.free[nb]:
-                        continue
-                    nc = cost[cur] + (1.4142 if dx and dy else 1.0)
-                    if nc < cost.get(nb, math.inf):
-                        cost[nb] = nc
-                        came[nb] = cur
-                        heapq.heappush(heap, (nc + math.hypot(nb[0] - g[0], nb[1] - g[1]), nb))
-        cells = []
-        at: tuple[int, int] | None = g if g in came else s
-        while at is not None:
-            cells.append(at)
-            at = came[at]
-        pts = [self.point(c) for c in reversed(cells)]
+        cells = self.cell_path(self.nearest_free(a), self.nearest_free(b))
+        pts = [self.point(c) for c in cells]
         # string-pulling: keep a point only when the straight line would cross an obstacle
         smooth = [pts[0]]
         i = 0
