@@ -65,7 +65,8 @@ ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0
 def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
     """``{"train-i" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
 
-    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; every
+    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``, its
+    description the family's with ``cfg.overrides`` and ``cfg.fps``; every
     episode has :data:`SHARDS_PER_EPISODE` shards whatever the worker count (so
     a run resumes with any ``--workers``, and 1, 2 or 4 workers share them evenly).
     """
@@ -81,7 +82,7 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
                 family=cfg.family,
                 num_frames=frames,
                 seed=stream_seed(cfg.seed, f"episode/{role}", i),
-                overrides={"fps": cfg.fps},
+                overrides={**cfg.overrides, "fps": cfg.fps},
                 splits=ROLE_SPLITS[role],
                 shard_frames=-(-frames // SHARDS_PER_EPISODE),
                 **dict(cfg.fidelity),

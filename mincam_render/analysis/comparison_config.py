@@ -62,6 +62,9 @@ class ComparisonConfig:
         family: scene family name or description (.toml).
         seed: root seed of every episode and training seed.
         fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        overrides: values replacing the scene description's in every episode (nested
+            as in the TOML, e.g. ``{"camera": {"detectors": 16}}``; ``fps`` is its own
+            field).
         train_episodes: training episodes (static tasks; a temporal task trains on one).
         train_frames: frames of each training episode.
         val_frames: frames of the validation episode.
@@ -76,6 +79,7 @@ class ComparisonConfig:
     family: str = "workspace"
     seed: int = 0
     fps: float = 2.0
+    overrides: Mapping[str, Any] = field(default_factory=dict)
     train_episodes: int = 2
     train_frames: int = 1200
     val_frames: int = 600
@@ -93,6 +97,8 @@ class ComparisonConfig:
         for name in ("train_episodes", "test_episodes", "seeds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
+        if "fps" in self.overrides:
+            raise ValueError("overrides: give the frame rate as fps, not as an override")
         names = [d.name for d in self.designs]
         if len(names) < 2 or len(set(names)) != len(names):
             raise ValueError(f"designs {names}: need at least two, each once")

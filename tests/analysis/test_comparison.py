@@ -95,6 +95,31 @@ def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
     assert not {r.seed for r in reqs.values()} & {r.seed for r in other.values()}
 
 
+def test_episodes_carry_the_overrides_and_the_frame_rate():
+    cfg = ComparisonConfig(overrides={"camera": {"detectors": 16}}, fps=3.0)
+    for req in episode_requests(cfg).values():
+        assert req.overrides == {"camera": {"detectors": 16}, "fps": 3.0}
+    assert episode_requests(ComparisonConfig())["val-0"].overrides == {"fps": 2.0}
+    with pytest.raises(ValueError, match="as fps, not as an override"):
+        ComparisonConfig(overrides={"fps": 30.0})
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--detectors", "2"], ["--set", "camera.detectors=2"]],
+)
+def test_cli_study_default_pixels_follow_the_detector_override(args, tmp_path):
+    """The narrow description has no [camera] table: the override still sets 2 detectors."""
+    from mincam_render.scenes.registry import SCENES_DIR
+
+    narrow = str(SCENES_DIR / "patches_narrow.toml")
+    cmd = ["study", "--family", narrow, *args, "--out", str(tmp_path)]
+    res = CliRunner().invoke(main, cmd)
+    assert res.exit_code == 2
+    assert "4 is not among --pixels [1, 2]" in res.output
+    assert not any(tmp_path.iterdir())  # refused before anything was written
+
+
 def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant, tmp_path):
     out = tmp_path / "study"
     args = [

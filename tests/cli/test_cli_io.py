@@ -185,12 +185,12 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
-        (("train",), [], TrainConfig, 7),
-        (("sweep",), [], TrainConfig, 7),
-        (("prune",), ["--run", "r"], TrainConfig, 7),
+        (("train",), [], TrainConfig, 9),
+        (("sweep",), [], TrainConfig, 9),
+        (("prune",), ["--run", "r"], TrainConfig, 9),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
-        (("pipeline",), [], ComparisonConfig, 9),
-        (("study",), ["--out", "o"], ComparisonConfig, 9),
+        (("pipeline",), [], ComparisonConfig, 10),
+        (("study",), ["--out", "o"], ComparisonConfig, 10),
     ],
 )
 def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(
