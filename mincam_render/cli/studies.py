@@ -45,6 +45,10 @@ episode_options = apply_options([
     click.option("--detectors", type=click.IntRange(1, 64), default=None,
                  help="Detectors rendered per episode (same as --set camera.detectors=N; "
                  "default: the description's)."),
+    click.option("--light-scale", type=FiniteFloat(1e-9, 1e9), default=C.light_scale,
+                 show_default=True,
+                 help="Every emitter's radiance times this factor, applied to the rendered "
+                 "episodes (transport is linear in it: no new render)."),
     click.option("--train-episodes", type=click.IntRange(1, 100),
                  default=C.train_episodes, show_default=True,
                  help="Training episodes (other scene seeds; temporal tasks: 1)."),
@@ -221,7 +225,8 @@ def pipeline_cmd(
 @click.option(
     "--ablation/--no-ablation",
     default=False,
-    help="Also train every minimalist camera without the detector model (supplement A).",
+    help="Also train every minimalist camera's masks without the detector model, then a "
+    "fresh head with it, tested with it (supplement A).",
 )
 @click.option(
     "--reference-pixels",

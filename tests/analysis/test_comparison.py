@@ -1,7 +1,9 @@
 """Comparisons of designs: design names, episode seeds, reduction factor, study table, CLI."""
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -17,6 +19,7 @@ from mincam_render.analysis.comparison import (
 )
 from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
+from mincam_render.learn.train import run_masks
 
 
 def _design(pixels, mean, lo, hi, grid=None):
@@ -141,6 +144,11 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
     assert all(f"| {n} |" in table for n in metrics["designs"])
     for n in names:  # every minimalist design keeps its masks
         assert (out / "masks" / "patches" / n / "masks.json").is_file()
+    for run in metrics["designs"]["mincam-2px-nosensor"]["runs"]:  # supplement A
+        tested, masks = json.loads((Path(run) / "run.json").read_text()), Path(run).parent
+        assert tested["model"]["sensor_model"] and tested["frozen_masks_from"] == str(masks)
+        assert not json.loads((masks / "run.json").read_text())["model"]["sensor_model"]
+        np.testing.assert_array_equal(run_masks(run)[0], run_masks(masks)[0])
 
 
 def test_reference_verdicts_and_training_states():

@@ -189,8 +189,8 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("sweep",), [], TrainConfig, 9),
         (("prune",), ["--run", "r"], TrainConfig, 9),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
-        (("pipeline",), [], ComparisonConfig, 10),
-        (("study",), ["--out", "o"], ComparisonConfig, 10),
+        (("pipeline",), [], ComparisonConfig, 11),
+        (("study",), ["--out", "o"], ComparisonConfig, 11),
     ],
 )
 def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(

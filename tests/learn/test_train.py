@@ -488,3 +488,24 @@ def test_a_decayed_run_resumes_with_its_decayed_rates(monkeypatch, tmp_path):
 def test_train_config_refuses_bad_decay_settings(field, value):
     with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
         tr.TrainConfig(**{field: value})
+
+
+@pytest.mark.parametrize("stored_scales", [False, True])
+def test_light_scaled_data_is_the_transport_times_the_factor(stored_scales):
+    data = linear_task(40)
+    if stored_scales:  # float16 storage with per-frame scales, as datasets keep it
+        s = np.linspace(0.5, 2.0, 40).astype(np.float32)
+        data = replace(data, transport=(data.transport / s[:, None, None, None]), scales=s)
+    idx = torch.arange(40)
+    brighter = data.with_light_scaled(3.0).with_light_scaled(0.5)
+    torch.testing.assert_close(brighter.frames_w(idx), 1.5 * data.frames_w(idx), rtol=1e-6, atol=0)
+    assert brighter.source["light_scale"] == 1.5
+    for name in data.labels:
+        np.testing.assert_array_equal(brighter.labels[name], data.labels[name])
+    assert brighter.transport is data.transport  # no copy of the frames
+
+
+@pytest.mark.parametrize("factor", [0.0, -1.0, float("nan"), float("inf")])
+def test_light_scale_must_be_a_positive_finite_factor(factor):
+    with pytest.raises(ValueError, match="light scale factor"):
+        linear_task(10).with_light_scaled(factor)
