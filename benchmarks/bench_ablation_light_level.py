@@ -191,11 +191,21 @@ def plot(result: dict, path: Path) -> None:
     ax.set_xscale("log")
     ax.set_xlabel("illuminance at the camera (lx)")
     ax.set_ylabel("test count RMSE (4 freeform pixels)")
-    ax.set_title("Supplement A over light level (patches, tested with the sensor model)")
+    ax.set_title(
+        "Supplement A over light level (patches, 4 px, tested with the sensor model)", fontsize=9
+    )
     ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=130)
     plt.close(fig)
+
+
+def write(result: dict, results: Path) -> None:
+    """``ablation_light_level.json``, ``.png`` and ``.md`` in ``results``."""
+    results.mkdir(parents=True, exist_ok=True)
+    (results / "ablation_light_level.json").write_text(json.dumps(result, indent=2) + "\n")
+    plot(result, results / "ablation_light_level.png")
+    (results / "ablation_light_level.md").write_text(report(result) + "\n")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -229,14 +239,6 @@ def main(argv: list[str] | None = None) -> None:
     print(f"illuminance at light factor 1: {unit['illuminance_lux']:.1f} lx "
           f"(mean radiance {unit['mean_radiance_w_m2_sr']:.3f} W/m^2/sr x "
           f"{unit['projected_solid_angle_sr']:.3f} sr x {unit['efficacy_lm_per_w']:g} lm/W)")  # fmt: skip
-    out = []
-    for lux in levels:
-        cfg = dataclasses.replace(base, light_scale=lux / unit["illuminance_lux"])
-        lv = run_level(cfg, a.work, lux, a.workers)
-        out.append(lv)
-        w, wo = lv["with_sensor_model"], lv["without_sensor_model"]
-        print(f"{lux:>8g} lx  with {w['rmse_mean']:.3f} {w['rmse_ci95']}  without "
-              f"{wo['rmse_mean']:.3f} {wo['rmse_ci95']}  ({lv['seconds']:.0f} s)", flush=True)  # fmt: skip
     result = {
         "benchmark": "ablation_light_level",
         "command": " ".join(
@@ -245,13 +247,17 @@ def main(argv: list[str] | None = None) -> None:
         "machine": machine(),
         "config": json.loads(json.dumps(dataclasses.asdict(base), default=str)),
         "illuminance_at_unit_scale": unit,
-        "levels": out,
+        "levels": [],
         "paper": PAPER,
     }
-    a.results.mkdir(parents=True, exist_ok=True)
-    (a.results / "ablation_light_level.json").write_text(json.dumps(result, indent=2) + "\n")
-    plot(result, a.results / "ablation_light_level.png")
-    (a.results / "ablation_light_level.md").write_text(report(result) + "\n")
+    for lux in levels:  # in the order given; the files list them by illuminance
+        cfg = dataclasses.replace(base, light_scale=lux / unit["illuminance_lux"])
+        lv = run_level(cfg, a.work, lux, a.workers)
+        w, wo = lv["with_sensor_model"], lv["without_sensor_model"]
+        print(f"{lux:>8g} lx  with {w['rmse_mean']:.3f} {w['rmse_ci95']}  without "
+              f"{wo['rmse_mean']:.3f} {wo['rmse_ci95']}  ({lv['seconds']:.0f} s)", flush=True)  # fmt: skip
+        result["levels"] = sorted([*result["levels"], lv], key=lambda v: v["lux"])
+        write(result, a.results)  # after every level: a level run is kept if a later one is not
     print(table(result))
 
 

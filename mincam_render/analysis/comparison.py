@@ -218,8 +218,9 @@ def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     """``converged`` (every run: last doubling of steps < 2 % better); else why not.
 
     ``early-stopped, not converged``: validation stopped improving for the
-    patience window, yet the last doubling of steps still gained >= 2 %
-    (noisy or slow); ``budget-limited``: some run used every step.
+    patience window after the last learning-rate decay, yet the last doubling
+    of steps still gained >= 2 % (noisy or slow); ``budget-limited``: some run
+    used every step.
     """
     if all(c["converged"] for c in convergence):
         return "converged"
