@@ -68,7 +68,8 @@ ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0
 def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
     """``{"train-i" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
 
-    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``; every
+    Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``, its
+    description the family's with ``cfg.overrides`` and ``cfg.fps``; every
     episode has :data:`SHARDS_PER_EPISODE` shards whatever the worker count (so
     a run resumes with any ``--workers``, and 1, 2 or 4 workers share them evenly).
     """
@@ -84,7 +85,7 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
                 family=cfg.family,
                 num_frames=frames,
                 seed=stream_seed(cfg.seed, f"episode/{role}", i),
-                overrides={"fps": cfg.fps},
+                overrides={**cfg.overrides, "fps": cfg.fps},
                 splits=ROLE_SPLITS[role],
                 shard_frames=-(-frames // SHARDS_PER_EPISODE),
                 **dict(cfg.fidelity),
@@ -93,15 +94,19 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
 
 
 def render_episodes(
-    cfg: ComparisonConfig, out: Path, *, workers: int = 2, progress: bool = True
+    cfg: ComparisonConfig, episodes_dir: Path, *, workers: int = 2, progress: bool = True
 ) -> dict[str, TrainingData]:
-    """Render (or resume) every episode into ``out/episodes/<name>``; their training views."""
+    """Render (or resume) every episode into ``episodes_dir/<name>``; their training views.
+
+    The views are at ``cfg.light_scale`` times the rendered light.
+    """
     data = {}
     for name, request in episode_requests(cfg).items():
-        path = out / "episodes" / name
+        path = episodes_dir / name
         render_dataset(request, path, workers=workers, progress=progress)
         role = name.split("-")[0]
-        data[name] = TrainingData.from_dataset(open_dataset(path), role)
+        view = TrainingData.from_dataset(open_dataset(path), role)
+        data[name] = view if cfg.light_scale == 1.0 else view.with_light_scaled(cfg.light_scale)
     return data
 
 
@@ -205,23 +210,34 @@ def _design_runs(
     """Train one design with every training seed; each run's metrics (with episodes).
 
     ``splits``: ``{"train": TrainingData, "val": TrainingData, "tests": {name: TrainingData}}``.
+    A design without the detector model is supplement A's ablation: its masks
+    are trained without the model, then frozen while a fresh head is trained
+    with it (``<run>/head-with-sensor``); that camera is the one tested (with
+    the model), and the masks' own training is kept as ``mask_run``.
     """
     runs = []
     for i in range(cfg.seeds):
         seed = stream_seed(cfg.seed, f"train/{design.name}", i)
         run_dir = out / "runs" / f"{design.name}-seed{i}"
-        run = train_run(
-            splits["train"],
-            splits["val"],
-            None,
-            run_dir,
-            config=dataclasses.replace(cfg.train, seed=seed, head=design.head),
-            episodes=splits["tests"],
-            progress=progress,
-            **design.train_kwargs(),
-        )
+        common = {
+            "config": dataclasses.replace(cfg.train, seed=seed, head=design.head),
+            "episodes": splits["tests"],
+            "progress": progress,
+        }
+        run = train_run(splits["train"], splits["val"], None, run_dir, **common,
+                        **design.train_kwargs())  # fmt: skip
+        if not design.sensor_model:
+            masks = {"run_dir": str(run_dir), **{k: run[k] for k in _MASK_RUN_KEYS}}
+            run_dir = run_dir / "head-with-sensor"
+            run = train_run(splits["train"], splits["val"], None, run_dir, **common,
+                            frozen_masks_from=masks["run_dir"])  # fmt: skip
+            run["mask_run"] = masks
         runs.append(dict(run, run_dir=str(run_dir), seed_index=i))
     return runs
+
+
+#: What a comparison keeps of the masks' training in supplement A's ablation.
+_MASK_RUN_KEYS = ("steps", "best_step", "stopped_early", "train_wall_time_s", "episodes")
 
 
 def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
@@ -239,8 +255,9 @@ def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     """``converged`` (every run: last doubling of steps < 2 % better); else why not.
 
     ``early-stopped, not converged``: validation stopped improving for the
-    patience window, yet the last doubling of steps still gained >= 2 %
-    (noisy or slow); ``budget-limited``: some run used every step.
+    patience window after the last learning-rate decay, yet the last doubling
+    of steps still gained >= 2 % (noisy or slow); ``budget-limited``: some run
+    used every step.
     """
     if all(c["converged"] for c in convergence):
         return "converged"
@@ -300,19 +317,23 @@ def run_comparison(
     *,
     workers: int = 2,
     masks_dir: str | os.PathLike | None = None,
+    episodes_dir: str | os.PathLike | None = None,
     progress: bool = True,
 ) -> dict[str, Any]:
     """Render, train, test and compare (module docstring); ``metrics.json`` contents.
 
-    Writes ``out_dir/episodes/``, ``out_dir/runs/``, ``out_dir/metrics.json``,
-    ``out_dir/comparison.png`` and, unless ``masks_dir`` is None, every
-    minimalist design's best masks into ``masks_dir/<task>/<design>/``.
+    Writes the episodes into ``episodes_dir`` (default ``out_dir/episodes/``; a
+    shared directory lets comparisons at other light scales reuse one render),
+    ``out_dir/runs/``, ``out_dir/metrics.json``, ``out_dir/comparison.png`` and,
+    unless ``masks_dir`` is None, every minimalist design's best masks into
+    ``masks_dir/<task>/<design>/``.
     """
     from mincam_render.analysis.plots import plot_comparison
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    data = render_episodes(cfg, out, workers=workers, progress=progress)
+    episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
+    data = render_episodes(cfg, episodes, workers=workers, progress=progress)
     tests = {k: v for k, v in data.items() if k.startswith("test-")}
     train = TrainingData.concat([v for k, v in data.items() if k.startswith("train-")])
     splits = {"train": train, "val": data["val-0"], "tests": tests}

@@ -5,6 +5,7 @@ No PyTorch or Mitsuba import, so the command line shows these defaults at once.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,7 +21,9 @@ class Design:
         pixels: freeform pixels (minimalist camera), or None for a baseline.
         grid: ``(rows, cols)`` of a conventional camera, or None.
         sensor_model: train the minimalist camera with the detector model (noise,
-            saturation); False is the paper's supplement-A ablation.
+            saturation); False is the paper's supplement-A ablation: masks trained
+            without the model, then frozen while a fresh head is trained with it,
+            and tested with it.
         head: the inference network (replaces the recipe's ``TrainConfig.head``).
     """
 
@@ -66,6 +69,12 @@ class ComparisonConfig:
         family: scene family name or description (.toml).
         seed: root seed of every episode and training seed.
         fps: frame rate of the episodes (1/s); 2 fps: 1,200 frames = 10 min of activity.
+        overrides: values replacing the scene description's in every episode (nested
+            as in the TOML, e.g. ``{"camera": {"detectors": 16}}``; ``fps`` is its own
+            field).
+        light_scale: every emitter's radiance times this factor (> 0), applied to
+            the rendered episodes (transport is linear in it), so light levels
+            share one render.
         train_episodes: training episodes (static tasks; a temporal task trains on one).
         train_frames: frames of each training episode.
         val_frames: frames of the validation episode.
@@ -81,6 +90,8 @@ class ComparisonConfig:
     family: str = "workspace"
     seed: int = 0
     fps: float = 2.0
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    light_scale: float = 1.0
     train_episodes: int = 2
     train_frames: int = 1200
     val_frames: int = 600
@@ -98,6 +109,10 @@ class ComparisonConfig:
         for name in ("train_episodes", "test_episodes", "seeds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
+        if not (math.isfinite(self.light_scale) and self.light_scale > 0):
+            raise ValueError(f"light_scale = {self.light_scale!r}: need a finite factor > 0")
+        if "fps" in self.overrides:
+            raise ValueError("overrides: give the frame rate as fps, not as an override")
         names = [d.name for d in self.designs]
         if len(names) < 2 or len(set(names)) != len(names):
             raise ValueError(f"designs {names}: need at least two, each once")

@@ -86,6 +86,36 @@ def grid_list(ctx: click.Context, param: click.Parameter, value: str) -> list[tu
         raise click.BadParameter(f"{value!r} is not a list of ROWSxCOLS, e.g. 2x2,4x4") from None
 
 
+def scene_settings(
+    ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
+) -> dict[str, Any]:
+    """Callback: repeated ``KEY=VALUE`` (TOML values, dotted keys) -> a nested override dict."""
+    import tomllib
+
+    out: dict = {}
+    for item in values:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise click.BadParameter(f"{item!r} is not KEY=VALUE, e.g. camera.detectors=8")
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw  # a bare string
+        node = out
+        parts = key.strip().split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = value
+    return out
+
+
+def with_detectors(overrides: dict[str, Any], detectors: int | None) -> dict[str, Any]:
+    """``overrides`` with ``camera.detectors`` set (the ``--detectors`` shorthand); None: as is."""
+    if detectors is None:
+        return overrides
+    return {**overrides, "camera": {**overrides.get("camera", {}), "detectors": detectors}}
+
+
 def out_option(help_text: str, default: str | None = None) -> Callable:
     """``--out DIRECTORY``: with a default shown in the help, or required without one.
 

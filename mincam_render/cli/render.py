@@ -18,7 +18,14 @@ from mincam_render.render.fidelity import Fidelity
 from mincam_render.render.precision import DTYPES
 
 from .errors import user_error
-from .options import FiniteFloat, apply_options, field_default, out_option
+from .options import (
+    FiniteFloat,
+    apply_options,
+    field_default,
+    out_option,
+    scene_settings,
+    with_detectors,
+)
 
 _default = functools.partial(field_default, RenderRequest)
 
@@ -31,28 +38,6 @@ def _render_splits(ctx: click.Context, param: click.Parameter, value: str) -> tu
     if len(parts) != 3:
         raise click.BadParameter(f"{value!r}: expected three fractions train,val,test")
     return parts
-
-
-def _render_settings(
-    ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
-) -> dict[str, Any]:
-    import tomllib
-
-    out: dict = {}
-    for item in values:
-        key, sep, raw = item.partition("=")
-        if not sep or not key.strip():
-            raise click.BadParameter(f"{item!r} is not KEY=VALUE, e.g. camera.detectors=8")
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw  # a bare string
-        node = out
-        parts = key.strip().split(".")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = value
-    return out
 
 
 #: What to render: options named like the RenderRequest fields they fill (and
@@ -75,7 +60,7 @@ _REQUEST_OPTIONS = [
         show_default=True, help="Train,val,test fractions (contiguous in time).",
     ),
     click.option(
-        "--set", "overrides", multiple=True, callback=_render_settings, metavar="KEY=VALUE",
+        "--set", "overrides", multiple=True, callback=scene_settings, metavar="KEY=VALUE",
         help="Override a scene description value (TOML syntax), repeatable.",
     ),
     click.option(
@@ -212,9 +197,7 @@ def render_cmd(
 
 def _request(*, detectors: int | None, overrides: dict[str, Any], **fields: Any) -> RenderRequest:
     """The request the options describe; ``fields`` are named like RenderRequest's fields."""
-    if detectors is not None:
-        overrides = {**overrides, "camera": {**overrides.get("camera", {}), "detectors": detectors}}
-    return RenderRequest(overrides=overrides or None, **fields)
+    return RenderRequest(overrides=with_detectors(overrides, detectors) or None, **fields)
 
 
 @click.command("export-exr")

@@ -18,17 +18,38 @@ from mincam_render.analysis.comparison_config import ComparisonConfig as C
 from mincam_render.learn.train_config import HeadKind
 
 from .errors import user_error
-from .options import FiniteFloat, apply_options, grid, grid_list, int_list, out_option
+from .options import (
+    FiniteFloat,
+    apply_options,
+    grid,
+    grid_list,
+    int_list,
+    out_option,
+    scene_settings,
+    with_detectors,
+)
 
 if TYPE_CHECKING:
     from mincam_render.analysis.comparison_config import Design
 
 #: Options of the commands that render independent episodes and compare designs;
 #: named like the ComparisonConfig fields they fill, except --steps (the training
-#: recipe's max_steps), --workers and --spp (how episodes are rendered).
+#: recipe's max_steps), --workers and --spp (how episodes are rendered) and
+#: --detectors (a shorthand for --set camera.detectors=N).
 episode_options = apply_options([
     click.option("--family", default=C.family, show_default=True,
                  help="Scene family name or scene description (.toml)."),
+    click.option("--set", "overrides", multiple=True, callback=scene_settings,
+                 metavar="KEY=VALUE",
+                 help="Override a scene description value in every episode (TOML syntax), "
+                 "repeatable."),
+    click.option("--detectors", type=click.IntRange(1, 64), default=None,
+                 help="Detectors rendered per episode (same as --set camera.detectors=N; "
+                 "default: the description's)."),
+    click.option("--light-scale", type=FiniteFloat(1e-9, 1e9), default=C.light_scale,
+                 show_default=True,
+                 help="Every emitter's radiance times this factor, applied to the rendered "
+                 "episodes (transport is linear in it: no new render)."),
     click.option("--train-episodes", type=click.IntRange(1, 100),
                  default=C.train_episodes, show_default=True,
                  help="Training episodes (other scene seeds; temporal tasks: 1)."),
@@ -75,13 +96,18 @@ def _head_list(value: str) -> list[HeadKind]:
     return heads
 
 
-def _family_detectors(family: str) -> int:
-    """Detectors of a family's camera (its default pixel count)."""
+def _family_detectors(episode: dict[str, Any]) -> int:
+    """Detectors of the episodes' camera (the default pixel count), overrides applied."""
     from mincam_render.core.config import ConfigError
     from mincam_render.scenes.registry import load_family
 
+    overrides = with_detectors(episode["overrides"], episode["detectors"])
     try:
-        return load_family(family, seed=0, num_frames=30).camera().num_detectors
+        return (
+            load_family(episode["family"], seed=0, num_frames=30, overrides=overrides)
+            .camera()
+            .num_detectors
+        )
     except ConfigError as err:
         raise user_error(err) from None
 
@@ -93,6 +119,8 @@ def _compare(
     spp: int | None,
     steps: int,
     workers: int,
+    overrides: dict[str, Any],
+    detectors: int | None,
     **episode: Any,
 ) -> dict[str, Any]:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
@@ -107,6 +135,7 @@ def _compare(
     try:
         cfg = C(
             **episode,
+            overrides=with_detectors(overrides, detectors),
             designs=designs,
             train=TrainConfig(max_steps=steps),
             fidelity=quick if spp is not None else {},
@@ -188,7 +217,7 @@ def pipeline_cmd(
     """
     from mincam_render.analysis.comparison import Design
 
-    pixels = pixels or _family_detectors(episode["family"])
+    pixels = pixels or _family_detectors(episode)
     _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
 
 
@@ -211,7 +240,8 @@ def pipeline_cmd(
 @click.option(
     "--ablation/--no-ablation",
     default=False,
-    help="Also train every minimalist camera without the detector model (supplement A).",
+    help="Also train every minimalist camera's masks without the detector model, then a "
+    "fresh head with it, tested with it (supplement A).",
 )
 @click.option(
     "--heads",
@@ -255,7 +285,7 @@ def study_cmd(
     from mincam_render.analysis.comparison import Design, study_table, summarise_study
     from mincam_render.learn.train import default_pixel_counts
 
-    pixels = pixels or default_pixel_counts(_family_detectors(episode["family"]))
+    pixels = pixels or default_pixel_counts(_family_detectors(episode))
     if reference_pixels not in pixels:
         raise click.BadParameter(
             f"{reference_pixels} is not among --pixels {pixels}", param_hint="--reference-pixels"

@@ -86,7 +86,18 @@ _RECIPE_OPTIONS = {
     "patience": (
         "--patience",
         click.IntRange(1),
-        "Evaluations without validation improvement before stopping.",
+        "Evaluations without validation improvement before the learning rates decay "
+        "(after --lr-decays decays: before stopping).",
+    ),
+    "lr_decays": (
+        "--lr-decays",
+        click.IntRange(0),
+        "Plateaus answered by a learning-rate decay before one stops the run.",
+    ),
+    "lr_decay": (
+        "--lr-decay",
+        FiniteFloat(0, 1, min_open=True, max_open=True),
+        "Factor applied to every learning rate at each decay.",
     ),
     "head": (
         "--head",

@@ -142,15 +142,39 @@ def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") 
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
                 raise ConfigError(f"{source}: missing required key {prefix}{name}")
             continue
-        kwargs[name] = _convert(
-            source, f"{prefix}{name}", hints[name], table[name], dict(f.metadata)
-        )
+        value = table[name]
+        default = _default_of(f)
+        if isinstance(value, dict) and _is_instance(default):
+            # a partial table overlays the field's default: [camera] detectors = 16
+            value = merge(_as_table(default), value)
+        kwargs[name] = _convert(source, f"{prefix}{name}", hints[name], value, dict(f.metadata))
     try:
         return cls(**kwargs)
     except ConfigError:
         raise
     except ValueError as err:
         raise ConfigError(f"{source}: {prefix.rstrip('.') or cls.__name__}: {err}") from None
+
+
+def _default_of(f: dataclasses.Field) -> Any:
+    """A field's default value (built from its factory), or ``dataclasses.MISSING``."""
+    if f.default_factory is not dataclasses.MISSING:
+        return f.default_factory()
+    return f.default
+
+
+def _is_instance(value: Any) -> bool:
+    """Whether ``value`` is a dataclass instance (not a dataclass type)."""
+    return dataclasses.is_dataclass(value) and not isinstance(value, type)
+
+
+def _as_table(obj: Any) -> dict[str, Any]:
+    """A dataclass instance as the table :func:`parse` reads back into an equal instance."""
+    return {
+        f.name: _as_table(v) if _is_instance(v := getattr(obj, f.name)) else v
+        for f in dataclasses.fields(obj)
+        if f.init
+    }
 
 
 def load_toml(cls: type[T], path: str | os.PathLike, overrides: dict | None = None) -> T:

@@ -42,3 +42,32 @@ def lambertian_radiance(power_w: float, area_m2: float) -> float:
     if area_m2 <= 0:
         raise ValueError(f"area_m2 = {area_m2!r} must be > 0")
     return power_w / (math.pi * area_m2)
+
+
+def rectangle_projected_solid_angle(
+    half_width_m: float, half_height_m: float, distance_m: float
+) -> float:
+    r"""Projected solid angle (sr) of a rectangle facing a point on its axis.
+
+    The rectangle (half-sides ``half_width_m``, ``half_height_m``) is centred on
+    the normal of a small receiver ``distance_m`` away and parallel to it; a
+    Lambertian rectangle of uniform radiance ``L`` gives the receiver the
+    irradiance ``E = L * Omega``. Sum of the four corner rectangles' form
+    factors (each ``pi F``), with ``X = a / d``, ``Y = b / d``:
+
+    .. math:: \Omega = 2 \left[ \frac{X}{\sqrt{1+X^2}} \arctan\frac{Y}{\sqrt{1+X^2}}
+              + \frac{Y}{\sqrt{1+Y^2}} \arctan\frac{X}{\sqrt{1+Y^2}} \right]
+
+    It tends to ``pi`` (a whole hemisphere) as the rectangle grows, and to
+    ``area / d^2`` when it is small.
+    """
+    for name, v in (
+        ("half_width_m", half_width_m),
+        ("half_height_m", half_height_m),
+        ("distance_m", distance_m),
+    ):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} = {v!r} m: need a finite length > 0")
+    x, y = half_width_m / distance_m, half_height_m / distance_m
+    sx, sy = math.sqrt(1 + x * x), math.sqrt(1 + y * y)
+    return 2 * (x / sx * math.atan(y / sx) + y / sy * math.atan(x / sy))

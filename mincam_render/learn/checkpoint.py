@@ -31,7 +31,9 @@ class TrainingState:
     Args:
         step: optimisation steps taken.
         best_step: step of the lowest validation loss so far.
-        bad: evaluations since the last improvement (early stopping counts them).
+        bad: evaluations since the last improvement or learning-rate decay (early
+            stopping counts them).
+        lr_decays: learning-rate decays done (each at a plateau of ``patience``).
         best_loss: lowest validation loss so far (inf before the first evaluation).
         best_state: the model's ``state_dict`` at ``best_step`` (torch tensors).
         history: one record per evaluation: ``step``, ``train_loss``, ``val_loss``,
@@ -45,6 +47,7 @@ class TrainingState:
     step: int = 0
     best_step: int = 0
     bad: int = 0
+    lr_decays: int = 0
     best_loss: float = math.inf
     best_state: dict[str, torch.Tensor] = field(default_factory=dict)
     history: list[dict[str, float]] = field(default_factory=list)
@@ -122,4 +125,5 @@ def restore_checkpoint(
     opt.load_state_dict(ck["optimizer"])
     generator.set_state(ck["generator"])
     source.load_state(ck["source"])
-    return TrainingState(**{f.name: ck[f.name] for f in fields(TrainingState)})
+    # a field the checkpoint's writer did not have yet takes its default (0 decays done)
+    return TrainingState(**{f.name: ck[f.name] for f in fields(TrainingState) if f.name in ck})

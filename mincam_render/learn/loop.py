@@ -14,8 +14,10 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
   ``0 .. max``, predicting the expected count), :class:`~mincam_render.learn.models.CountLoss`;
   by default the paper's choice for the scene family
   (:data:`~mincam_render.learn.builders.PAPER_COUNT_LOSS`).
-* Early stopping on the validation loss (evaluated every ``eval_every`` steps;
-  stop after ``patience`` evaluations without improvement; the best state is kept).
+* Learning-rate decay on plateaus, then early stopping, on the validation loss
+  (evaluated every ``eval_every`` steps): after ``patience`` evaluations without
+  improvement every learning rate is multiplied by ``lr_decay``, up to
+  ``lr_decays`` times; the next plateau stops the run. The best state is kept.
 * Checkpoints after every evaluation (atomic ``checkpoint.pt``,
   :mod:`~mincam_render.learn.checkpoint`): a killed run started again with the
   same arguments resumes from it and reaches the same state as an
@@ -222,8 +224,25 @@ def _evaluate(
         st.best_state = _copy_state(run.model)
     else:
         st.bad += 1
-    if st.bad >= run.config.patience:
+    if st.bad < run.config.patience:
+        return
+    if st.lr_decays < run.config.lr_decays:
+        _decay_learning_rate(run)
+    else:
         st.stopped_early = True
+
+
+def _decay_learning_rate(run: _Run) -> None:
+    """A plateau: every learning rate times ``lr_decay``; the patience count starts again."""
+    st = run.state
+    for group in run.opt.param_groups:
+        group["lr"] *= run.config.lr_decay
+    st.lr_decays += 1
+    st.bad = 0
+    log.info(
+        "step %d: validation loss flat for %d evaluations; learning rates x %g (decay %d of %d)",
+        st.step, run.config.patience, run.config.lr_decay, st.lr_decays, run.config.lr_decays,
+    )  # fmt: skip
 
 
 def _finish(run: _Run, elapsed: float, out: Path | None) -> TrainResult:

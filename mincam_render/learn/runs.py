@@ -23,7 +23,7 @@ from mincam_render.learn.builders import build_baseline, build_mincam, describe_
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
-from mincam_render.learn.models import Model
+from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.train_config import HeadKind, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
@@ -41,6 +41,7 @@ def train_run(
     config: TrainConfig = TrainConfig(),
     on_the_fly: RenderedBatches | None = None,
     episodes: Mapping[str, TrainingData] | None = None,
+    frozen_masks_from: str | os.PathLike | None = None,
     resume: bool = True,
     progress: bool = False,
 ) -> dict[str, Any]:
@@ -51,12 +52,20 @@ def train_run(
     still provides target statistics and the baseline exposure). ``episodes``:
     test episodes evaluated one by one (``metrics["episodes"][name]``), beside
     ``test``; the metrics also hold the validation ``history``.
+    ``frozen_masks_from``: a finished minimalist run whose masks (and detectors)
+    this camera takes, frozen; only a fresh head is trained (supplement A: masks
+    learned without the detector model, head retrained with it).
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
     with exclusive_writer(out_dir, "training") as out:
-        model = _build_model(train, pixels, baseline_grid, sensor_model, config)
+        if frozen_masks_from is not None:
+            model: Model = _frozen_mask_camera(train, frozen_masks_from, sensor_model, config)
+        else:
+            model = _build_model(train, pixels, baseline_grid, sensor_model, config)
         run = describe_run(model, train, val, test, config, on_the_fly is not None)
+        if frozen_masks_from is not None:
+            run["frozen_masks_from"] = str(frozen_masks_from)
         _refuse_other_data(out, run, resume)
         _write_json_atomic(out / "run.json", run)
         res = train_model(
@@ -94,6 +103,26 @@ def _build_model(
         seed=config.seed,
         head=config.head,
     )
+
+
+def _frozen_mask_camera(
+    train: TrainingData, source: str | os.PathLike, sensor_model: bool, config: TrainConfig
+) -> MincamCamera:
+    """A minimalist camera with the masks of finished run ``source``, frozen, and a fresh head."""
+    run, state = load_run(source)
+    if run["model"]["kind"] != "mincam":
+        raise ValueError(f"{source}: a {run['model']['kind']} run has no masks to freeze")
+    model = build_mincam(
+        train,
+        detectors=run["model"]["detectors"],
+        sensor_model=sensor_model,
+        count_loss=config.count_loss,
+        seed=config.seed,
+    )
+    with torch.no_grad():
+        model.logits.copy_(state["logits"])
+    model.logits.requires_grad_(False)
+    return model
 
 
 def describe_run(

@@ -43,7 +43,13 @@ class TrainConfig:
         lr: head learning rate; None = :func:`learning_rate_for` the input count.
         mask_lr: Adam learning rate of the mask logits (logit units per step).
         eval_every: steps between validation evaluations (and checkpoints).
-        patience: evaluations without improvement before stopping.
+        patience: evaluations without improvement before the learning rate decays
+            (or, after ``lr_decays`` decays, before stopping).
+        lr_decays: plateaus answered by multiplying every learning rate by
+            ``lr_decay`` and going on (0: the first plateau stops the run). With a
+            constant rate Adam's steps keep the parameters jittering about the
+            optimum, so the validation loss stalls above what a smaller rate reaches.
+        lr_decay: factor applied to every learning rate at each decay, in (0, 1).
         gain_range: random global gain per sample (augmentation), (lo, hi).
         max_eval_samples: validation samples used per evaluation (evenly spaced).
         count_loss: how COUNT labels are learned; None = the paper's choice for the
@@ -64,6 +70,8 @@ class TrainConfig:
     mask_lr: float = 0.05
     eval_every: int = 100
     patience: int = 8
+    lr_decays: int = 2
+    lr_decay: float = 0.2
     gain_range: tuple[float, float] = (0.8, 1.2)
     max_eval_samples: int = 2048
     count_loss: CountLoss | None = None
@@ -77,11 +85,14 @@ class TrainConfig:
             ("batch_size", 2),
             ("eval_every", 1),
             ("patience", 1),
+            ("lr_decays", 0),
             ("max_eval_samples", 2),
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:
                 raise ValueError(f"TrainConfig.{name} = {v!r}: allowed an integer >= {lo}")
+        if not 0 < self.lr_decay < 1:
+            raise ValueError(f"TrainConfig.lr_decay = {self.lr_decay!r}: allowed (0, 1)")
         if self.lr is not None and not 0 < self.lr < 1:
             raise ValueError(f"TrainConfig.lr = {self.lr!r}: allowed (0, 1) or None")
         if not 0 <= self.mask_lr < 10:

@@ -12,6 +12,7 @@ float32 once. Arrays are numpy unless a docstring says torch.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -240,6 +241,20 @@ class TrainingData:
             source=src,
             scales=None if self.scales is None else self.scales[start:stop],
         )
+
+    def with_light_scaled(self, factor: float) -> TrainingData:
+        """The same frames with every emitter's radiance times ``factor`` (> 0).
+
+        Transport is linear in the radiance of the scene's emitters, so a scene
+        ``factor`` times brighter has ``factor`` times the transport, frame by
+        frame: only the per-frame ``scales`` change (no copy of the frames).
+        """
+        if not (math.isfinite(factor) and factor > 0):
+            raise ValueError(f"light scale factor = {factor!r}: need a finite number > 0")
+        n = len(self.transport)
+        old = np.ones(n, np.float32) if self.scales is None else np.asarray(self.scales)
+        src = dict(self.source, light_scale=float(factor) * self.source.get("light_scale", 1.0))
+        return replace(self, scales=(old * np.float32(factor)).astype(np.float32), source=src)
 
     def split(self, fractions: Sequence[float] = (0.7, 0.1, 0.2)) -> tuple[TrainingData, ...]:
         """Contiguous train/val/test segments in the given proportions."""

@@ -1,7 +1,9 @@
 """Comparisons of designs: design names, episode seeds, reduction factor, study table, CLI."""
 
 import json
+from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -19,6 +21,7 @@ from mincam_render.analysis.comparison import (
 )
 from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
+from mincam_render.learn.train import run_masks
 from mincam_render.learn.train_config import HeadKind
 
 
@@ -119,6 +122,31 @@ def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
     assert not {r.seed for r in reqs.values()} & {r.seed for r in other.values()}
 
 
+def test_episodes_carry_the_overrides_and_the_frame_rate():
+    cfg = ComparisonConfig(overrides={"camera": {"detectors": 16}}, fps=3.0)
+    for req in episode_requests(cfg).values():
+        assert req.overrides == {"camera": {"detectors": 16}, "fps": 3.0}
+    assert episode_requests(ComparisonConfig())["val-0"].overrides == {"fps": 2.0}
+    with pytest.raises(ValueError, match="as fps, not as an override"):
+        ComparisonConfig(overrides={"fps": 30.0})
+
+
+@pytest.mark.parametrize(
+    "args",
+    [["--detectors", "2"], ["--set", "camera.detectors=2"]],
+)
+def test_cli_study_default_pixels_follow_the_detector_override(args, tmp_path):
+    """The narrow description has no [camera] table: the override still sets 2 detectors."""
+    from mincam_render.scenes.registry import SCENES_DIR
+
+    narrow = str(SCENES_DIR / "patches_narrow.toml")
+    cmd = ["study", "--family", narrow, *args, "--out", str(tmp_path)]
+    res = CliRunner().invoke(main, cmd)
+    assert res.exit_code == 2
+    assert "4 is not among --pixels [1, 2]" in res.output
+    assert not any(tmp_path.iterdir())  # refused before anything was written
+
+
 def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant, tmp_path):
     out = tmp_path / "study"
     args = [
@@ -140,6 +168,11 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
     assert all(f"| {n} |" in table for n in metrics["designs"])
     for n in names:  # every minimalist design keeps its masks
         assert (out / "masks" / "patches" / n / "masks.json").is_file()
+    for run in metrics["designs"]["mincam-2px-nosensor"]["runs"]:  # supplement A
+        tested, masks = json.loads((Path(run) / "run.json").read_text()), Path(run).parent
+        assert tested["model"]["sensor_model"] and tested["frozen_masks_from"] == str(masks)
+        assert not json.loads((masks / "run.json").read_text())["model"]["sensor_model"]
+        np.testing.assert_array_equal(run_masks(run)[0], run_masks(masks)[0])
 
 
 def test_reference_verdicts_and_training_states():

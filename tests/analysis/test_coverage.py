@@ -18,9 +18,7 @@ from mincam_render.optics.camera import FreeformCamera
 LIGHTS = LabelSpec(
     name="lights", kind=LabelKind.BINARY, size=5, element_names=("a", "b", "c", "d", "e")
 )
-SPEED = LabelSpec(
-    name="speed_left_mph", kind=LabelKind.REGRESSION, unit="mph", zero_below_true=3.0
-)
+SPEED = LabelSpec(name="speed_left_mph", kind=LabelKind.REGRESSION, unit="mph", zero_below_true=3.0)
 COUNT = LabelSpec(name="count_left", kind=LabelKind.COUNT)
 
 

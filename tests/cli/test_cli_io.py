@@ -185,12 +185,12 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
-        (("train",), [], TrainConfig, 8),
-        (("sweep",), [], TrainConfig, 8),
-        (("prune",), ["--run", "r"], TrainConfig, 8),
+        (("train",), [], TrainConfig, 10),
+        (("sweep",), [], TrainConfig, 10),
+        (("prune",), ["--run", "r"], TrainConfig, 10),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
-        (("pipeline",), [], ComparisonConfig, 9),
-        (("study",), ["--out", "o"], ComparisonConfig, 9),
+        (("pipeline",), [], ComparisonConfig, 11),
+        (("study",), ["--out", "o"], ComparisonConfig, 11),
     ],
 )
 def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(

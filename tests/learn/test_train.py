@@ -441,3 +441,76 @@ def test_temporal_batch_over_all_frames_equals_the_gathered_union():
 def test_batches_use_all_frames_when_windows_cover_most_of_them(frames, batch, expected):
     data = replace(linear_task(frames, k=1, res=2), history=5)
     assert tr.DatasetBatches(data, batch)._all_frames is expected
+
+
+@pytest.mark.parametrize(("decays", "stop_step"), [(0, 15), (2, 35)])
+def test_plateaus_decay_the_learning_rates_then_stop(monkeypatch, tmp_path, decays, stop_step):
+    """Flat validation loss: ``lr_decays`` decays, each after ``patience`` evaluations; stop."""
+    from mincam_render.learn import loop
+
+    def flat(model, val, limit=None):
+        return {}, {}, 1.0  # never improves on the first evaluation
+
+    monkeypatch.setattr(loop, "predict", flat)
+    monkeypatch.setattr(loop.RunLog, "evaluation", lambda *a, **k: None)
+    train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
+    cfg = tr.TrainConfig(
+        max_steps=1000, batch_size=16, eval_every=5, patience=2, lr_decays=decays,
+        lr_decay=0.5, lr=1e-3, mask_lr=0.04,
+    )  # fmt: skip
+    res = tr.train_model(tr.build_mincam(train, 2), train, val, cfg, out_dir=tmp_path)
+    assert res.stopped_early and res.steps == stop_step and res.best_step == 5
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=False)
+    assert ck["lr_decays"] == decays
+    lrs = [g["lr"] for g in ck["optimizer"]["param_groups"]]
+    np.testing.assert_allclose(lrs, [1e-3 * 0.5**decays, 0.04 * 0.5**decays], rtol=1e-12)
+
+
+def test_a_decayed_run_resumes_with_its_decayed_rates(monkeypatch, tmp_path):
+    """Killed between two decays, a run resumes with the rates and count it had."""
+    from mincam_render.learn import loop
+
+    monkeypatch.setattr(loop, "predict", lambda model, val, limit=None: ({}, {}, 1.0))
+    monkeypatch.setattr(loop.RunLog, "evaluation", lambda *a, **k: None)
+    train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
+    cfg = tr.TrainConfig(
+        max_steps=1000, batch_size=16, eval_every=5, patience=2, lr_decays=2, lr_decay=0.5
+    )
+    part = tr.train_model(
+        tr.build_mincam(train, 2), train, val, cfg, out_dir=tmp_path, stop_after_steps=22
+    )
+    assert part.steps == 22 and not part.stopped_early
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=False)
+    assert ck["lr_decays"] == 1 and ck["bad"] == 1
+    res = tr.train_model(tr.build_mincam(train, 2), train, val, cfg, out_dir=tmp_path)
+    assert res.stopped_early and res.steps == 35
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("lr_decays", -1), ("lr_decays", 1.5), ("lr_decay", 0.0), ("lr_decay", 1.0)],
+)
+def test_train_config_refuses_bad_decay_settings(field, value):
+    with pytest.raises(ValueError, match=f"TrainConfig.{field}"):
+        tr.TrainConfig(**{field: value})
+
+
+@pytest.mark.parametrize("stored_scales", [False, True])
+def test_light_scaled_data_is_the_transport_times_the_factor(stored_scales):
+    data = linear_task(40)
+    if stored_scales:  # float16 storage with per-frame scales, as datasets keep it
+        s = np.linspace(0.5, 2.0, 40).astype(np.float32)
+        data = replace(data, transport=(data.transport / s[:, None, None, None]), scales=s)
+    idx = torch.arange(40)
+    brighter = data.with_light_scaled(3.0).with_light_scaled(0.5)
+    torch.testing.assert_close(brighter.frames_w(idx), 1.5 * data.frames_w(idx), rtol=1e-6, atol=0)
+    assert brighter.source["light_scale"] == 1.5
+    for name in data.labels:
+        np.testing.assert_array_equal(brighter.labels[name], data.labels[name])
+    assert brighter.transport is data.transport  # no copy of the frames
+
+
+@pytest.mark.parametrize("factor", [0.0, -1.0, float("nan"), float("inf")])
+def test_light_scale_must_be_a_positive_finite_factor(factor):
+    with pytest.raises(ValueError, match="light scale factor"):
+        linear_task(10).with_light_scaled(factor)

@@ -297,3 +297,25 @@ def test_lighting_all_lights_off_at_night_is_dark_not_nan(variant):
     assert np.all(lab["lights"] == 0)
     assert np.all(np.isfinite(dark)) and np.all(dark >= 0)
     assert lit.sum() > 0 and dark.sum() == 0.0  # no emitter left on
+
+
+@pytest.mark.parametrize(("a", "b", "d"), [(0.84, 0.84, 1.0), (0.3, 1.2, 2.0), (0.01, 0.02, 1.0)])
+def test_rectangle_projected_solid_angle_equals_the_integral_over_the_rectangle(a, b, d):
+    """E = L * Omega: midpoint sum of cos(theta) d(omega) = d^2 / r^4 dA over the rectangle."""
+    from mincam_render.core.photometry import rectangle_projected_solid_angle
+
+    n = 2000
+    x = (np.arange(n) + 0.5) / n * 2 * a - a
+    y = (np.arange(n) + 0.5) / n * 2 * b - b
+    r2 = x[:, None] ** 2 + y[None, :] ** 2 + d * d
+    numeric = float(np.sum(d * d / r2**2) * (2 * a / n) * (2 * b / n))
+    assert rectangle_projected_solid_angle(a, b, d) == pytest.approx(numeric, rel=1e-6)
+
+
+def test_rectangle_projected_solid_angle_limits_and_bad_input():
+    from mincam_render.core.photometry import rectangle_projected_solid_angle
+
+    assert rectangle_projected_solid_angle(1e6, 1e6, 1.0) == pytest.approx(math.pi, rel=1e-5)
+    assert rectangle_projected_solid_angle(1e-4, 2e-4, 1.0) == pytest.approx(8e-8, rel=1e-6)
+    with pytest.raises(ValueError, match="distance_m = 0"):
+        rectangle_projected_solid_angle(1.0, 1.0, 0)

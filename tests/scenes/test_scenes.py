@@ -51,6 +51,29 @@ def test_parse_builds_nested_defaults():
     assert isinstance(out.inner.size_m, float)
 
 
+@pytest.mark.parametrize("default", [Outer(), Outer(count=5, inner=Inner(size_m=7.0))])
+def test_parse_reads_back_a_default_as_its_table(default):
+    from mincam_render.core.config import _as_table
+
+    assert parse(Outer, _as_table(default)) == default
+
+
+def test_a_partial_nested_table_keeps_the_fields_defaults(tmp_path):
+    """``[camera] detectors = 16`` alone: every other camera key keeps the family's default."""
+    path = tmp_path / "sixteen.toml"
+    path.write_text('family = "patches"\npatch_size = [0.10, 0.15]\n[camera]\ndetectors = 16\n')
+    fam = load_family(path, seed=0, num_frames=3)
+    want = dataclasses.replace(
+        PatchesConfig(),
+        patch_size=(0.10, 0.15),
+        camera=dataclasses.replace(PatchesConfig().camera, detectors=16),
+    )
+    assert fam.config == want
+    assert fam.camera().num_detectors == 16
+    over = load_family("patches", seed=0, num_frames=3, overrides={"camera": {"detectors": 2}})
+    assert over.config.camera == dataclasses.replace(PatchesConfig().camera, detectors=2)
+
+
 def test_shipped_patches_description_matches_defaults():
     fam = load_family("patches", seed=0, num_frames=3)
     assert fam.config == PatchesConfig()
