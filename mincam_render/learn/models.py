@@ -54,6 +54,7 @@ from torch.nn import functional as F
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.train_config import CountLoss
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.optics.fabrication import fabricated_transmittance
 from mincam_render.optics.maskplane import (
     MaskPlaneBackend,
     logits_for_transmittance,
@@ -61,6 +62,7 @@ from mincam_render.optics.maskplane import (
     power_through,
     transmittance,
 )
+from mincam_render.optics.perturbation import PerturbationDraw
 from mincam_render.optics.sensor import detector_voltage
 
 #: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
@@ -272,6 +274,7 @@ class CameraModel(nn.Module):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
         """Pixel outputs ``[batch, time, pixel]``.
 
@@ -286,6 +289,9 @@ class CameraModel(nn.Module):
             gain: ``[batch]`` global gain per sample (augmentation).
             noise: add sensor noise.
             generator: random generator of the noise.
+            draw: a built camera's deviations from the design
+                (:class:`~mincam_render.optics.perturbation.PerturbationDraw`); None
+                measures the camera as designed. Only a minimalist camera has them.
 
         """
         raise NotImplementedError
@@ -299,6 +305,7 @@ class CameraModel(nn.Module):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> dict[str, torch.Tensor]:
         """Raw head outputs ``{name: [batch, size]}`` (arguments as :meth:`measure`)."""
         v = self.measure(
@@ -308,6 +315,7 @@ class CameraModel(nn.Module):
             gain=gain,
             noise=noise,
             generator=generator,
+            draw=draw,
         )
         return self.head(temporal_features(v))
 
@@ -412,10 +420,21 @@ class MincamCamera(CameraModel):
         # about as much as the clamp itself at every step)
         self.logits.detach().clamp_(-MAX_LOGIT, MAX_LOGIT)
 
-    def power(self, frames: torch.Tensor) -> torch.Tensor:
-        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks."""
+    def fabricated_transmittance(self, draw: PerturbationDraw) -> torch.Tensor:
+        """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable)."""
+        return fabricated_transmittance(
+            self.logits, self.camera.transmittance_range, draw, self.camera.texel_size_m
+        )
+
+    def power(self, frames: torch.Tensor, draw: PerturbationDraw | None = None) -> torch.Tensor:
+        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks.
+
+        With ``draw``, through the masks as built (plain torch mask plane).
+        """
         if not self._identity_detectors:
             frames = frames.index_select(1, self.detectors)
+        if draw is not None:
+            return power_through(frames, self.fabricated_transmittance(draw))
         if self.mask_plane is MaskPlaneBackend.DRJIT:
             return mask_power(
                 frames, self.logits, self.camera.transmittance_range, backend=self.mask_plane
@@ -436,20 +455,30 @@ class MincamCamera(CameraModel):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
         """Pixel outputs ``[batch, time, pixel]`` (V); arguments as :meth:`CameraModel.measure`.
 
         Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
+        A ``draw`` also scales each pixel's power by its gain mismatch and adds its
+        output offset (V).
         """
         frames = _frames_of(transport, windows)
         windows = _windows_for(transport, windows)
-        power = _per_window(self.power(frames), windows, frame_scales)
+        power = _per_window(self.power(frames, draw), windows, frame_scales)
         if gain is not None:
             power = power * gain.reshape(-1, 1, 1)
+        offset = None
+        if draw is not None:
+            if not (draw.gain == 1.0).all():
+                power = power * torch.as_tensor(draw.gain, dtype=power.dtype, device=power.device)
+            if draw.offset_v.any():
+                offset = torch.as_tensor(draw.offset_v, dtype=power.dtype, device=power.device)
         e = self.camera.electronics
         if not self.sensor_model:
-            return power * (e.responsivity_a_per_w * e.gain_v_per_a)
-        return detector_voltage(power, e, noise=noise, generator=generator)
+            v = power * (e.responsivity_a_per_w * e.gain_v_per_a)
+            return v if offset is None else v + offset
+        return detector_voltage(power, e, noise=noise, generator=generator, offset_v=offset)
 
 
 def box_pixels(image: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
@@ -526,8 +555,18 @@ class BaselineCamera(CameraModel):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
-        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base."""
+        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base.
+
+        Raises:
+            ValueError: a ``draw`` was given (it describes freeform pixels).
+        """
+        if draw is not None:
+            raise ValueError(
+                "perturbation draws describe freeform pixels (masks, diodes); a baseline "
+                "camera has none"
+            )
         frames = _frames_of(transport, windows)
         windows = _windows_for(transport, windows)
         pix = box_pixels(frames.mean(dim=1), self.grid).reshape(len(frames), self.num_pixels)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from mincam_render.optics.perturbation import PerturbationModel
+
 
 class CountLoss(enum.Enum):
     """How a COUNT label is learned.
@@ -39,6 +41,11 @@ class TrainConfig:
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
             oversubscribe a small machine: on 2 shared cores one thread measured
             7x faster per step than two.
+        perturbation: robust training (domain randomisation): every batch is
+            measured through a new built camera drawn from this model (mask
+            shift, rotation, print tone, printable range, blur, gain mismatch, dark
+            offset; :mod:`mincam_render.optics.perturbation`); None trains the
+            design as drawn (nominal). A minimalist camera's option only.
 
     """
 
@@ -53,6 +60,7 @@ class TrainConfig:
     count_loss: CountLoss | None = None
     seed: int = 0
     torch_threads: int | None = 1
+    perturbation: PerturbationModel | None = None
 
     def __post_init__(self) -> None:
         for name, lo in (
@@ -77,6 +85,11 @@ class TrainConfig:
                 raise ValueError(
                     f"TrainConfig.count_loss = {self.count_loss!r}: allowed {allowed} or None"
                 ) from None
+        if self.perturbation is not None and not isinstance(self.perturbation, PerturbationModel):
+            raise ValueError(
+                f"TrainConfig.perturbation = {self.perturbation!r}: allowed a PerturbationModel "
+                "or None"
+            )
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
