@@ -10,7 +10,6 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
 import torch
 
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
@@ -124,5 +123,6 @@ def batch_draw(
     """
     if perturbation is None or not isinstance(model, MincamCamera):
         return None
-    seed = int(torch.randint(0, 2**62, (1,), generator=generator))
-    return perturbation.draw(model.num_pixels, np.random.default_rng(seed))
+    n = perturbation.uniforms_needed(model.num_pixels)
+    u = torch.rand(n, generator=generator, dtype=torch.float64).numpy()
+    return perturbation.draw_from(u, model.num_pixels)

@@ -161,23 +161,36 @@ class PerturbationModel:
 
     def draw(self, num_pixels: int, rng: np.random.Generator) -> PerturbationDraw:
         """One built camera of ``num_pixels`` freeform pixels (uniform draws of every term)."""
+        return self.draw_from(rng.random(self.uniforms_needed(num_pixels)), num_pixels)
+
+    @staticmethod
+    def uniforms_needed(num_pixels: int) -> int:
+        """How many U(0, 1) numbers :meth:`draw_from` takes for ``num_pixels`` pixels."""
+        return 5 * int(num_pixels) + 5
+
+    def draw_from(self, u: np.ndarray, num_pixels: int) -> PerturbationDraw:
+        """The built camera of :meth:`uniforms_needed` uniforms ``u`` in [0, 1) (numpy).
+
+        Training draws ``u`` from its torch generator (a resumed run draws the same).
+        """
         k = int(num_pixels)
         if k < 1:
             raise ValueError(f"num_pixels = {num_pixels!r}: need at least 1")
-
-        def sym(a: float, shape: tuple[int, ...] = ()) -> np.ndarray:
-            return rng.uniform(-a, a, shape) if a > 0 else np.zeros(shape)
-
+        u = np.asarray(u, np.float64)
+        if u.shape != (self.uniforms_needed(k),):
+            raise ValueError(f"u has shape {u.shape}: expected ({self.uniforms_needed(k)},)")
+        shift, rot, scalars, gain, offset = np.split(u, [2 * k, 3 * k, 3 * k + 5, 4 * k + 5])
+        gamma, dot, lo, hi, blur = scalars
         return PerturbationDraw(
-            shift_mm=sym(self.mask_shift_mm, (k, 2)),
-            rotation_deg=sym(self.mask_rotation_deg, (k,)),
-            gamma=1.0 + float(sym(self.gamma_deviation)),
-            dot_gain=float(sym(self.dot_gain_deviation)),
-            min_transmittance_error=float(sym(self.min_transmittance_error)),
-            max_transmittance_error=float(sym(self.max_transmittance_error)),
-            blur_sigma_mm=float(rng.uniform(0, self.mask_blur_mm)) if self.mask_blur_mm else 0.0,
-            gain=1.0 + sym(self.gain_mismatch_percent, (k,)) / 100.0,
-            offset_v=sym(self.dark_offset_v, (k,)),
+            shift_mm=self.mask_shift_mm * (2 * shift.reshape(k, 2) - 1),
+            rotation_deg=self.mask_rotation_deg * (2 * rot - 1),
+            gamma=1.0 + self.gamma_deviation * (2 * gamma - 1),
+            dot_gain=self.dot_gain_deviation * (2 * dot - 1),
+            min_transmittance_error=self.min_transmittance_error * (2 * lo - 1),
+            max_transmittance_error=self.max_transmittance_error * (2 * hi - 1),
+            blur_sigma_mm=self.mask_blur_mm * blur,
+            gain=1.0 + self.gain_mismatch_percent * (2 * gain - 1) / 100.0,
+            offset_v=self.dark_offset_v * (2 * offset - 1),
         )
 
 

@@ -52,8 +52,8 @@ def test_each_term_alone_changes_only_its_own_fields(term, rng):
 @pytest.mark.parametrize(("rows", "cols"), [(2, 0), (0, -3), (1, 2)])
 def test_an_integer_shift_is_a_roll_with_the_border_entering(rows, cols, rng):
     m = torch.from_numpy(rng.uniform(0.1, 0.6, (2, 8, 8)))
-    shift = torch.tensor([[rows, cols], [rows, cols]], dtype=torch.float64)
-    out = place_masks(m, shift, torch.zeros(2, dtype=torch.float64), fill=0.01)
+    shift = np.array([[rows, cols], [rows, cols]], dtype=np.float64)
+    out = place_masks(m, shift, np.zeros(2), fill=0.01)
     rolled = torch.roll(m, shifts=(rows, cols), dims=(1, 2)).clone()
     if rows > 0:
         rolled[:, :rows] = 0.01
@@ -75,8 +75,7 @@ def test_a_shift_in_mm_moves_the_mask_by_texels(rng):
 
 def test_a_quarter_turn_rotates_the_mask_clockwise(rng):
     m = torch.from_numpy(rng.uniform(0.1, 0.6, (1, 6, 6)))
-    quarter = torch.tensor([math.pi / 2], dtype=torch.float64)
-    out = place_masks(m, torch.zeros(1, 2, dtype=torch.float64), quarter, fill=0.0)
+    out = place_masks(m, np.zeros((1, 2)), np.array([math.pi / 2]), fill=0.0)
     # clockwise as seen with row 0 up: the top row becomes the right column
     torch.testing.assert_close(out, torch.rot90(m, k=-1, dims=(1, 2)), rtol=0, atol=1e-12)
 
