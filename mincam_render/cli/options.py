@@ -78,6 +78,19 @@ def int_list(ctx: click.Context, param: click.Parameter, value: str | None) -> l
     return out
 
 
+def float_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[float, ...]:
+    """Callback: ``"0,0.5,1"`` -> ``(0.0, 0.5, 1.0)``, finite numbers."""
+    try:
+        out = tuple(float(v) for v in value.split(",") if v.strip())
+    except ValueError:
+        raise click.BadParameter(
+            f"{value!r} is not comma-separated numbers, e.g. 0,0.5,1"
+        ) from None
+    if not out or not all(math.isfinite(v) for v in out):
+        raise click.BadParameter(f"{value!r}: need finite numbers, e.g. 0,0.5,1")
+    return out
+
+
 def grid_list(ctx: click.Context, param: click.Parameter, value: str) -> list[tuple[int, int]]:
     """Callback: ``"2x2,4x4"`` -> ``[(2, 2), (4, 4)]``."""
     try:

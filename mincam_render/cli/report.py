@@ -1,18 +1,24 @@
-"""``mincam-render report``: reports comparing simulation with measurements, and energy."""
+"""``mincam-render report``: reports comparing simulation with measurements, energy, robustness."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
+from mincam_render.analysis.robustness import RobustnessConfig
+
 from .errors import InputError, user_error
-from .options import out_option
+from .options import FiniteFloat, field_default, float_list, out_option
+
+if TYPE_CHECKING:
+    from mincam_render.learn.training_data import TrainingData
 
 
 @click.group("report")
 def report_group() -> None:
-    """Reports: simulation against measurements (sim2real), the self-powered budget (energy)."""
+    """Reports: simulation vs measurements (sim2real), energy budget, robustness to tolerances."""
 
 
 @report_group.command("sim2real")
@@ -162,3 +168,102 @@ def report_energy_cmd(
         raise user_error(err) from None
     click.echo(headline(result))
     click.echo(f"wrote {paths['json']}, {paths['html']} and {paths['png']}")
+
+
+@report_group.command("robustness")
+@click.argument("runs", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--data",
+    "data_dirs",
+    multiple=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Test dataset (its test split; repeat for several episodes) [default: each run's "
+    "own test split].",
+)
+@click.option(
+    "--levels",
+    default=",".join(f"{v:g}" for v in field_default(RobustnessConfig, "levels")),
+    show_default=True,
+    callback=float_list,
+    help="Magnitudes as multiples of the default ranges, increasing from 0.",
+)
+@click.option(
+    "--draws",
+    type=click.IntRange(2, 100000),
+    default=field_default(RobustnessConfig, "draws"),
+    show_default=True,
+    help="Built cameras drawn per level (Monte Carlo).",
+)
+@click.option(
+    "--allowed-increase",
+    type=FiniteFloat(0, 10, min_open=True, max_open=True),
+    default=field_default(RobustnessConfig, "allowed_increase"),
+    show_default=True,
+    help="Relative error increase a tolerance allows.",
+)
+@click.option(
+    "--seed",
+    type=click.IntRange(0),
+    default=field_default(RobustnessConfig, "seed"),
+    show_default=True,
+    help="Seed of the draws (the same draws for every run).",
+)
+@out_option(
+    "Output directory (created): robustness.html, .png and .json.", default="runs/robustness"
+)
+def report_robustness_cmd(
+    runs: tuple[Path, ...], data_dirs: tuple[Path, ...], out: Path, **config: object
+) -> None:
+    """Trained designs under fabrication and detector perturbations: error, tolerance, spec.
+
+    For each minimalist-camera RUN (from `mincam-render train`, nominal or
+    --robust), the task error when each perturbation alone, and all at once,
+    is LEVELS x its default range, over DRAWS built cameras per level; the
+    tolerance of each design for an error increase within ALLOWED_INCREASE,
+    written as a fabrication spec (docs/robustness.md).
+
+    \b
+    Example:
+      mincam-render report robustness runs/ws8 runs/ws8-robust --data runs/ws/test \\
+          --draws 20 --out runs/robustness
+    """
+    from mincam_render.analysis.robustness import robustness_curves
+    from mincam_render.analysis.robustness_report import write_robustness_report
+    from mincam_render.learn.train import load_mincam, load_run
+
+    try:
+        cfg = RobustnessConfig(**config)  # type: ignore[arg-type]
+        designs = []
+        for run_dir in runs:
+            run, _ = load_run(run_dir)
+            tests = _test_data(run, data_dirs)
+            model = load_mincam(run_dir, next(iter(tests.values())))
+            robust = run["config"].get("perturbation") is not None
+            designs.append(robustness_curves(model, tests, cfg, name=run_dir.name, robust=robust))
+        paths = write_robustness_report(designs, out)
+    except (ValueError, KeyError, OSError) as err:
+        raise user_error(err) from None
+    for d in designs:
+        mix = d["curves"]["mix"]["tolerance"]
+        click.echo(
+            f"{d['name']} ({'robust' if d['robust'] else 'nominal'}): nominal error "
+            f"{d['nominal_error']:.4g}; all perturbations at once within the limit up to "
+            f"{'>= ' if not mix['bounded'] else ''}{mix['factor']:.2g}x the default ranges"
+        )
+    click.echo(f"wrote {paths['html']}, {paths['png'].name}, {paths['json'].name}")
+
+
+def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData]:
+    """``{name: TrainingData}``: the test split of each ``--data``, or of the run's dataset."""
+    from mincam_render.data.dataset import open_dataset
+    from mincam_render.learn.train import TrainingData
+
+    if not data_dirs:
+        test = run["data"].get("test") or {}
+        if not test.get("dataset"):
+            raise InputError(
+                "the run has no test dataset on disk (trained in memory or on episodes): "
+                "give --data DIRECTORY"
+            )
+        data_dirs = (Path(test["dataset"]),)
+    return {p.name: TrainingData.from_dataset(open_dataset(p), "test") for p in data_dirs}

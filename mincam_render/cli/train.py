@@ -18,6 +18,7 @@ import click
 
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train_config import HeadKind, TrainConfig
+from mincam_render.optics.perturbation import PerturbationModel
 
 from . import __name__ as _pkg
 from .errors import InputError, user_error
@@ -118,6 +119,50 @@ def _recipe_option(name: str) -> Callable[[Callable[..., Any]], Callable[..., An
     )
 
 
+#: PerturbationModel field -> help of the ``train`` option filling it (with --robust).
+_PERTURBATION_HELP = {
+    "mask_shift_mm": "mask position error per axis per detector (mm)",
+    "mask_rotation_deg": "mask rotation error per detector (deg)",
+    "gamma_deviation": "printed tone-curve exponent: gamma = 1 +- this",
+    "dot_gain_deviation": "dot gain at 50 % ink coverage, +- this (<= 0.25)",
+    "min_transmittance_error": "error of the printable minimum transmittance",
+    "max_transmittance_error": "error of the printable maximum transmittance",
+    "mask_blur_mm": "Gaussian blur sigma of the print, drawn in [0, this] (mm)",
+    "gain_mismatch_percent": "per-detector gain error (%)",
+    "dark_offset_v": "per-detector output offset (V)",
+}
+
+#: --robust and the perturbation model's half-ranges (defaults: the dataclass's).
+robust_options = apply_options(
+    [
+        click.option(
+            "--robust",
+            is_flag=True,
+            help="Robust training: every batch through a new built camera drawn from the "
+            "perturbation model below (docs/robustness.md).",
+        )
+    ]
+    + [
+        click.option(
+            "--" + f.name.replace("_", "-"),
+            f.name,
+            type=FiniteFloat(0, 100),
+            default=field_default(PerturbationModel, f.name),
+            show_default=True,
+            help=f"With --robust: {_PERTURBATION_HELP[f.name]}.",
+        )
+        for f in dataclasses.fields(PerturbationModel)
+    ]
+)
+
+
+def _recipe_with_perturbation(recipe: dict[str, Any], robust: bool) -> TrainConfig:
+    """The TrainConfig of the options; with ``robust``, its perturbation model's."""
+    names = [f.name for f in dataclasses.fields(PerturbationModel)]
+    halves = {name: recipe.pop(name) for name in names}
+    return TrainConfig(**recipe, perturbation=PerturbationModel(**halves) if robust else None)
+
+
 #: Options shared by train, sweep and prune (the paper's recipe as defaults), the
 #: recipe's in the order of TrainConfig's fields.
 training_options = apply_options(
@@ -189,6 +234,7 @@ def _splits(
     help="After training, export printable masks into this directory.",
 )
 @click.option("--no-resume", is_flag=True, help="Start afresh even if a checkpoint exists.")
+@robust_options
 def train_cmd(
     dataset: Path | None,
     family: str | None,
@@ -201,6 +247,7 @@ def train_cmd(
     on_the_fly: bool,
     export_dir: Path | None,
     no_resume: bool,
+    robust: bool,
     **recipe: Any,
 ) -> None:
     """Train a minimalist (or baseline) camera end to end; metrics on the test split.
@@ -210,15 +257,23 @@ def train_cmd(
     files, history.jsonl, mask_evolution.png, run.json and metrics.json
     (test RMSE/accuracy after rounding and median filtering) into --out.
 
+    With --robust, every batch is measured through a new built camera (mask
+    shift and rotation, print tone, printable range, blur, detector gain and
+    offset, drawn within the ranges of the options below).
+
     \b
     Example:
       mincam-render train --family patches --frames 300 --pixels 4 --steps 200 \\
           --out runs/patches4
+      mincam-render train --family patches --frames 300 --pixels 4 --steps 200 \\
+          --robust --mask-shift-mm 0.5 --out runs/patches4-robust
     """
     from mincam_render.learn.train import train_run
 
     try:
-        config = TrainConfig(**recipe)
+        if robust and baseline is not None:
+            raise InputError("--robust perturbs masks and diodes: not with --baseline")
+        config = _recipe_with_perturbation(recipe, robust)
         if no_resume and (out / "checkpoint.pt").exists():
             (out / "checkpoint.pt").unlink()
         train, val, test = _splits(dataset, family, frames, spp, config.seed)

@@ -21,6 +21,7 @@ import torch
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.models import Model, task_loss
 from mincam_render.learn.training_data import TrainingData
+from mincam_render.optics.perturbation import PerturbationDraw
 
 
 def median_filter_window(median_filter_s: float, fps: float) -> int:
@@ -76,10 +77,12 @@ def predict(
     noise: bool = True,
     seed: int = 1234,
     limit: int | None = None,
+    draw: PerturbationDraw | None = None,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], float]:
     """Predictions, labels (``{name: [n, size]}``) and mean loss over a split, in time order.
 
     Batches of consecutive samples: a temporal batch measures each frame once.
+    ``draw``: measure through this built camera (None: as designed).
     """
     was_training = model.training
     model.eval()
@@ -91,7 +94,7 @@ def predict(
     for a in range(0, len(idx), batch_size):
         batch = data.sample(torch.from_numpy(idx[a : a + batch_size]))
         y = batch.labels
-        out = model(**batch.inputs(), noise=noise, generator=g)
+        out = model(**batch.inputs(), noise=noise, generator=g, draw=draw)
         loss, _ = task_loss(model.head, out, y)
         loss_sum += float(loss) * len(batch)
         for k, v in model.head.predict(out).items():
@@ -103,13 +106,20 @@ def predict(
 
 
 def evaluate(
-    model: Model, data: TrainingData, *, noise: bool = True, seed: int = 1234
+    model: Model,
+    data: TrainingData,
+    *,
+    noise: bool = True,
+    seed: int = 1234,
+    draw: PerturbationDraw | None = None,
 ) -> dict[str, Any]:
     """Test metrics after post-processing (every sample of ``data``, in time order).
 
+    ``draw``: measure through this built camera (None: as designed).
+
     Returns :func:`metrics` of :func:`predict`'s output.
     """
-    pred, lab, loss = predict(model, data, noise=noise, seed=seed)
+    pred, lab, loss = predict(model, data, noise=noise, seed=seed, draw=draw)
     return metrics(pred, lab, loss, data)
 
 

@@ -187,7 +187,9 @@ def _train_steps(
     """Steps until the run is done, or checkpoint and return after ``stop_after_steps``."""
     st, config = run.state, run.config
     while not run.done():
-        loss = train_step(run.model, run.source, run.opt, run.gen, config.gain_range)
+        loss = train_step(
+            run.model, run.source, run.opt, run.gen, config.gain_range, config.perturbation
+        )
         st.step += 1
         bar.update(1)
         logs.train_loss(loss, st.step, clock)

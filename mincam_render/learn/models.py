@@ -56,6 +56,7 @@ from torch.nn import functional as F
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.train_config import CountLoss
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.optics.fabrication import fabricated_transmittance
 from mincam_render.optics.maskplane import (
     MaskPlaneBackend,
     logits_for_transmittance,
@@ -63,6 +64,7 @@ from mincam_render.optics.maskplane import (
     power_through,
     transmittance,
 )
+from mincam_render.optics.perturbation import PerturbationDraw
 from mincam_render.optics.sensor import detector_voltage
 
 log = logging.getLogger(__name__)
@@ -314,6 +316,7 @@ class CameraModel(nn.Module):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
         """Pixel outputs ``[batch, time, pixel]``.
 
@@ -328,6 +331,9 @@ class CameraModel(nn.Module):
             gain: ``[batch]`` global gain per sample (augmentation).
             noise: add sensor noise.
             generator: random generator of the noise.
+            draw: a built camera's deviations from the design
+                (:class:`~mincam_render.optics.perturbation.PerturbationDraw`); None
+                measures the camera as designed. Only a minimalist camera has them.
 
         """
         raise NotImplementedError
@@ -341,6 +347,7 @@ class CameraModel(nn.Module):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> dict[str, torch.Tensor]:
         """Raw head outputs ``{name: [batch, size]}`` (arguments as :meth:`measure`)."""
         v = self.measure(
@@ -350,6 +357,7 @@ class CameraModel(nn.Module):
             gain=gain,
             noise=noise,
             generator=generator,
+            draw=draw,
         )
         return self.head(temporal_features(v))
 
@@ -454,10 +462,21 @@ class MincamCamera(CameraModel):
         # about as much as the clamp itself at every step)
         self.logits.detach().clamp_(-MAX_LOGIT, MAX_LOGIT)
 
-    def power(self, frames: torch.Tensor) -> torch.Tensor:
-        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks."""
+    def fabricated_transmittance(self, draw: PerturbationDraw) -> torch.Tensor:
+        """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable)."""
+        return fabricated_transmittance(
+            self.logits, self.camera.transmittance_range, draw, self.camera.texel_size_m
+        )
+
+    def power(self, frames: torch.Tensor, draw: PerturbationDraw | None = None) -> torch.Tensor:
+        """``P[frame, pixel]`` (W) of ``T[frame, detector, row, col]`` through the masks.
+
+        With ``draw``, through the masks as built (plain torch mask plane).
+        """
         if not self._identity_detectors:
             frames = frames.index_select(1, self.detectors)
+        if draw is not None:
+            return power_through(frames, self.fabricated_transmittance(draw))
         if self.mask_plane is MaskPlaneBackend.DRJIT:
             return mask_power(
                 frames, self.logits, self.camera.transmittance_range, backend=self.mask_plane
@@ -478,20 +497,30 @@ class MincamCamera(CameraModel):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
         """Pixel outputs ``[batch, time, pixel]`` (V); arguments as :meth:`CameraModel.measure`.
 
         Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
+        A ``draw`` also scales each pixel's power by its gain mismatch and adds its
+        output offset (V).
         """
         frames = _frames_of(transport, windows)
         windows = _windows_for(transport, windows)
-        power = _per_window(self.power(frames), windows, frame_scales)
+        power = _per_window(self.power(frames, draw), windows, frame_scales)
         if gain is not None:
             power = power * gain.reshape(-1, 1, 1)
+        offset = None
+        if draw is not None:
+            if not (draw.gain == 1.0).all():
+                power = power * torch.as_tensor(draw.gain, dtype=power.dtype, device=power.device)
+            if draw.offset_v.any():
+                offset = torch.as_tensor(draw.offset_v, dtype=power.dtype, device=power.device)
         e = self.camera.electronics
         if not self.sensor_model:
-            return power * (e.responsivity_a_per_w * e.gain_v_per_a)
-        return detector_voltage(power, e, noise=noise, generator=generator)
+            v = power * (e.responsivity_a_per_w * e.gain_v_per_a)
+            return v if offset is None else v + offset
+        return detector_voltage(power, e, noise=noise, generator=generator, offset_v=offset)
 
 
 @functools.lru_cache(maxsize=64)
@@ -588,8 +617,18 @@ class BaselineCamera(CameraModel):
         gain: torch.Tensor | None = None,
         noise: bool = True,
         generator: torch.Generator | None = None,
+        draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
-        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base."""
+        """Pixel values ``[batch, time, R*C]`` in DN / 255 (0-1); arguments as in the base.
+
+        Raises:
+            ValueError: a ``draw`` was given (it describes freeform pixels).
+        """
+        if draw is not None:
+            raise ValueError(
+                "perturbation draws describe freeform pixels (masks, diodes); a baseline "
+                "camera has none"
+            )
         frames = _frames_of(transport, windows)
         windows = _windows_for(transport, windows)
         pix = box_pixels(frames.mean(dim=1), self.grid).reshape(len(frames), self.num_pixels)

@@ -2,7 +2,8 @@
 
 :func:`train_run` writes ``run.json`` (what was trained on what, with which
 recipe), trains resumably (:func:`~mincam_render.learn.loop.train_model`) and
-writes ``metrics.json``; :func:`load_run` and :func:`run_masks` read a finished run.
+writes ``metrics.json``; :func:`load_run`, :func:`load_mincam` and :func:`run_masks` read a
+finished run.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import torch
 
 from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
-from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
+from mincam_render.learn.builders import build_baseline, build_head, build_mincam, describe_model
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
@@ -241,3 +242,46 @@ def run_masks(run_dir: str | os.PathLike) -> tuple[np.ndarray, FreeformCamera, d
     with torch.no_grad():
         m = transmittance(state["logits"], camera.transmittance_range).numpy()
     return m, camera, run
+
+
+def load_mincam(run_dir: str | os.PathLike, data: TrainingData) -> MincamCamera:
+    """The trained minimalist camera of a finished run, to be measured on ``data``.
+
+    Built from the run's own camera, detectors, head (with its count classes) and
+    weights; ``data`` must have the run's mask resolution and enough detectors.
+
+    Raises:
+        ValueError: not a minimalist-camera run, or ``data`` does not fit it.
+    """
+    from mincam_render.data.dataset import camera_from_dict
+
+    run, state = load_run(run_dir)
+    desc = run["model"]
+    if desc["kind"] != "mincam":
+        raise ValueError(f"{run_dir}: a {desc['kind']} run is not a minimalist camera")
+    camera = camera_from_dict(run["camera"])
+    if data.camera.mask_resolution != camera.mask_resolution:
+        raise ValueError(
+            f"{run_dir}: masks of {camera.mask_resolution} texels, but the data's transport "
+            f"has {data.camera.mask_resolution}"
+        )
+    if max(desc["detectors"]) >= data.transport.shape[1]:
+        raise ValueError(
+            f"{run_dir}: reads detectors {desc['detectors']}; the data has "
+            f"{data.transport.shape[1]}"
+        )
+    head = build_head(
+        data,
+        len(desc["detectors"]) * max(desc["history"] - 1, 1),
+        count_classes=desc.get("count_classes"),
+    )
+    model = MincamCamera(
+        camera,
+        head,
+        detectors=desc["detectors"],
+        sensor_model=desc["sensor_model"],
+        history=desc["history"],
+    )
+    model.load_state_dict(state)
+    model.eval()
+    return model

@@ -16,6 +16,7 @@ from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.builders import learning_rate_for
 from mincam_render.learn.models import MincamCamera, Model, task_loss
 from mincam_render.learn.train_config import TrainConfig
+from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel
 
 
 def build_optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
@@ -93,16 +94,19 @@ def train_step(
     opt: torch.optim.Optimizer,
     generator: torch.Generator,
     gain_range: tuple[float, float],
+    perturbation: PerturbationModel | None = None,
 ) -> torch.Tensor:
     """One optimisation step of :func:`train_model` (Adam on the task loss); the loss, detached.
 
-    A batch, a random global gain per sample (augmentation), the camera with
+    A batch, a random global gain per sample (augmentation), with ``perturbation``
+    a built camera drawn for the batch (robust training), the camera with
     sensor noise, the loss, backward, the optimiser, and the projection of the
     mask logits (a saturated mask must be able to move back).
     """
     batch = source.next(generator)
     gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
-    out = model(**batch.inputs(), gain=gain, noise=True, generator=generator)
+    draw = batch_draw(model, perturbation, generator)
+    out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
     loss, _ = task_loss(model.head, out, batch.labels)
     for group in opt.param_groups:  # zero_grad(set_to_none=True) without its overhead
         for p in group["params"]:
@@ -112,3 +116,17 @@ def train_step(
     if isinstance(model, MincamCamera):
         model.project_logits_()
     return loss.detach()
+
+
+def batch_draw(
+    model: Model, perturbation: PerturbationModel | None, generator: torch.Generator
+) -> PerturbationDraw | None:
+    """A built camera for one batch, from ``generator`` (so a resumed run draws the same).
+
+    None without a perturbation model or for a baseline camera (no masks, no diodes).
+    """
+    if perturbation is None or not isinstance(model, MincamCamera):
+        return None
+    n = perturbation.uniforms_needed(model.num_pixels)
+    u = torch.rand(n, generator=generator, dtype=torch.float64).numpy()
+    return perturbation.draw_from(u, model.num_pixels)

@@ -21,7 +21,7 @@ in its own module:
 * :mod:`~mincam_render.learn.snapshots` -- mask snapshots, ``mask_evolution.png``;
 * :mod:`~mincam_render.learn.loop` -- :func:`train_model` (the recipe);
 * :mod:`~mincam_render.learn.runs` -- :func:`train_run` into a run directory,
-  :func:`load_run`, :func:`run_masks`;
+  :func:`load_run`, :func:`load_mincam`, :func:`run_masks`;
 * :mod:`~mincam_render.learn.sweep` -- error against pixel count (:func:`sweep`);
 * :mod:`~mincam_render.learn.prune` -- supplement C's :func:`greedy_prune`.
 """
@@ -59,7 +59,7 @@ from mincam_render.learn.models import (
 )
 from mincam_render.learn.prune import greedy_prune
 from mincam_render.learn.run_log import LOG_EVERY
-from mincam_render.learn.runs import load_run, run_masks, train_run
+from mincam_render.learn.runs import load_mincam, load_run, run_masks, train_run
 from mincam_render.learn.snapshots import plot_mask_evolution
 from mincam_render.learn.step import build_optimizer, train_step
 from mincam_render.learn.sweep import (
@@ -103,6 +103,7 @@ __all__ = [
     "greedy_prune",
     "head_kind",
     "learning_rate_for",
+    "load_mincam",
     "load_run",
     "median_filter",
     "median_filter_window",

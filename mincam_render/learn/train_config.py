@@ -5,6 +5,8 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from mincam_render.optics.perturbation import PerturbationModel
+
 
 class CountLoss(enum.Enum):
     """How a COUNT label is learned.
@@ -61,6 +63,11 @@ class TrainConfig:
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
             oversubscribe a small machine: on 2 shared cores one thread measured
             7x faster per step than two.
+        perturbation: robust training (domain randomisation): every batch is
+            measured through a new built camera drawn from this model (mask
+            shift, rotation, print tone, printable range, blur, gain mismatch, dark
+            offset; :mod:`mincam_render.optics.perturbation`); None trains the
+            design as drawn (nominal). A minimalist camera's option only.
 
     """
 
@@ -78,6 +85,7 @@ class TrainConfig:
     head: HeadKind = HeadKind.MLP
     seed: int = 0
     torch_threads: int | None = 1
+    perturbation: PerturbationModel | None = None
 
     def __post_init__(self) -> None:
         for name, lo in (
@@ -112,6 +120,11 @@ class TrainConfig:
                 raise ValueError(
                     f"TrainConfig.head = {self.head!r}: allowed {[h.value for h in HeadKind]}"
                 ) from None
+        if self.perturbation is not None and not isinstance(self.perturbation, PerturbationModel):
+            raise ValueError(
+                f"TrainConfig.perturbation = {self.perturbation!r}: allowed a PerturbationModel "
+                "or None"
+            )
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")

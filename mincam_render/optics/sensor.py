@@ -53,6 +53,7 @@ def detector_voltage(
     *,
     noise: bool = True,
     generator: torch.Generator | None = None,
+    offset_v: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Output voltage of each freeform pixel for the optical power on its diode.
 
@@ -62,6 +63,9 @@ def detector_voltage(
         noise: add shot, read and quantization noise; False gives the noiseless
             mean response (for evaluation), still with leaky saturation.
         generator: torch random generator for reproducible noise.
+        offset_v: ``[detector]`` output offset of each read-out (V), added after
+            the noise (it is no photocurrent: no shot noise) and before saturation;
+            None adds nothing.
 
     Returns:
         ``p_f[..., detector]`` in volts, same shape, dtype and device as ``power_w``.
@@ -85,4 +89,6 @@ def detector_voltage(
         eps = torch.randn(power_w.shape, **kw)
         quant = torch.rand(power_w.shape, **kw)
         voltage_v = torch.addcmul(voltage_v, torch.sqrt(variance), eps).add_(quant, alpha=e.lsb_v)
+    if offset_v is not None:
+        voltage_v = voltage_v + offset_v
     return leaky_saturation(voltage_v, e.full_scale_v, e.saturation_slope)

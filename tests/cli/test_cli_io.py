@@ -7,10 +7,12 @@ from click.testing import CliRunner
 
 from mincam_render.analysis.comparison_config import ComparisonConfig
 from mincam_render.analysis.fidelity_bench import FidelityBenchConfig
+from mincam_render.analysis.robustness import RobustnessConfig
 from mincam_render.cli.main import main
 from mincam_render.data.exr import read_transport_exr, write_transport_exr
 from mincam_render.data.render_job import RenderRequest
 from mincam_render.learn.train_config import TrainConfig
+from mincam_render.optics.perturbation import PerturbationModel
 
 
 def test_exr_round_trip_is_exact(tmp_path, rng):
@@ -188,6 +190,8 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("train",), [], TrainConfig, 10),
         (("sweep",), [], TrainConfig, 10),
         (("prune",), ["--run", "r"], TrainConfig, 10),
+        (("train",), [], PerturbationModel, 9),
+        (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
         (("pipeline",), [], ComparisonConfig, 11),
         (("study",), ["--out", "o"], ComparisonConfig, 11),

@@ -48,8 +48,11 @@ def _measurement_model(
             gain: torch.Tensor | None = None,
             noise: bool = True,
             generator: torch.Generator | None = None,
+            draw: object = None,
         ) -> dict[str, torch.Tensor]:
             # the arguments of CameraModel.forward; frames [frame, P, 1, 1] -> [b, time, P, 1, 1]
+            if draw is not None:
+                raise ValueError("measured voltages have no masks or diodes to perturb")
             t = _per_window(transport, windows, frame_scales) if transport.ndim == 4 else transport
             v = t.reshape(t.shape[0], -1, t.shape[-3])
             if gain is not None:

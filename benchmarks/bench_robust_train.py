@@ -1,0 +1,141 @@
+r"""Robust training's cost per step: a perturbed step against the nominal step, same run.
+
+Robust training (``TrainConfig.perturbation``) draws a built camera per batch and
+measures the batch through its fabricated masks
+(:mod:`mincam_render.optics.fabrication`: tone curve, printed range, blur,
+shift and rotation by bilinear resampling) and its detectors (gain mismatch,
+offset). Its budget is at most 2x the nominal step's time (issue 21).
+
+Both are :func:`mincam_render.learn.train.train_step` on the same data, same
+model shape, same batch source, interleaved in chunks so that a burst of load
+on the shared machine hits both; median over repeats of samples/s, and their
+ratio. Rows: K in {1, 8, 16} pixels x batch {64, 256}, masks 32^2 (the
+workspace 8 px row is the issue's size), on random transport in memory (the
+step's cost does not depend on the content). Before timing, the perturbed
+step at a zero draw is checked to measure exactly what the nominal one does.
+Writes ``benchmarks/results/robust_train.json`` (machine, git revision,
+rows, ratios, the worst ratio).
+
+Usage (from a clean tree):
+    flock /tmp/mincam_bench.lock python benchmarks/bench_robust_train.py \
+        [--steps 200] [--repeats 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_patches_paper import machine  # noqa: E402
+from bench_train_throughput import random_data  # noqa: E402
+
+from mincam_render.learn import train as tr  # noqa: E402
+from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel  # noqa: E402
+
+OUT = Path(__file__).parent / "results" / "robust_train.json"
+#: Chunks per repeat, alternating nominal and robust.
+CHUNKS = 10
+#: The issue's budget: robust steps at most this many times slower.
+BUDGET = 2.0
+
+
+def check_zero_draw_is_nominal(data: tr.TrainingData, pixels: int) -> None:
+    """The perturbed measurement at an identity draw equals the nominal one exactly."""
+    model = tr.build_mincam(data, pixels)
+    b = data.sample(torch.arange(16))
+    with torch.no_grad():
+        nominal = model.measure(**b.inputs(), noise=False)
+        drawn = model.measure(**b.inputs(), noise=False, draw=PerturbationDraw.identity(pixels))
+    if not torch.equal(nominal, drawn):
+        raise SystemExit("an identity draw changed the measurement: the benchmark would lie")
+
+
+def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repeats: int) -> dict:
+    """Samples/s of nominal and robust training steps (median of ``repeats``) and the ratio."""
+    check_zero_draw_is_nominal(data, pixels)
+    config = tr.TrainConfig(batch_size=batch)
+    perturbation = PerturbationModel()
+    runs = {}
+    for name, pert in (("nominal", None), ("robust", perturbation)):
+        model = tr.build_mincam(data, pixels)
+        opt = tr.build_optimizer(model, config)
+        src = tr.DatasetBatches(data, batch)
+        gen = torch.Generator().manual_seed(0)
+
+        def run(n: int, model=model, src=src, opt=opt, gen=gen, pert=pert) -> None:
+            for _ in range(n):
+                tr.train_step(model, src, opt, gen, config.gain_range, pert)
+
+        run(10)  # warm-up
+        runs[name] = run
+    rates: dict[str, list[float]] = {name: [] for name in runs}
+    chunk = max(1, steps // CHUNKS)
+    for _ in range(repeats):
+        seconds = dict.fromkeys(runs, 0.0)
+        for _ in range(CHUNKS):
+            for name, run in runs.items():
+                t0 = time.perf_counter()
+                run(chunk)
+                seconds[name] += time.perf_counter() - t0
+        for name in runs:
+            rates[name].append(CHUNKS * chunk * batch / seconds[name])
+    med = {name: statistics.median(v) for name, v in rates.items()}
+    return {
+        "pixels": pixels,
+        "mask_resolution": list(data.camera.mask_resolution),
+        "batch_size": batch,
+        "nominal_samples_per_s": {"median": med["nominal"], "all": rates["nominal"]},
+        "robust_samples_per_s": {"median": med["robust"], "all": rates["robust"]},
+        "ms_per_step": {n: 1e3 * batch / med[n] for n in runs},
+        "slowdown_robust_over_nominal": med["nominal"] / med["robust"],
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--out", type=Path, default=OUT)
+    args = ap.parse_args()
+    torch.set_num_threads(1)  # TrainConfig.torch_threads, as training runs
+    rows = []
+    for pixels in (1, 8, 16):
+        data = random_data(pixels, 32, 2048)
+        for batch in (64, 256):
+            r = measure_row(data, pixels, batch, args.steps, args.repeats)
+            rows.append(r)
+            print(
+                f"K={pixels:2d} batch={batch:3d}: nominal {r['ms_per_step']['nominal']:.2f} ms, "
+                f"robust {r['ms_per_step']['robust']:.2f} ms per step, "
+                f"slowdown {r['slowdown_robust_over_nominal']:.2f}x"
+            )
+    worst = max(r["slowdown_robust_over_nominal"] for r in rows)
+    result = {
+        "benchmark": "bench_robust_train",
+        "machine": machine(),
+        "steps": args.steps,
+        "repeats": args.repeats,
+        "perturbation": PerturbationModel().__dict__,
+        "rows": rows,
+        "worst_slowdown": worst,
+        "budget": BUDGET,
+        "within_budget": worst <= BUDGET,
+    }
+    print(
+        f"worst slowdown {worst:.2f}x (budget {BUDGET:g}x): "
+        f"{'within' if worst <= BUDGET else 'OVER'} budget"
+    )
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,279 @@
+r"""How a built camera differs from its design: fabrication, mounting and detector tolerances.
+
+A mask is printed on transparency film, cut, glued in front of a photodiode and
+the board is screwed to a wall. :class:`PerturbationModel` gives each step's
+error a physical unit and a default half-range; :meth:`PerturbationModel.draw`
+samples one built camera (:class:`PerturbationDraw`). Every term is drawn
+uniformly in ``[-a, a]`` (``[0, a]`` for the blur), so a default range reads
+directly as a fabrication tolerance ("align masks to +-0.3 mm").
+
+Defaults and their reasoning (``docs/robustness.md`` has the sources):
+
+* ``mask_shift_mm`` 0.3 mm per axis per detector: a film mask cut by hand and
+  placed against a printed cut mark; 0.3 mm is the width of a scalpel cut and a
+  pencil line, 0.6 texel of the prototype's 0.5-mm texels.
+* ``mask_rotation_deg`` 2 deg per detector: a 16-mm square set by eye against
+  a square mount moves its corner by 16 mm x tan(2 deg) = 0.56 mm.
+* ``gamma_deviation`` 0.15: the printed tone curve ``y -> y^gamma`` (``y`` the
+  design's place in the printable range) with ``gamma`` in ``1 +- 0.15``; an
+  uncalibrated driver or another film batch changes mid-tones this much.
+* ``dot_gain_deviation`` 0.1: ink coverage ``c -> c + 4 g c (1 - c)`` (dot gain
+  ``g`` at 50 % coverage, the printers' convention); office laser and inkjet
+  printers on film show 10-20 % dot gain, a calibration removes the mean, the
+  spread remains.
+* ``min_transmittance_error`` 0.005 and ``max_transmittance_error`` 0.05: the
+  printable range 0.01-0.67 of the paper (supplement B) was measured on one
+  printer and film; the film base and the darkest ink vary between batches.
+* ``mask_blur_mm`` 0.1 mm: Gaussian sigma up to the spread of a 600-dpi dot
+  (42 um) plus the film lying up to ~0.1 mm off the mask plane.
+* ``gain_mismatch_percent`` 5 %: per-detector responsivity spread of one diode
+  type plus 1 % transimpedance resistors.
+* ``dark_offset_v`` 2 mV: the transimpedance amplifier's output offset (input
+  offset voltage of a precision op-amp, ~1 mV, times its noise gain) plus dark
+  current times the gain (``1e-11 A x 1e7 V/A = 0.1 mV``).
+
+Camera pose error (position, orientation) changes the transport itself and needs
+transport rendered under jittered poses; it is not part of this model yet
+(``docs/robustness.md``).
+
+Arrays are numpy; the torch side (the fabricated mask plane) is
+:mod:`mincam_render.optics.fabrication`.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+
+class PerturbationTerm(enum.Enum):
+    """One source of error, possibly of several fields (see :data:`TERM_FIELDS`)."""
+
+    MASK_SHIFT = "mask_shift"
+    MASK_ROTATION = "mask_rotation"
+    TONE = "tone"
+    PRINTABLE_RANGE = "printable_range"
+    MASK_BLUR = "mask_blur"
+    GAIN_MISMATCH = "gain_mismatch"
+    DARK_OFFSET = "dark_offset"
+
+
+#: The :class:`PerturbationModel` fields of each term.
+TERM_FIELDS: dict[PerturbationTerm, tuple[str, ...]] = {
+    PerturbationTerm.MASK_SHIFT: ("mask_shift_mm",),
+    PerturbationTerm.MASK_ROTATION: ("mask_rotation_deg",),
+    PerturbationTerm.TONE: ("gamma_deviation", "dot_gain_deviation"),
+    PerturbationTerm.PRINTABLE_RANGE: ("min_transmittance_error", "max_transmittance_error"),
+    PerturbationTerm.MASK_BLUR: ("mask_blur_mm",),
+    PerturbationTerm.GAIN_MISMATCH: ("gain_mismatch_percent",),
+    PerturbationTerm.DARK_OFFSET: ("dark_offset_v",),
+}
+
+#: Field -> (unit, upper bound, whether the bound is open): the allowed range ``[0, bound]``.
+_LIMITS: dict[str, tuple[str, float, bool]] = {
+    "mask_shift_mm": ("mm", 16.0, False),
+    "mask_rotation_deg": ("deg", 45.0, False),
+    "gamma_deviation": ("", 1.0, True),
+    "dot_gain_deviation": ("", 0.25, False),
+    "min_transmittance_error": ("", 0.5, False),
+    "max_transmittance_error": ("", 0.5, False),
+    "mask_blur_mm": ("mm", 16.0, False),
+    "gain_mismatch_percent": ("%", 100.0, True),
+    "dark_offset_v": ("V", 10.0, False),
+}
+
+
+def _check_magnitude(owner: str, name: str, value: object) -> float:
+    """``value`` as a float in ``[0, bound]`` of :data:`_LIMITS`, else ValueError naming it."""
+    unit, bound, open_ = _LIMITS[name]
+    allowed = f"[0, {bound:g}{')' if open_ else ']'}" + (f" {unit}" if unit else "")
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed a number in {allowed}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(
+            f"{owner}.{name} = {value!r} is invalid: allowed a finite number in {allowed}"
+        )
+    if v < 0 or v > bound or (open_ and v == bound):
+        raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed {allowed}")
+    return v
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbationModel:
+    """Half-ranges of the differences between a built camera and its design (defaults above).
+
+    Args:
+        mask_shift_mm: mask position error per axis per detector (mm), [0, 16].
+        mask_rotation_deg: mask rotation error per detector (deg), [0, 45].
+        gamma_deviation: printed tone-curve exponent ``gamma = 1 +- a``, [0, 1).
+        dot_gain_deviation: dot gain at 50 % ink coverage, ``+- a``, [0, 0.25]
+            (the curve stays monotone up to 0.25).
+        min_transmittance_error: error of the printable minimum transmittance, [0, 0.5].
+        max_transmittance_error: error of the printable maximum transmittance, [0, 0.5].
+        mask_blur_mm: Gaussian blur sigma of the print, drawn in ``[0, a]`` (mm), [0, 16].
+        gain_mismatch_percent: per-detector gain error (%), [0, 100).
+        dark_offset_v: per-detector output offset (V), [0, 10].
+
+    Raises:
+        ValueError: a field is negative, NaN, infinite or above its bound (the
+            message names the field, its unit and the allowed range).
+
+    """
+
+    mask_shift_mm: float = 0.3
+    mask_rotation_deg: float = 2.0
+    gamma_deviation: float = 0.15
+    dot_gain_deviation: float = 0.1
+    min_transmittance_error: float = 0.005
+    max_transmittance_error: float = 0.05
+    mask_blur_mm: float = 0.1
+    gain_mismatch_percent: float = 5.0
+    dark_offset_v: float = 2e-3
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = _check_magnitude("PerturbationModel", f.name, getattr(self, f.name))
+            object.__setattr__(self, f.name, value)
+
+    @classmethod
+    def zero(cls) -> PerturbationModel:
+        """The camera as designed: every term 0."""
+        return cls(**{f.name: 0.0 for f in fields(cls)})
+
+    def only(self, term: PerturbationTerm) -> PerturbationModel:
+        """This model with every term but ``term`` set to 0."""
+        keep = TERM_FIELDS[PerturbationTerm(term)]
+        return replace(PerturbationModel.zero(), **{n: getattr(self, n) for n in keep})
+
+    def scaled(self, factor: float) -> PerturbationModel:
+        """Every half-range times ``factor`` (>= 0; the result is validated)."""
+        if not (math.isfinite(factor) and factor >= 0):
+            raise ValueError(f"factor = {factor!r} is invalid: allowed a finite number >= 0")
+        return replace(self, **{f.name: getattr(self, f.name) * factor for f in fields(self)})
+
+    def is_zero(self) -> bool:
+        """Whether every term is 0 (a draw is then the identity)."""
+        return all(getattr(self, f.name) == 0.0 for f in fields(self))
+
+    def draw(self, num_pixels: int, rng: np.random.Generator) -> PerturbationDraw:
+        """One built camera of ``num_pixels`` freeform pixels (uniform draws of every term)."""
+        return self.draw_from(rng.random(self.uniforms_needed(num_pixels)), num_pixels)
+
+    @staticmethod
+    def uniforms_needed(num_pixels: int) -> int:
+        """How many U(0, 1) numbers :meth:`draw_from` takes for ``num_pixels`` pixels."""
+        return 5 * int(num_pixels) + 5
+
+    def draw_from(self, u: np.ndarray, num_pixels: int) -> PerturbationDraw:
+        """The built camera of :meth:`uniforms_needed` uniforms ``u`` in [0, 1) (numpy).
+
+        Training draws ``u`` from its torch generator (a resumed run draws the same).
+        """
+        k = int(num_pixels)
+        if k < 1:
+            raise ValueError(f"num_pixels = {num_pixels!r}: need at least 1")
+        u = np.asarray(u, np.float64)
+        if u.shape != (self.uniforms_needed(k),):
+            raise ValueError(f"u has shape {u.shape}: expected ({self.uniforms_needed(k)},)")
+        shift, rot, scalars, gain, offset = np.split(u, [2 * k, 3 * k, 3 * k + 5, 4 * k + 5])
+        gamma, dot, lo, hi, blur = scalars
+        return PerturbationDraw(
+            shift_mm=self.mask_shift_mm * (2 * shift.reshape(k, 2) - 1),
+            rotation_deg=self.mask_rotation_deg * (2 * rot - 1),
+            gamma=1.0 + self.gamma_deviation * (2 * gamma - 1),
+            dot_gain=self.dot_gain_deviation * (2 * dot - 1),
+            min_transmittance_error=self.min_transmittance_error * (2 * lo - 1),
+            max_transmittance_error=self.max_transmittance_error * (2 * hi - 1),
+            blur_sigma_mm=self.mask_blur_mm * blur,
+            gain=1.0 + self.gain_mismatch_percent * (2 * gain - 1) / 100.0,
+            offset_v=self.dark_offset_v * (2 * offset - 1),
+        )
+
+
+def _vector(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.array(value, dtype=np.float64)
+    if arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise ValueError(f"PerturbationDraw.{name} must be {shape} finite numbers; got {value!r}")
+    return arr
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbationDraw:
+    """One built camera: the drawn value of every term (numpy, per pixel where it says so).
+
+    Args:
+        shift_mm: ``[pixel, 2]`` mask displacement (mm): rows (down), columns (right).
+        rotation_deg: ``[pixel]`` mask rotation about its centre (deg), clockwise
+            as seen from the camera (row 0 up).
+        gamma: printed tone-curve exponent, > 0.
+        dot_gain: dot gain at 50 % ink coverage, [-0.25, 0.25].
+        min_transmittance_error: added to the printable minimum transmittance.
+        max_transmittance_error: added to the printable maximum transmittance.
+        blur_sigma_mm: Gaussian blur sigma of the print (mm), >= 0.
+        gain: ``[pixel]`` factor on each detector's power, > 0.
+        offset_v: ``[pixel]`` added to each detector's output voltage (V).
+
+    """
+
+    shift_mm: np.ndarray
+    rotation_deg: np.ndarray
+    gamma: float = 1.0
+    dot_gain: float = 0.0
+    min_transmittance_error: float = 0.0
+    max_transmittance_error: float = 0.0
+    blur_sigma_mm: float = 0.0
+    gain: np.ndarray = field(default_factory=lambda: np.ones(0))
+    offset_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        shift = np.array(self.shift_mm, dtype=np.float64)
+        k = shift.shape[0] if shift.ndim == 2 else -1
+        object.__setattr__(self, "shift_mm", _vector("shift_mm", shift, (k, 2)))
+        object.__setattr__(self, "rotation_deg", _vector("rotation_deg", self.rotation_deg, (k,)))
+        for name, default in (("gain", 1.0), ("offset_v", 0.0)):
+            value = getattr(self, name)
+            value = np.full(k, default) if np.size(value) == 0 else value
+            object.__setattr__(self, name, _vector(name, value, (k,)))
+        if not (math.isfinite(self.gamma) and self.gamma > 0):
+            raise ValueError(f"PerturbationDraw.gamma = {self.gamma!r} is invalid: allowed > 0")
+        if not abs(self.dot_gain) <= 0.25:
+            raise ValueError(
+                f"PerturbationDraw.dot_gain = {self.dot_gain!r} is invalid: allowed [-0.25, 0.25]"
+            )
+        if not (math.isfinite(self.blur_sigma_mm) and self.blur_sigma_mm >= 0):
+            raise ValueError(
+                f"PerturbationDraw.blur_sigma_mm = {self.blur_sigma_mm!r} mm is invalid: "
+                "allowed a finite number >= 0"
+            )
+        if not np.all(self.gain > 0):
+            raise ValueError(f"PerturbationDraw.gain = {self.gain!r} is invalid: allowed > 0")
+
+    @property
+    def num_pixels(self) -> int:
+        """Number of freeform pixels the draw is for."""
+        return int(self.shift_mm.shape[0])
+
+    @classmethod
+    def identity(cls, num_pixels: int) -> PerturbationDraw:
+        """The camera as designed, for ``num_pixels`` pixels."""
+        return cls(shift_mm=np.zeros((num_pixels, 2)), rotation_deg=np.zeros(num_pixels))
+
+    def transmittance_range(self, nominal: tuple[float, float]) -> tuple[float, float]:
+        """The printed ``(lo, hi)`` transmittance for the ``nominal`` range, kept in [0, 1].
+
+        Raises:
+            ValueError: the errors leave no range (``lo >= hi``).
+        """
+        lo = min(max(nominal[0] + self.min_transmittance_error, 0.0), 1.0)
+        hi = min(max(nominal[1] + self.max_transmittance_error, 0.0), 1.0)
+        if not lo < hi:
+            raise ValueError(
+                f"printed transmittance range ({lo:g}, {hi:g}) is empty: the errors "
+                f"{self.min_transmittance_error:g}, {self.max_transmittance_error:g} are too large "
+                f"for the nominal range {nominal}"
+            )
+        return lo, hi

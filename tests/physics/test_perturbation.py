@@ -1,0 +1,216 @@
+"""Perturbation model and fabricated mask plane: identities, closed forms, gradients, bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.optics.fabrication import (
+    blur_mask,
+    fabricated_transmittance,
+    place_masks,
+    print_tone,
+)
+from mincam_render.optics.maskplane import transmittance
+from mincam_render.optics.perturbation import (
+    TERM_FIELDS,
+    PerturbationDraw,
+    PerturbationModel,
+    PerturbationTerm,
+)
+
+RANGE = (0.01, 0.67)
+TEXEL_M = (0.5 * MM, 0.5 * MM)  # the prototype's 16 mm / 32 texels
+
+
+def _logits(rng: np.random.Generator, k: int = 3, res: int = 8) -> torch.Tensor:
+    return torch.from_numpy(rng.normal(0, 2, (k, res, res)))
+
+
+@pytest.mark.parametrize("term", list(PerturbationTerm), ids=lambda t: t.value)
+def test_each_term_at_magnitude_zero_is_exactly_the_design(term, rng):
+    logits = _logits(rng)
+    draw = PerturbationModel().only(term).scaled(0.0).draw(3, rng)
+    m = fabricated_transmittance(logits, RANGE, draw, TEXEL_M)
+    assert torch.equal(m, transmittance(logits, RANGE))
+    assert np.array_equal(draw.gain, np.ones(3)) and np.array_equal(draw.offset_v, np.zeros(3))
+
+
+@pytest.mark.parametrize("term", list(PerturbationTerm), ids=lambda t: t.value)
+def test_each_term_alone_changes_only_its_own_fields(term, rng):
+    model = PerturbationModel().only(term)
+    for f in dataclasses.fields(model):
+        expected = getattr(PerturbationModel(), f.name) if f.name in TERM_FIELDS[term] else 0.0
+        assert getattr(model, f.name) == expected
+
+
+@pytest.mark.parametrize(("rows", "cols"), [(2, 0), (0, -3), (1, 2)])
+def test_an_integer_shift_is_a_roll_with_the_border_entering(rows, cols, rng):
+    m = torch.from_numpy(rng.uniform(0.1, 0.6, (2, 8, 8)))
+    shift = np.array([[rows, cols], [rows, cols]], dtype=np.float64)
+    out = place_masks(m, shift, np.zeros(2), fill=0.01)
+    rolled = torch.roll(m, shifts=(rows, cols), dims=(1, 2)).clone()
+    if rows > 0:
+        rolled[:, :rows] = 0.01
+    if cols > 0:
+        rolled[:, :, :cols] = 0.01
+    if cols < 0:
+        rolled[:, :, cols:] = 0.01
+    torch.testing.assert_close(out, rolled, rtol=0, atol=1e-12)
+
+
+def test_a_shift_in_mm_moves_the_mask_by_texels(rng):
+    logits = _logits(rng, k=1)
+    draw = PerturbationDraw(shift_mm=[[0.0, 1.0]], rotation_deg=[0.0])  # 2 texels right
+    m = fabricated_transmittance(logits, RANGE, draw, TEXEL_M)
+    nominal = transmittance(logits, RANGE)
+    torch.testing.assert_close(m[:, :, 2:], nominal[:, :, :-2], rtol=0, atol=1e-12)
+    torch.testing.assert_close(m[:, :, :2], torch.full_like(m[:, :, :2], RANGE[0]))
+
+
+def test_a_quarter_turn_rotates_the_mask_clockwise(rng):
+    m = torch.from_numpy(rng.uniform(0.1, 0.6, (1, 6, 6)))
+    out = place_masks(m, np.zeros((1, 2)), np.array([math.pi / 2]), fill=0.0)
+    # clockwise as seen with row 0 up: the top row becomes the right column
+    torch.testing.assert_close(out, torch.rot90(m, k=-1, dims=(1, 2)), rtol=0, atol=1e-12)
+
+
+def test_blur_keeps_a_uniform_mask_uniform_away_from_the_border_and_preserves_mass():
+    m = torch.full((1, 32, 32), 0.4, dtype=torch.float64)
+    out = blur_mask(m, (1.0, 1.0), fill=0.4)
+    torch.testing.assert_close(out, m, rtol=0, atol=1e-12)
+    spike = torch.zeros((1, 16, 16), dtype=torch.float64)
+    spike[0, 8, 8] = 1.0
+    blurred = blur_mask(spike, (1.5, 0.7), fill=0.0)
+    assert float(blurred.sum()) == pytest.approx(1.0, abs=1e-12)
+    # separable Gaussian: the variance along each axis is sigma^2 (3-sigma kernel)
+    rows = torch.arange(16, dtype=torch.float64)
+    var_r = float((blurred[0].sum(1) * (rows - 8) ** 2).sum())
+    assert var_r == pytest.approx(1.5**2, rel=0.03)
+
+
+@pytest.mark.parametrize(
+    ("gamma", "dot_gain"), [(0.7, 0.0), (1.3, 0.25), (1.0, -0.25), (0.85, 0.1)]
+)
+def test_tone_curve_is_monotone_and_stays_in_the_printable_range(gamma, dot_gain):
+    y = torch.linspace(0, 1, 1001, dtype=torch.float64)
+    out = print_tone(y, gamma, dot_gain)
+    assert torch.all(out.diff() >= -1e-15)
+    assert float(out.min()) >= 0.0 and float(out.max()) <= 1.0
+    assert float(out[0]) == pytest.approx(0.0, abs=1e-12)
+    assert float(out[-1]) == pytest.approx(1.0, abs=1e-12)
+    # closed form at the middle of the range
+    c = 1 - 0.5**gamma
+    assert float(print_tone(torch.tensor([0.5], dtype=torch.float64), gamma, dot_gain)) == (
+        pytest.approx(1 - (c + 4 * dot_gain * c * (1 - c)), rel=1e-12)
+    )
+
+
+def test_fabricated_masks_stay_within_the_printed_range(rng):
+    logits = _logits(rng, k=4, res=16) * 4
+    for _ in range(5):
+        draw = PerturbationModel().scaled(2.0).draw(4, rng)
+        lo, hi = draw.transmittance_range(RANGE)
+        m = fabricated_transmittance(logits, RANGE, draw, TEXEL_M)
+        assert float(m.min()) >= lo - 1e-12 and float(m.max()) <= hi + 1e-12
+
+
+def test_gradient_through_the_fabricated_mask_plane_matches_central_differences(rng):
+    logits = _logits(rng, k=2, res=6).requires_grad_(True)
+    draw = PerturbationDraw(
+        shift_mm=[[0.31, -0.17], [-0.4, 0.2]],
+        rotation_deg=[3.0, -1.5],
+        gamma=0.8,
+        dot_gain=0.12,
+        min_transmittance_error=0.003,
+        max_transmittance_error=-0.04,
+        blur_sigma_mm=0.4,
+    )
+    weights = torch.from_numpy(rng.normal(size=(2, 6, 6)))
+
+    def f(x: torch.Tensor) -> torch.Tensor:
+        return (fabricated_transmittance(x, RANGE, draw, TEXEL_M) * weights).sum()
+
+    assert torch.autograd.gradcheck(f, (logits,), eps=1e-6, atol=1e-7, rtol=1e-5)
+
+
+def test_gain_mismatch_scales_measurements_exactly_and_offset_adds_volts(rng):
+    from support import linear_task
+
+    from mincam_render.learn import train as tr
+
+    data = linear_task(n=40, k=3)
+    model = tr.build_mincam(data)
+    t = torch.from_numpy(data.transport)
+    k = model.num_pixels
+    gain = rng.uniform(0.9, 1.1, k)
+    offset = rng.uniform(-2e-3, 2e-3, k)
+    base = PerturbationDraw.identity(k)
+    nominal = model.measure(t, noise=False).detach()
+    assert 0 < float(nominal.max()) < model.camera.electronics.full_scale_v  # unsaturated
+    scaled = model.measure(t, noise=False, draw=dataclasses.replace(base, gain=gain))
+    expected = nominal * torch.from_numpy(gain).float()
+    torch.testing.assert_close(scaled, expected, rtol=1e-6, atol=0)
+    shifted = model.measure(t, noise=False, draw=dataclasses.replace(base, offset_v=offset))
+    torch.testing.assert_close(
+        shifted, nominal + torch.from_numpy(offset).float(), rtol=0, atol=1e-7
+    )
+    assert torch.equal(model.measure(t, noise=False, draw=base), nominal)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"mask_shift_mm": -0.1}, "mask_shift_mm"),
+        ({"mask_rotation_deg": float("nan")}, "mask_rotation_deg"),
+        ({"gamma_deviation": 1.0}, "gamma_deviation"),
+        ({"dot_gain_deviation": 0.3}, "dot_gain_deviation"),
+        ({"gain_mismatch_percent": float("inf")}, "gain_mismatch_percent"),
+        ({"dark_offset_v": "2mV"}, "dark_offset_v"),
+        ({"mask_blur_mm": True}, "mask_blur_mm"),
+    ],
+)
+def test_bad_magnitudes_are_refused_naming_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=f"PerturbationModel.{field} = "):
+        PerturbationModel(**kwargs)
+
+
+@pytest.mark.parametrize("gamma", [0.0, -1.0, float("nan")])
+def test_gamma_must_be_positive(gamma):
+    with pytest.raises(ValueError, match="gamma"):
+        print_tone(torch.ones(3), gamma, 0.0)
+    with pytest.raises(ValueError, match="PerturbationDraw.gamma"):
+        PerturbationDraw(shift_mm=np.zeros((1, 2)), rotation_deg=[0.0], gamma=gamma)
+
+
+def test_draws_of_bad_shape_or_range_are_refused():
+    with pytest.raises(ValueError, match="rotation_deg"):
+        PerturbationDraw(shift_mm=np.zeros((2, 2)), rotation_deg=[0.0])
+    with pytest.raises(ValueError, match="is empty"):
+        PerturbationDraw(
+            shift_mm=np.zeros((1, 2)), rotation_deg=[0.0], max_transmittance_error=-0.7
+        ).transmittance_range(RANGE)
+    with pytest.raises(ValueError, match="factor"):
+        PerturbationModel().scaled(-1.0)
+    with pytest.raises(ValueError, match="pixels"):
+        fabricated_transmittance(torch.zeros(2, 4, 4), RANGE, PerturbationDraw.identity(3), TEXEL_M)
+
+
+def test_draws_are_within_their_ranges_and_reproducible():
+    model = PerturbationModel()
+    a = model.draw(8, np.random.default_rng(5))
+    b = model.draw(8, np.random.default_rng(5))
+    assert np.array_equal(a.shift_mm, b.shift_mm) and a.gamma == b.gamma
+    assert np.abs(a.shift_mm).max() <= 0.3 and np.abs(a.rotation_deg).max() <= 2.0
+    assert abs(a.gamma - 1) <= 0.15 and 0 <= a.blur_sigma_mm <= 0.1
+    assert np.abs(a.gain - 1).max() <= 0.05 and np.abs(a.offset_v).max() <= 2e-3
+
+
+def test_camera_texel_size_is_what_the_fabrication_uses():
+    cam = FreeformCamera(mask_resolution=(32, 32), layout=DetectorLayout.row(count=1, pitch_m=0.02))
+    assert cam.texel_size_m == pytest.approx(TEXEL_M)
