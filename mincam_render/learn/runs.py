@@ -176,11 +176,15 @@ def _run_metrics(
 
 
 def config_record(config: TrainConfig) -> dict[str, Any]:
-    """``run.json``'s recipe: the fields of ``config``, ``head`` only when not the paper's MLP.
+    """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
-    Runs written before the head was a choice then resume (their recipe compares equal).
+    ``head`` appears only when not the paper's MLP, ``perturbation`` only when
+    training is robust. Runs written before either was a choice then resume (their
+    recipe compares equal).
     """
     record = asdict(config)
+    if config.perturbation is None:
+        del record["perturbation"]
     if config.head is HeadKind.MLP:
         del record["head"]
     else:

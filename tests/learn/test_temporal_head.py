@@ -103,6 +103,7 @@ def test_train_run_records_the_head_and_resumes_runs_written_before_the_choice(t
     assert run["config"]["head"] == "tcn" and metrics["model"]["head"] == "tcn"
     # the paper's MLP: run.json's recipe as before the head was a choice
     assert "head" not in config_record(tr.TrainConfig())
+    assert "perturbation" not in config_record(tr.TrainConfig())
 
 
 def test_the_default_learning_rate_follows_the_first_layers_fan_in():
