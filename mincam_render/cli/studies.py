@@ -173,8 +173,9 @@ def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
         click.echo(f"  verdict: {result['verdict']}")
     for name, against in result["versus_trivial"].items():
         click.echo(f"  {name} against the trivial predictor: {against}")
-    for warning in result["coverage"]["warnings"]:
-        click.echo(f"  label coverage: {warning}")
+    if n := len(result["coverage"]["warnings"]):
+        # each was logged before training; the summary only points at them
+        click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")
 
 
 @click.command("pipeline")
