@@ -45,6 +45,8 @@ from mincam_render.analysis.statistics import (
     Interval,
     bootstrap_interval,
     converged,
+    paired_difference,
+    paired_statement,
     verdict,
 )
 from mincam_render.core.labels import LabelKind
@@ -251,6 +253,27 @@ def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeE
     )
 
 
+def paired_differences(
+    errors: Mapping[str, EpisodeErrors], compared: Sequence[str], seed: int
+) -> dict[str, dict[str, Any]]:
+    """Paired differences on the same test episodes, beside the separate intervals.
+
+    ``compared`` (the first two designs) against each other when there are two,
+    and every design against the trivial predictor (``errors["trivial"]``).
+
+    Returns:
+        ``{"A - B": {"mean", "ci95", "statement"}}``.
+    """
+    pairs = [(n, "trivial") for n in errors if n != "trivial"]
+    if len(compared) == 2:
+        pairs.insert(0, (compared[0], compared[1]))
+    out: dict[str, dict[str, Any]] = {}
+    for a, b in pairs:
+        diff = paired_difference(errors[a], errors[b], seed=seed)
+        out[f"{a} - {b}"] = diff.as_dict() | {"statement": paired_statement(a, b, diff)}
+    return out
+
+
 def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     """``converged`` (every run: last doubling of steps < 2 % better); else why not.
 
@@ -266,11 +289,14 @@ def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     return "budget-limited"
 
 
-def _design_summary(runs: list[dict[str, Any]], interval: Interval) -> dict[str, Any]:
+def _design_summary(
+    runs: list[dict[str, Any]], interval: Interval, errors: EpisodeErrors
+) -> dict[str, Any]:
     conv = [dict(converged(r["history"]), stopped_early=r["stopped_early"]) for r in runs]
     return {
         "model": runs[0]["model"],
         "error": interval.as_dict(),
+        "episode_errors": errors.as_dict(),
         "error_per_seed": [_episode_errors([r["episodes"]]).point() for r in runs],
         "converged": all(c["converged"] for c in conv),
         "state": training_state(conv),
@@ -342,12 +368,13 @@ def run_comparison(
     coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
     runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
-    intervals = {
-        name: bootstrap_interval(_episode_errors([r["episodes"] for r in rs]), seed=cfg.seed)
-        for name, rs in runs.items()
+    errors = {name: _episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
+    errors["trivial"] = _episode_errors([trivial])
+    intervals = {name: bootstrap_interval(e, seed=cfg.seed) for name, e in errors.items()}
+    trivial_iv = intervals.pop("trivial")
+    designs = {
+        name: _design_summary(rs, intervals[name], errors[name]) for name, rs in runs.items()
     }
-    trivial_iv = bootstrap_interval(_episode_errors([trivial]), seed=cfg.seed)
-    designs = {name: _design_summary(rs, intervals[name]) for name, rs in runs.items()}
     first, second = (d.name for d in cfg.designs[:2])
     result: dict[str, Any] = {
         "task": task,
@@ -355,7 +382,11 @@ def run_comparison(
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         "episodes": {k: _episode_record(d) for k, d in data.items()},
         "designs": designs,
-        "trivial": {"error": trivial_iv.as_dict(), "episodes": trivial},
+        "trivial": {
+            "error": trivial_iv.as_dict(),
+            "episode_errors": errors["trivial"].as_dict(),
+            "episodes": trivial,
+        },
         "verdict": (
             verdict(first, intervals[first], second, intervals[second])
             if len(cfg.designs) == 2
@@ -364,6 +395,7 @@ def run_comparison(
         "versus_trivial": {
             name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
         },
+        "paired": paired_differences(errors, [d.name for d in cfg.designs[:2]], cfg.seed),
         "labels": label_intervals(
             {name: [r["episodes"] for r in rs] for name, rs in runs.items()}
             | {"trivial": [trivial]},
@@ -535,15 +567,30 @@ def study_table(result: Mapping[str, Any]) -> str:
 
 
 def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
-    """The reference design against every baseline: a verdict only where intervals separate."""
+    """The reference design against every baseline: a verdict only where intervals separate.
+
+    Each verdict is followed by the paired difference on the same test episodes
+    (:func:`~mincam_render.analysis.statistics.paired_difference`) where the
+    result keeps per-episode errors (studies from before it do not).
+    """
     designs = result["designs"]
-    ref = designs[reference]["error"]
-    iv = Interval(ref["mean"], *ref["ci95"])
-    return [
-        verdict(reference, iv, name, Interval(d["error"]["mean"], *d["error"]["ci95"]))
-        for name, d in designs.items()
-        if name.startswith("baseline-")
-    ]
+    ref = designs[reference]
+    iv = Interval(ref["error"]["mean"], *ref["error"]["ci95"])
+    seed = int(result.get("config", {}).get("seed", 0))
+    lines = []
+    for name, d in designs.items():
+        if not name.startswith("baseline-"):
+            continue
+        other = Interval(d["error"]["mean"], *d["error"]["ci95"])
+        lines.append(verdict(reference, iv, name, other))
+        if "episode_errors" in ref and "episode_errors" in d:
+            diff = paired_difference(
+                EpisodeErrors.from_dict(ref["episode_errors"]),
+                EpisodeErrors.from_dict(d["episode_errors"]),
+                seed=seed,
+            )
+            lines.append(paired_statement(reference, name, diff))
+    return lines
 
 
 def summarise_study(result: dict[str, Any], reference: str) -> dict[str, Any]:

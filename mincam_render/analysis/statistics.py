@@ -10,14 +10,21 @@ and training seeds independently (``scipy.stats.bootstrap``, percentile
 method; with 3 episodes and 3 seeds the interval is coarse, and honest about it).
 
 "A beats B" holds only where the two 95 % intervals do not overlap
-(:func:`verdict`). A run counts as converged when the last doubling of its
-steps improved its best validation loss by less than 2 % (:func:`converged`).
+(:func:`verdict`). Two designs tested on the same episodes also get the
+interval of their difference (:func:`paired_difference`): the episodes are
+resampled once for both, so an episode that is hard for every camera moves both
+errors together and drops out of the difference; the separate intervals keep
+that shared variation. The paired interval is reported beside the verdict; the
+verdict itself stays the stricter separate-interval rule. A run counts as
+converged when the last doubling of its steps improved its best validation loss
+by less than 2 % (:func:`converged`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +73,19 @@ class EpisodeErrors:
         per_seed = np.sqrt((e**2) @ w) if self.pooling == "rms" else e @ w
         return float(per_seed.mean())
 
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form: ``{"error": [[seed x episode]], "frames": [...], "pooling": ...}``."""
+        return {
+            "error": self.error.tolist(),
+            "frames": self.frames.tolist(),
+            "pooling": self.pooling,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> EpisodeErrors:
+        """Inverse of :meth:`as_dict`."""
+        return cls(np.asarray(d["error"]), np.asarray(d["frames"]), str(d["pooling"]))
+
     def point(self) -> float:
         """The configuration's figure: every seed, every episode."""
         s, e = self.error.shape
@@ -88,26 +108,30 @@ class Interval:
         return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"
 
 
-def bootstrap_interval(errors: EpisodeErrors, seed: int = 0) -> Interval:
-    """:meth:`EpisodeErrors.point` with its interval, resampling seeds and episodes."""
+def _bootstrap(
+    axes: list[np.ndarray], statistic: Callable[..., float], point: float, seed: int
+) -> Interval:
+    """``point`` with the percentile interval of ``statistic(*index arrays)``.
+
+    Each axis of index arrays (seeds, episodes) is resampled independently; an
+    axis of one index is kept as it is (a lone seed is not resampled), and with
+    nothing to resample the interval is degenerate, said as such.
+    """
     from scipy.stats import bootstrap
 
-    s, e = errors.error.shape
-    point = errors.point()
-    axes = [np.arange(s), np.arange(e)]
-    varied = [i for i, a in enumerate(axes) if len(a) >= 2]  # a lone seed is not resampled
-    if not varied:  # nothing to resample: a degenerate interval, said as such
+    varied = [i for i, a in enumerate(axes) if len(a) >= 2]
+    if not varied:
         return Interval(point, point, point)
 
-    def statistic(*resampled: np.ndarray) -> float:
+    def resampled_statistic(*resampled: np.ndarray) -> float:
         idx = list(axes)
         for i, r in zip(varied, resampled, strict=True):
             idx[i] = r.astype(int)
-        return errors.pooled(idx[0], idx[1])
+        return statistic(*idx)
 
     res = bootstrap(
         tuple(axes[i] for i in varied),
-        statistic,
+        resampled_statistic,
         vectorized=False,
         paired=False,
         confidence_level=CONFIDENCE,
@@ -117,6 +141,54 @@ def bootstrap_interval(errors: EpisodeErrors, seed: int = 0) -> Interval:
     )
     ci = res.confidence_interval
     return Interval(point, float(ci.low), float(ci.high))
+
+
+def bootstrap_interval(errors: EpisodeErrors, seed: int = 0) -> Interval:
+    """:meth:`EpisodeErrors.point` with its interval, resampling seeds and episodes."""
+    s, e = errors.error.shape
+    return _bootstrap([np.arange(s), np.arange(e)], errors.pooled, errors.point(), seed)
+
+
+def paired_difference(a: EpisodeErrors, b: EpisodeErrors, seed: int = 0) -> Interval:
+    """``a.point() - b.point()`` with its 95 % interval, on the same test episodes.
+
+    Every bootstrap resample draws one set of test episodes for both
+    configurations and each configuration's training seeds independently (seed
+    ``i`` of ``a`` and of ``b`` are unrelated models). An interval that excludes
+    0 says the ordering holds on these episodes' kind of scene, beyond seeds and
+    episode-to-episode difficulty.
+
+    Raises:
+        ValueError: the two were not tested on the same number of episodes or
+            frames, or with the same pooling.
+    """
+    if not np.array_equal(a.frames, b.frames) or a.pooling != b.pooling:
+        raise ValueError(
+            "a paired difference needs the same test episodes: frames "
+            f"{a.frames.tolist()} vs {b.frames.tolist()}, pooling {a.pooling!r} vs {b.pooling!r}"
+        )
+    axes = [np.arange(a.error.shape[0]), np.arange(b.error.shape[0]), np.arange(len(a.frames))]
+    return _bootstrap(
+        axes,
+        lambda sa, sb, ep: a.pooled(sa, ep) - b.pooled(sb, ep),
+        a.point() - b.point(),
+        seed,
+    )
+
+
+def paired_statement(name_a: str, name_b: str, diff: Interval) -> str:
+    """One line on the paired difference ``a - b`` (lower error is better)."""
+    where = (
+        f"{name_a} lower on the same episodes"
+        if diff.high < 0
+        else f"{name_b} lower on the same episodes"
+        if diff.low > 0
+        else "the interval contains 0"
+    )
+    return (
+        f"paired difference {name_a} - {name_b}: {diff.mean:+.3f} "
+        f"[{diff.low:+.3f}, {diff.high:+.3f}] ({where})"
+    )
 
 
 def verdict(name_a: str, a: Interval, name_b: str, b: Interval) -> str:

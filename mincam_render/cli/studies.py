@@ -173,6 +173,8 @@ def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
         click.echo(f"  verdict: {result['verdict']}")
     for name, against in result["versus_trivial"].items():
         click.echo(f"  {name} against the trivial predictor: {against}")
+    for paired in result["paired"].values():
+        click.echo(f"  {paired['statement']}")
     if n := len(result["coverage"]["warnings"]):
         # each was logged before training; the summary only points at them
         click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")

@@ -166,6 +166,12 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
     assert summary["seeds"] == 2 and isinstance(summary["converged"], bool)
     table = (out / "study.md").read_text()
     assert all(f"| {n} |" in table for n in metrics["designs"])
+    # each verdict of the reference against a baseline is followed by its paired difference
+    verdicts = metrics["reference_verdicts"]
+    assert len(verdicts) == 4 and verdicts[1].startswith(
+        "paired difference mincam-2px - baseline-1x1"
+    )
+    assert all(line in table for line in verdicts)
     for n in names:  # every minimalist design keeps its masks
         assert (out / "masks" / "patches" / n / "masks.json").is_file()
     for run in metrics["designs"]["mincam-2px-nosensor"]["runs"]:  # supplement A

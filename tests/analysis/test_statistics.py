@@ -8,6 +8,8 @@ from mincam_render.analysis.statistics import (
     Interval,
     bootstrap_interval,
     converged,
+    paired_difference,
+    paired_statement,
     verdict,
 )
 from mincam_render.core.seeds import stream_seed
@@ -62,6 +64,45 @@ def test_verdict_only_where_intervals_separate():
     assert verdict("a", Interval(1, 0.9, 1.5), "b", Interval(1.4, 1.2, 1.6)).startswith(
         "no verdict"
     )
+
+
+def test_paired_difference_removes_the_episode_difficulty_the_separate_intervals_keep():
+    # episodes of very different difficulty shared by both cameras; b is 0.1 worse everywhere
+    difficulty = np.array([0.5, 1.5, 3.0, 1.0])
+    seed_noise = np.array([[0.0], [0.01], [-0.01]])
+    a = EpisodeErrors(difficulty + seed_noise, np.full(4, 100), "mean")
+    b = EpisodeErrors(difficulty + 0.1 + seed_noise[::-1], np.full(4, 100), "mean")
+    assert verdict("a", bootstrap_interval(a), "b", bootstrap_interval(b)).startswith(
+        "no verdict"
+    )
+    diff = paired_difference(a, b)
+    assert diff.mean == pytest.approx(-0.1)  # means of the error rates: closed form
+    assert -0.1 - 0.02 <= diff.low <= diff.mean <= diff.high <= -0.1 + 0.02
+    assert "a lower on the same episodes" in paired_statement("a", "b", diff)
+    flipped = paired_difference(b, a)
+    assert flipped.mean == pytest.approx(0.1)
+    assert "a lower on the same episodes" in paired_statement("b", "a", flipped)
+
+
+def test_paired_difference_of_a_noisy_tie_contains_zero_and_needs_the_same_episodes():
+    rng = np.random.default_rng(1)
+    a = EpisodeErrors(1 + 0.2 * rng.standard_normal((3, 5)), np.full(5, 60), "rms")
+    b = EpisodeErrors(1 + 0.2 * rng.standard_normal((3, 5)), np.full(5, 60), "rms")
+    diff = paired_difference(a, b)
+    assert diff.low < 0 < diff.high
+    assert "contains 0" in paired_statement("a", "b", diff)
+    other = EpisodeErrors(np.ones((3, 4)), np.full(4, 60), "rms")
+    with pytest.raises(ValueError, match="same test episodes"):
+        paired_difference(a, other)
+
+
+def test_episode_errors_round_trip_through_json():
+    import json
+
+    e = EpisodeErrors(np.array([[1.0, 2.5], [0.5, 3.0]]), np.array([10, 40]), "rms")
+    back = EpisodeErrors.from_dict(json.loads(json.dumps(e.as_dict())))
+    assert np.array_equal(back.error, e.error) and np.array_equal(back.frames, e.frames)
+    assert back.pooling == "rms" and back.point() == pytest.approx(e.point())
 
 
 @pytest.mark.parametrize(

@@ -142,6 +142,17 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
         source = metrics["trivial"] if name == "trivial" else designs[name]
         assert figure == source["error"]  # the primary label is the task's error
     assert metrics["verdict"] in res.output
+    # paired differences on the same test episodes: the two cameras, then each against trivial
+    paired = metrics["paired"]
+    assert list(paired) == [
+        "mincam-2px - baseline-2x2", "mincam-2px - trivial", "baseline-2x2 - trivial"
+    ]  # fmt: skip
+    for key, p in paired.items():
+        a, b = key.split(" - ")
+        lo, hi = p["ci95"]
+        assert lo <= p["mean"] <= hi and p["statement"] in res.output
+        errors = {n: designs[n] for n in designs} | {"trivial": metrics["trivial"]}
+        assert p["mean"] == pytest.approx(errors[a]["error"]["mean"] - errors[b]["error"]["mean"])
     assert (out / "comparison.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     sidecar = json.loads((out / "masks" / "patches" / "mincam-2px" / "masks.json").read_text())
     assert sidecar["masks"] == 2 and len(sidecar["files"]["png"]) == 2
