@@ -242,7 +242,7 @@ def _design_runs(
 _MASK_RUN_KEYS = ("steps", "best_step", "stopped_early", "train_wall_time_s", "episodes")
 
 
-def _episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
+def episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
     """``EpisodeErrors`` of runs' (or the trivial predictor's) per-episode metrics."""
     first = per_seed[0]
     names = sorted(first)
@@ -297,7 +297,7 @@ def _design_summary(
         "model": runs[0]["model"],
         "error": interval.as_dict(),
         "episode_errors": errors.as_dict(),
-        "error_per_seed": [_episode_errors([r["episodes"]]).point() for r in runs],
+        "error_per_seed": [episode_errors([r["episodes"]]).point() for r in runs],
         "converged": all(c["converged"] for c in conv),
         "state": training_state(conv),
         "convergence": conv,
@@ -368,8 +368,8 @@ def run_comparison(
     coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
     runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
-    errors = {name: _episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
-    errors["trivial"] = _episode_errors([trivial])
+    errors = {name: episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
+    errors["trivial"] = episode_errors([trivial])
     intervals = {name: bootstrap_interval(e, seed=cfg.seed) for name, e in errors.items()}
     trivial_iv = intervals.pop("trivial")
     designs = {

@@ -1,0 +1,80 @@
+"""Paired differences for a kept study whose metrics predate them.
+
+`mincam-render study` now writes, beside every verdict, the paired difference of
+two designs on the same test episodes (``analysis.statistics.paired_difference``).
+Studies kept in ``benchmarks/results/`` before that have each run's per-episode
+test metrics only in its run directory (``RUN/metrics.json``). This script
+reads them back, adds ``episode_errors`` to every design and to the trivial
+predictor, recomputes ``reference_verdicts`` (each separate-interval verdict
+followed by its paired line) and ``paired`` (every design against the trivial
+predictor), records ``paired_added`` (git revision, date) and appends the lines
+to the study's ``.md``. Nothing is retrained: the figures are the kept runs'.
+
+Usage:
+    PYTHONPATH=. python benchmarks/study_paired.py benchmarks/results/study_workspace_2fps.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+from pathlib import Path
+from typing import Any
+
+from bench_patches_paper import machine
+
+from mincam_render.analysis.comparison import (
+    episode_errors,
+    paired_differences,
+    reference_verdicts,
+)
+
+
+def add_paired(result: dict[str, Any]) -> list[str]:
+    """Add per-episode errors and paired differences to ``result``; the new lines."""
+    errors = {}
+    for name, d in result["designs"].items():
+        runs = [json.loads((Path(r) / "metrics.json").read_text())["episodes"] for r in d["runs"]]
+        errors[name] = episode_errors(runs)
+        d["episode_errors"] = errors[name].as_dict()
+    errors["trivial"] = episode_errors([result["trivial"]["episodes"]])
+    result["trivial"]["episode_errors"] = errors["trivial"].as_dict()
+    seed = int(result["config"].get("seed", 0))
+    result["reference_verdicts"] = reference_verdicts(
+        result, result["reduction_factor"]["reference"]
+    )
+    result["paired"] = paired_differences(errors, [], seed)
+    return [line for line in result["reference_verdicts"] if line.startswith("paired")] + [
+        p["statement"] for p in result["paired"].values()
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("study", type=Path, help="a study_*.json of benchmarks/results")
+    args = parser.parse_args()
+    result = json.loads(args.study.read_text())
+    lines = add_paired(result)
+    revision = machine()["git_revision"]
+    result["paired_added"] = {"git_revision": revision, "date": str(datetime.date.today())}
+    args.study.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    md = args.study.with_suffix(".md")
+    section = [
+        "",
+        f"## Paired differences on the same test episodes (added at {revision})",
+        "",
+        "Each design's error minus the other's, the test episodes resampled once for "
+        "both and each design's seeds independently (95 % bootstrap interval; "
+        "`benchmarks/study_paired.py`, no retraining). An interval that excludes 0 says "
+        "the ordering holds beyond seeds and the difficulty the episodes share; the "
+        "verdicts above keep the stricter separate-interval rule.",
+        "",
+        *[f"- {line}" for line in lines],
+    ]
+    md.write_text(md.read_text().rstrip("\n") + "\n" + "\n".join(section) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
