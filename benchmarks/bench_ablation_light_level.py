@@ -45,7 +45,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from bench_patches_paper import machine
+from provenance import machine
 
 from mincam_render.analysis.comparison import Design, run_comparison
 from mincam_render.analysis.comparison_config import ComparisonConfig

@@ -26,30 +26,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import platform
-import subprocess
 import time
 from pathlib import Path
 
+from provenance import machine
+
 REPO = Path(__file__).resolve().parents[1]
 DEPTHS = (3, 6, 12, 24)
-
-
-def machine() -> dict:
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", *args], capture_output=True, text=True, cwd=REPO, check=False
-        ).stdout.strip()
-
-    return {
-        "platform": platform.platform(),
-        "cpus": os.cpu_count(),
-        "load_average_1min": os.getloadavg()[0],
-        "python": platform.python_version(),
-        "git_revision": git("rev-parse", "HEAD"),
-        "git_dirty": bool(git("status", "--porcelain")),
-    }
 
 
 def depth_check(family: str, config) -> dict:

@@ -14,25 +14,16 @@ Each rendered transport is checked to be finite and non-negative first.
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import statistics
-import subprocess
 import time
 from pathlib import Path
 
 import numpy as np
+from provenance import machine, write_result
 
 from mincam_render import render_transport
 from mincam_render.render import backend
 from mincam_render.scenes import FAMILY_NAMES, load_family
-
-
-def git_revision() -> str:
-    try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def bench(name: str, frames: int, spp: int, repeats: int) -> dict:
@@ -100,14 +91,11 @@ def main() -> None:
         )
     result = {
         "benchmark": "scene families: generate and render one frame at the default camera",
-        "machine": {"platform": platform.platform(), "cpus": __import__("os").cpu_count()},
+        "machine": machine(),
         "backend": backend.describe(),
-        "git_revision": git_revision(),
         "results": rows,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_result(args.out, result)
 
 
 if __name__ == "__main__":

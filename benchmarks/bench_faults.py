@@ -48,7 +48,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
-from bench_patches_paper import machine  # noqa: E402
+from provenance import machine  # noqa: E402
 
 RENDER = ["render", "patches", "--frames", "40", "--shard-frames", "8", "--detectors", "2"]
 RENDER += ["--mask-res", "8", "--spp", "2", "--seed", "5", "--no-progress", "--workers", "0"]

@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_patches_paper import machine  # noqa: E402
+from provenance import machine  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 FAMILIES = ("patches", "workspace", "lighting", "traffic")

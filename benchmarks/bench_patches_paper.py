@@ -46,7 +46,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -56,6 +55,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from provenance import machine
 
 from mincam_render.learn import train as tr
 from mincam_render.learn.models import CountLoss
@@ -66,37 +66,6 @@ from mincam_render.scenes import patches_linear as pl
 _LINEAR_BATCH = 2048
 #: Relative training cost per step (measured: mincam 8.3 ms, baselines 2.8-3.8 ms).
 _COST = {"mincam_4px": 2.5}
-
-
-def machine() -> dict:
-    try:
-        rev = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            cwd=Path(__file__).parent,
-            check=False,
-        ).stdout.strip()
-        dirty = bool(
-            subprocess.run(
-                ["git", "status", "--porcelain"],
-                capture_output=True,
-                text=True,
-                cwd=Path(__file__).parent,
-            ).stdout.strip()
-        )
-    except OSError:
-        rev, dirty = "", False
-    return {
-        "platform": platform.platform(),
-        "processor": platform.processor(),
-        "cpus": os.cpu_count(),
-        "torch_threads": torch.get_num_threads(),
-        "python": platform.python_version(),
-        "torch": torch.__version__,
-        "git_revision": rev,
-        "git_dirty": dirty,
-    }
 
 
 def budget_curve(model, train, val, test, config, checkpoints, run_dir):

@@ -45,15 +45,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
-import subprocess
 import time
 from contextlib import nullcontext
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
+from provenance import machine
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data.render_job import (
@@ -71,13 +70,6 @@ from mincam_render.render.differential import BackgroundSettings
 from mincam_render.render.sun_patch import sun_sampled_apart
 from mincam_render.render.transport import render_transport
 from mincam_render.scenes.registry import FAMILY_NAMES
-
-
-def git_revision() -> str:
-    try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def cpu_times() -> tuple[int, int]:
@@ -379,14 +371,9 @@ def main() -> None:
         )
     report = {
         "benchmark": "bench_render",
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor(),
-            "cpu_count": os.cpu_count(),
-        },
+        "machine": machine(),
         "variant": info["variant"],
         "versions": info,
-        "git_revision": git_revision(),
         "dr_thread_count": dr.thread_count(),
         "frames": args.frames,
         "repeats": args.repeats,

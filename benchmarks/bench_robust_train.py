@@ -33,8 +33,8 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_patches_paper import machine  # noqa: E402
 from bench_train_throughput import random_data  # noqa: E402
+from provenance import machine  # noqa: E402
 
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel  # noqa: E402

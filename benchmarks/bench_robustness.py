@@ -37,7 +37,7 @@ from typing import Any
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_patches_paper import machine  # noqa: E402
+from provenance import machine  # noqa: E402
 
 from mincam_render.analysis.comparison import render_episodes  # noqa: E402
 from mincam_render.analysis.comparison_config import ComparisonConfig  # noqa: E402

@@ -16,15 +16,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import platform
 import resource
-import subprocess
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import torch
+from provenance import machine
 
 from mincam_render import (
     DetectorElectronics,
@@ -50,13 +49,6 @@ CASES: list[dict] = []
 def case(name: str, params: dict, ok: bool, **outcome) -> None:
     CASES.append({"case": name, "parameters": params, "ok": bool(ok), **outcome})
     print(f"  {'ok  ' if ok else 'FAIL'} {name}", flush=True)
-
-
-def git_revision() -> str:
-    try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def open_mask_power(cam: FreeformCamera, radiance: float) -> float:
@@ -558,13 +550,8 @@ def main() -> int:
         print(f"{'ok' if c['ok'] else 'FAIL':4} {c['case'][:52]:52} {params[:40]:40} {short}")
     result = {
         "benchmark": "stability",
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor(),
-            "cpus": __import__("os").cpu_count(),
-        },
+        "machine": machine(),
         "variant": backend.describe()["variant"],
-        "git_revision": git_revision(),
         "quick": args.quick,
         "seconds": time.perf_counter() - t0,
         "cases": CASES,

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_patches_paper import machine  # noqa: E402
+from provenance import machine  # noqa: E402
 
 from mincam_render.core.photometry import VISIBLE_FRACTION_OF_SUNLIGHT  # noqa: E402
 from mincam_render.scenes.sky import (  # noqa: E402

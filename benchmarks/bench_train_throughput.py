@@ -49,7 +49,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_patches_paper import machine  # noqa: E402
+from provenance import machine  # noqa: E402
 
 from mincam_render.core.labels import LabelKind, LabelSpec  # noqa: E402
 from mincam_render.data.dataset import open_dataset  # noqa: E402

@@ -15,27 +15,18 @@ same spp, same integrator) is timed alongside; the ratio is our overhead.
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import statistics
-import subprocess
 import time
 from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+from provenance import machine, write_result
 
 import mincam_render as mr
 from mincam_render.render import backend
 from mincam_render.render import mitsuba_scene as ms
-
-
-def git_revision() -> str:
-    try:
-        return subprocess.check_output(["git", "rev-parse", "--short", "HEAD"], text=True).strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
 
 
 def check_closed_form(camera: mr.FreeformCamera, spp: int) -> dict[str, float]:
@@ -133,18 +124,11 @@ def main() -> None:
         )
     result = {
         "benchmark": "render_transport, demo scene, default camera",
-        "machine": {
-            "platform": platform.platform(),
-            "processor": platform.processor(),
-            "cpus": __import__("os").cpu_count(),
-        },
+        "machine": machine(),
         "backend": info,
-        "git_revision": git_revision(),
         "results": rows_out,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.out}")
+    write_result(args.out, result)
 
 
 if __name__ == "__main__":

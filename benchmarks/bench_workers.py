@@ -8,7 +8,7 @@ rendering is compared.
 
 Usage:
     PYTHONPATH=. .venv/bin/python benchmarks/bench_workers.py
-    (writes benchmarks/results/workers.json)
+    (writes benchmarks/results/workers.json: machine and git revision, wall times)
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ import shutil
 import tempfile
 import time
 from pathlib import Path
+
+from provenance import machine
 
 from mincam_render.data.dataset import SHARD_DIR
 from mincam_render.data.render_job import (
@@ -60,6 +62,7 @@ def main() -> None:
             rows.append(row)
             print(row, flush=True)
     result = {
+        "machine": machine(),
         "cores": cores,
         "pool_break_even_s": POOL_BREAK_EVEN_S,
         "identical_shards": True,

@@ -42,6 +42,14 @@ def spec(
     return dataclasses.field(default=default, metadata=md)
 
 
+def check_min_max(config: object, *names: str) -> None:
+    """Raise ValueError where a ``(min, max)`` field of ``config`` has min above max."""
+    for name in names:
+        lo, hi = getattr(config, name)
+        if lo > hi:
+            raise ValueError(f"{name} = {[lo, hi]}: min must not exceed max")
+
+
 def _fail(source: str, path: str, value: Any, reason: str) -> ConfigError:
     return ConfigError(f"{source}: {path} = {value!r}: {reason}")
 

@@ -172,6 +172,20 @@ def demo_scene() -> dict[str, Any]:
     )
 
 
+def _irradiance_sensor() -> dict[str, Any]:
+    """Mitsuba's irradiance meter on the shape holding it: one luminance value (W/m^2)."""
+    return {
+        "type": "irradiancemeter",
+        "film": {
+            "type": "hdrfilm",
+            "width": 1,
+            "height": 1,
+            "rfilter": {"type": "box"},
+            "pixel_format": "luminance",
+        },
+    }
+
+
 def with_mask_geometry(
     scene: dict[str, Any],
     camera: FreeformCamera,
@@ -246,17 +260,7 @@ def with_mask_geometry(
     out["_mincam_diode"] = {
         "type": "rectangle",
         "to_world": placed((0, 0, 0), (a / 2, a / 2, 1)),
-        "sensor": {
-            "type": "irradiancemeter",
-            "id": "_mincam_irradiancemeter",
-            "film": {
-                "type": "hdrfilm",
-                "width": 1,
-                "height": 1,
-                "rfilter": {"type": "box"},
-                "pixel_format": "luminance",
-            },
-        },
+        "sensor": _irradiance_sensor() | {"id": "_mincam_irradiancemeter"},
     }
     return out
 
@@ -302,16 +306,7 @@ def irradiance_meter(
     return {
         "type": "rectangle",
         "to_world": mi.ScalarTransform4f(m),
-        "sensor": {
-            "type": "irradiancemeter",
-            "film": {
-                "type": "hdrfilm",
-                "width": 1,
-                "height": 1,
-                "rfilter": {"type": "box"},
-                "pixel_format": "luminance",
-            },
-        },
+        "sensor": _irradiance_sensor(),
     }
 
 

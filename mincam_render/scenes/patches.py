@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import mitsuba as mi
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render import mitsuba_scene as ms
@@ -71,15 +71,13 @@ class PatchesConfig:
     )
 
     def __post_init__(self) -> None:
-        for name in (
+        check_min_max(
+            self,
             "patch_size",
             "patch_radiance_w_m2_sr",
             "illumination_amplitude",
             "illumination_period",
-        ):
-            lo, hi = getattr(self, name)
-            if lo > hi:
-                raise ValueError(f"{name} = {[lo, hi]}: min must not exceed max")
+        )
 
 
 class PatchesFamily(SceneFamily):

@@ -38,7 +38,7 @@ from typing import Any
 import mitsuba as mi
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import irradiance_to_lux
 from mincam_render.core.seeds import stream_seed
@@ -329,10 +329,7 @@ class TrafficConfig:
         return self.road_half_width_m + self.sidewalk_width_m + self.building_setback_m
 
     def __post_init__(self) -> None:
-        for name in ("building_height_m", "building_width_m", "building_albedo"):
-            lo, hi = getattr(self, name)
-            if lo > hi:
-                raise ValueError(f"{name} = {[lo, hi]}: min must not exceed max")
+        check_min_max(self, "building_height_m", "building_width_m", "building_albedo")
         if len(self.body_albedos) == 0 or len(self.body_albedos) != len(self.body_albedo_weights):
             raise ValueError(
                 f"body_albedo_weights has {len(self.body_albedo_weights)} values: needs one per "

@@ -85,6 +85,14 @@ def test_shipped_patches_description_matches_defaults():
         ('family = "patches"\nmax_patches = -1\n', r"max_patches = -1: allowed range"),
         ('family = "patches"\npatch_size = [0.3, 0.1]\n', r"patch_size .*min must not exceed max"),
         (
+            'family = "workspace"\n[people]\nwalk_speed_m_s = [1.4, 0.9]\n',
+            r"walk_speed_m_s = \[1.4, 0.9\]: min must not exceed max",
+        ),
+        (
+            'family = "traffic"\nbuilding_albedo = [0.5, 0.2]\n',
+            r"building_albedo = \[0.5, 0.2\]: min must not exceed max",
+        ),
+        (
             'family = "patches"\nplane_distance_m = "1 m"\n',
             r"plane_distance_m = '1 m': expected a number",
         ),

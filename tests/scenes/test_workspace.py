@@ -180,24 +180,11 @@ def test_desk_illuminance_is_indoor_level(family, scene):
     import mitsuba as mi
 
     from mincam_render.core.photometry import irradiance_to_lux
+    from mincam_render.render import mitsuba_scene as ms
 
     family.apply_state(scene, IndoorState(lights_on=(True, True), daylight_time_s=MIDNIGHT_S))
-    meter = mi.load_dict(
-        {
-            "type": "rectangle",
-            "to_world": mi.ScalarTransform4f().translate([1.9, 1.7, 0.76]).scale([0.05, 0.05, 1.0]),
-            "sensor": {
-                "type": "irradiancemeter",
-                "film": {
-                    "type": "hdrfilm",
-                    "width": 1,
-                    "height": 1,
-                    "rfilter": {"type": "box"},
-                    "pixel_format": "luminance",
-                },
-            },
-        }
-    )
+    # a 10 cm lux meter lying on the desk top, facing up
+    meter = mi.load_dict(ms.irradiance_meter((1.9, 1.7, 0.76), (0, 0, 1), (1, 0, 0), (0.1, 0.1)))
     e = float(np.asarray(mi.render(scene, sensor=meter.sensor(), spp=1024)).ravel()[0])
     assert 300.0 < irradiance_to_lux(e) < 600.0
 

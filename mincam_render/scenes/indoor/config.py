@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import check_min_max, spec
 
 if TYPE_CHECKING:
     from mincam_render.scenes.base import CameraMount
@@ -238,7 +238,8 @@ class PeopleConfig:
     stops: tuple[int, int] = spec((1, 4), range=(1, 100), doc="stops per visit")
 
     def __post_init__(self) -> None:
-        for name in (
+        check_min_max(
+            self,
             "height_m",
             "build",
             "walk_speed_m_s",
@@ -246,10 +247,7 @@ class PeopleConfig:
             "skin_albedo",
             "dwell_s",
             "stops",
-        ):
-            lo, hi = getattr(self, name)
-            if lo > hi:
-                raise ValueError(f"{name} = {[lo, hi]}: min must not exceed max")
+        )
 
 
 def wall_length(room: RoomConfig, wall: Wall) -> float:
