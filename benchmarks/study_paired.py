@@ -11,7 +11,8 @@ predictor), records ``paired_added`` (git revision, date) and appends the lines
 to the study's ``.md``. Nothing is retrained: the figures are the kept runs'.
 
 Usage:
-    PYTHONPATH=. python benchmarks/study_paired.py benchmarks/results/study_workspace_2fps.json
+    PYTHONPATH=. python benchmarks/study_paired.py benchmarks/results/study_patches.json \
+        [--also mincam-16px]
 """
 
 from __future__ import annotations
@@ -31,8 +32,12 @@ from mincam_render.analysis.comparison import (
 )
 
 
-def add_paired(result: dict[str, Any]) -> list[str]:
-    """Add per-episode errors and paired differences to ``result``; the new lines."""
+def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:
+    """Add per-episode errors and paired differences to ``result``; the new lines.
+
+    ``also``: further minimalist designs compared with every baseline (kept
+    under ``paired_also``), beside the study's reference.
+    """
     errors = {}
     for name, d in result["designs"].items():
         runs = [json.loads((Path(r) / "metrics.json").read_text())["episodes"] for r in d["runs"]]
@@ -45,17 +50,22 @@ def add_paired(result: dict[str, Any]) -> list[str]:
         result, result["reduction_factor"]["reference"]
     )
     result["paired"] = paired_differences(errors, [], seed)
-    return [line for line in result["reference_verdicts"] if line.startswith("paired")] + [
-        p["statement"] for p in result["paired"].values()
-    ]
+    result["paired_also"] = {name: reference_verdicts(result, name) for name in also}
+    extra = [line for lines in result["paired_also"].values() for line in lines]
+    return [
+        line for line in [*result["reference_verdicts"], *extra] if line.startswith("paired")
+    ] + [p["statement"] for p in result["paired"].values()]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("study", type=Path, help="a study_*.json of benchmarks/results")
+    parser.add_argument(
+        "--also", action="append", default=[], help="another design against every baseline"
+    )
     args = parser.parse_args()
     result = json.loads(args.study.read_text())
-    lines = add_paired(result)
+    lines = add_paired(result, args.also)
     revision = machine()["git_revision"]
     result["paired_added"] = {"git_revision": revision, "date": str(datetime.date.today())}
     args.study.write_text(json.dumps(result, indent=2, default=str) + "\n")
