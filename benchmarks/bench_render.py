@@ -143,7 +143,7 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
         max_workers=workers,
         mp_context=mp.get_context("spawn"),
         initializer=_worker_init,
-        initargs=(_threads_per_worker(workers), None, None),
+        initargs=(_threads_per_worker(workers), None),
     ) as pool:
         for round_ in range(repeats + 1):
             t0 = time.perf_counter()
