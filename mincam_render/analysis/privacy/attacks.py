@@ -16,8 +16,9 @@ Both keep the state of the lowest validation loss (the validation episode).
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,6 +32,21 @@ from mincam_render.learn.training_data import TrainingData
 
 #: Frames measured at once (bounds memory at 32 x 32 texels x 8 detectors).
 MEASURE_CHUNK = 512
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Torch on one intra-op thread inside the block (restored after).
+
+    The attackers are tiny networks: on a small shared machine torch's spinning
+    worker threads make them many times slower (as ``TrainConfig.torch_threads``).
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
 
 
 def design_camera(run_dir: str | os.PathLike, data: TrainingData) -> Any:
@@ -54,7 +70,7 @@ def measurements(camera: Any, data: TrainingData, *, seed: int) -> np.ndarray:
     """
     gen = torch.Generator().manual_seed(int(seed))
     out = []
-    with torch.no_grad():
+    with torch.no_grad(), one_thread():
         for start in range(0, len(data), MEASURE_CHUNK):
             idx = torch.arange(start, min(start + MEASURE_CHUNK, len(data)))
             frames = data.frames_w(idx)
@@ -109,6 +125,18 @@ def _fit(
     seed: int,
 ) -> Fitted:
     """Adam on ``loss_of(outputs, targets)`` in batches; the state of the lowest validation loss."""
+    with one_thread():
+        return _fit_steps(model, loss_of, train, val, cfg, seed)
+
+
+def _fit_steps(
+    model: nn.Module,
+    loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    train: tuple[np.ndarray, np.ndarray],
+    val: tuple[np.ndarray, np.ndarray],
+    cfg: AttackConfig,
+    seed: int,
+) -> Fitted:
     gen = torch.Generator().manual_seed(int(seed))
     xt, yt = (torch.from_numpy(np.asarray(a, np.float32)) for a in train)
     xv, yv = (torch.from_numpy(np.asarray(a, np.float32)) for a in val)

@@ -32,6 +32,7 @@ def headline(privacy: Mapping[str, Any]) -> str:
 
 
 def design_rows(privacy: Mapping[str, Any]) -> list[list[Any]]:
+    """Table rows: every design, then the trivial attacker and predictor."""
     rows = []
     for name, d in privacy["designs"].items():
         conv = d["convergence"]
