@@ -9,8 +9,8 @@ Usage:
    frames, 1 validation episode of 200, 3 test episodes of 200), rendered at a
    fixed cheap fidelity (4 spp, depth 3); mincam 1, 2, 4, 8 px, 8 px with the
    privacy term (weight 1) and baselines 2x2 .. 32x32, each trained for the
-   people count with 3 seeds.
-2. **Attacks.** A 64 x 64 full view of every frame; per design, 3 attacker
+   people count with 2 seeds of at most 1,000 steps.
+2. **Attacks.** A 64 x 64 full view of every frame (4 spp); per design, 3 attacker
    seeds train a decoder to the view and a re-identifier of the roster on the
    training episodes and are scored on the test episodes.
 3. **Output.** ``--out`` (JSON: machine, git revision, timings, the audit),

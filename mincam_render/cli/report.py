@@ -281,7 +281,7 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
 @click.option(
     "--task-seeds",
     type=click.IntRange(1, 100),
-    default=3,
+    default=2,
     show_default=True,
     help="Training seeds of every design (the task).",
 )

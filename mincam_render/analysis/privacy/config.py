@@ -42,6 +42,9 @@ def default_designs() -> tuple[Design, ...]:
 def default_comparison() -> ComparisonConfig:
     """The audit's episodes and task training: the workspace at 1 fps with a roster.
 
+    Sized for a shared 2-core machine: 2 task seeds of at most 1,000 steps per
+    design (the attacks have 3 seeds each).
+
     1 fps spreads 300 frames over 5 minutes of office activity (a few visits
     of each person per episode); the task is the workspace's (people count RMSE).
     """
@@ -55,9 +58,9 @@ def default_comparison() -> ComparisonConfig:
         val_frames=200,
         test_frames=200,
         test_episodes=3,
-        seeds=3,
+        seeds=2,
         designs=default_designs(),
-        train=TrainConfig(max_steps=3000),
+        train=TrainConfig(max_steps=1000),
         fidelity=AUDIT_FIDELITY,
     )
 
@@ -79,9 +82,9 @@ class AttackConfig:
     """
 
     view_width: int = 64
-    view_spp: int = 16
+    view_spp: int = 4
     seeds: int = 3
-    max_steps: int = 3000
+    max_steps: int = 1500
     batch_size: int = 128
     hidden: int = 256
     lr: float = 1e-3
