@@ -287,6 +287,7 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
 )
 @click.option(
     "--attack-seeds",
+    "seeds",
     type=click.IntRange(1, 100),
     default=field_default(AttackConfig, "seeds"),
     show_default=True,
@@ -294,6 +295,7 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
 )
 @click.option(
     "--attack-steps",
+    "max_steps",
     type=click.IntRange(1, 10**6),
     default=field_default(AttackConfig, "max_steps"),
     show_default=True,
@@ -308,8 +310,8 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
 def report_privacy_cmd(
     train_frames: int,
     task_seeds: int,
-    attack_seeds: int,
-    attack_steps: int,
+    seeds: int,
+    max_steps: int,
     workers: int,
     out: Path,
 ) -> None:
@@ -348,7 +350,7 @@ def report_privacy_cmd(
             test_frames=other,
             seeds=task_seeds,
         )
-        attack = AttackConfig(seeds=attack_seeds, max_steps=attack_steps)
+        attack = AttackConfig(seeds=seeds, max_steps=max_steps)
         cfg = PrivacyConfig(comparison=comparison, attack=attack)
         privacy = analyze_privacy(cfg, out, workers=workers, progress=True)
         with np.load(out / "examples.npz") as examples:

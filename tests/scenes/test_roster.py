@@ -59,7 +59,7 @@ def test_presence_round_trips_through_the_frame_records_and_counts_people(episod
     stored = [json.loads(json_bytes(s)) for s in states]  # as the shards keep them
     present = presence(stored, 4)
     np.testing.assert_array_equal(present, presence(states, 4))
-    counts = np.array([family.labels_for(family.state(i))["people_count"][0] for i in range(FRAMES)])
+    counts = [family.labels_for(family.state(i))["people_count"][0] for i in range(FRAMES)]
     np.testing.assert_array_equal(present.sum(axis=1), counts)
     assert present.any(axis=1).mean() > 0.3  # the roster shows up in the room
 
