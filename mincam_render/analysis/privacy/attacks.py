@@ -82,6 +82,9 @@ def measurements(camera: Any, data: TrainingData, *, seed: int) -> np.ndarray:
 class _Standardise(nn.Module):
     """Fixed per-feature standardisation with the attacker's training statistics."""
 
+    mean: torch.Tensor  # buffer: [feature]
+    std: torch.Tensor  # buffer: [feature]
+
     def __init__(self, x: np.ndarray) -> None:
         super().__init__()
         self.register_buffer("mean", torch.from_numpy(x.mean(axis=0)).float())

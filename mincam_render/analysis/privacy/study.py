@@ -76,7 +76,9 @@ def load_episodes(
     return {k: Episode(k, paths[k], display(raw[k], white), present[k]) for k in paths}
 
 
-def _intervals(per_seed: Sequence[Mapping[str, float]], frames: Mapping[str, int], seed: int):
+def _intervals(
+    per_seed: Sequence[Mapping[str, float]], frames: Mapping[str, int], seed: int
+) -> dict[str, Any]:
     """``{"mean", "ci95"}`` of per-seed ``{episode: figure}`` (mean pooling over frames)."""
     names = sorted(frames)
     errors = EpisodeErrors(
@@ -97,7 +99,7 @@ def _attack_once(
 
     train = TrainingData.concat([data[k] for k in sorted(data) if k.startswith("train-")])
     camera = attacks.design_camera(run_dir, train)
-    x = {k: attacks.measurements(camera, d, seed=stream_seed(seed, "noise", k))
+    x = {k: attacks.measurements(camera, d, seed=stream_seed(seed, f"noise/{k}"))
          for k, d in data.items()}  # fmt: skip
     train_names = sorted(k for k in data if k.startswith("train-"))
     xt = np.concatenate([x[k] for k in train_names])
