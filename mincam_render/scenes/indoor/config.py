@@ -251,6 +251,10 @@ class PeopleConfig:
         0, range=(0, 2**31 - 1), doc="seed of the roster's looks (not the episode's seed)"
     )
 
+    def description_omits(self) -> tuple[str, ...]:
+        """Without a roster its fields are left out of resolved descriptions (format 4 as is)."""
+        return ("roster", "roster_seed") if self.roster == 0 else ()
+
     def __post_init__(self) -> None:
         for name in (
             "height_m",
