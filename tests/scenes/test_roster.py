@@ -82,3 +82,15 @@ def test_presence_bad_input():
         presence([{"people": [{"inside": True}]}], 2)
     with pytest.raises(ValueError, match="outside the roster"):
         presence([{"people": [{"identity": 5, "inside": True}]}], 2)
+
+
+def test_an_unused_roster_stays_out_of_resolved_descriptions():
+    from mincam_render.core.config import parse, to_dict
+    from mincam_render.scenes.workspace import WorkspaceConfig
+
+    plain = to_dict(WorkspaceConfig())["people"]
+    assert "roster" not in plain and "roster_seed" not in plain  # format-4 identities as before
+    with_roster = WorkspaceConfig(max_people=4, people=PeopleConfig(roster=4, roster_seed=2))
+    resolved = to_dict(with_roster)
+    assert resolved["people"]["roster"] == 4 and resolved["people"]["roster_seed"] == 2
+    assert parse(WorkspaceConfig, resolved, source="test") == with_roster
