@@ -112,13 +112,16 @@ def train_step(
     batch = source.next(generator)
     gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
     draw = batch_draw(model, perturbation, generator)
-    v = model.measure(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
-    loss, _ = task_loss(model.head, model.head(temporal_features(v)), batch.labels)
-    total = loss
     adversary = getattr(model, "adversary", None)
-    if adversary is not None:
+    if adversary is None:  # any model with a forward (sim2real's measured heads too)
+        out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
+        loss, _ = task_loss(model.head, out, batch.labels)
+        total = loss
+    else:
         from mincam_render.learn.privacy_term import privacy_objective
 
+        v = model.measure(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
+        loss, _ = task_loss(model.head, model.head(temporal_features(v)), batch.labels)
         frames = batch.transport if batch.windows is None else batch.transport[batch.windows[:, -1]]
         total = loss + privacy_objective(adversary, v[:, -1], frames, privacy_weight)
     for group in opt.param_groups:  # zero_grad(set_to_none=True) without its overhead
