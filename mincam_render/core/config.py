@@ -207,7 +207,7 @@ def to_dict(obj: Any) -> Any:
     and so dataset identities and fidelity-plan keys, stay as they were.
     """
     if dataclasses.is_dataclass(obj):
-        omits = getattr(obj, "description_omits", tuple)()
+        omits: tuple[str, ...] = getattr(obj, "description_omits", tuple)()
         return {
             f.name: to_dict(getattr(obj, f.name))
             for f in dataclasses.fields(obj)
