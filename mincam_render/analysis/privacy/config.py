@@ -84,8 +84,8 @@ class AttackConfig:
     view_width: int = 64
     view_spp: int = 4
     seeds: int = 3
-    max_steps: int = 1500
-    batch_size: int = 128
+    max_steps: int = 600
+    batch_size: int = 64
     hidden: int = 256
     lr: float = 1e-3
     eval_every: int = 100
