@@ -11,8 +11,9 @@ Usage:
    privacy term (weight 1) and baselines 2x2 .. 32x32, each trained for the
    people count with 2 seeds of at most 1,000 steps.
 2. **Attacks.** A 64 x 64 full view of every frame (4 spp); per design, 3 attacker
-   seeds train a decoder to the view and a re-identifier of the roster on the
-   training episodes and are scored on the test episodes.
+   seeds (at most 600 steps each) train a decoder to the view and a
+   re-identifier of the roster on the training episodes and are scored on the
+   test episodes.
 3. **Output.** ``--out`` (JSON: machine, git revision, timings, the audit),
    ``privacy.md`` (the table) and ``privacy.png`` (the curve) beside it; the
    report (HTML) in ``--work``.
