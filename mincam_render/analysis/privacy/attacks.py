@@ -207,3 +207,49 @@ def train_reid(
     x, y = train
     model = _seeded(seed, lambda: _mlp(x, y.shape[1], cfg.hidden))
     return _fit(model, F.binary_cross_entropy_with_logits, train, val, cfg, seed)
+
+
+#: Ridge penalties tried by :func:`fit_ridge` (times the number of training frames).
+RIDGE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)
+
+
+@dataclass
+class RidgeDecoder:
+    """A linear decoder (ridge regression, closed form) from read-outs to display views."""
+
+    mean: np.ndarray  # [feature]
+    std: np.ndarray  # [feature]
+    weights: np.ndarray  # [feature + 1, pixel]
+    penalty: float
+
+    def decode(self, x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """Display images ``[frame, row, col]``, clipped to [0, 1]."""
+        z = (np.asarray(x, np.float64) - self.mean) / self.std
+        y = np.hstack([z, np.ones((len(z), 1))]) @ self.weights
+        return np.clip(y, 0.0, 1.0).reshape(len(x), *shape).astype(np.float32)
+
+
+def fit_ridge(
+    train: tuple[np.ndarray, np.ndarray], val: tuple[np.ndarray, np.ndarray]
+) -> RidgeDecoder:
+    """Ridge regression from read-outs to views, its penalty chosen on ``val`` (numpy).
+
+    The linear attacker: for a conventional camera its read-out is a downsampled
+    image of the scene, which a linear map upsamples; the MLP may need far more
+    data to match it.
+    """
+    x, y = np.asarray(train[0], np.float64), np.asarray(train[1], np.float64)
+    mean, std = x.mean(axis=0), x.std(axis=0) + 1e-6
+    a = np.hstack([(x - mean) / std, np.ones((len(x), 1))])
+    gram, rhs = a.T @ a, a.T @ y.reshape(len(y), -1)
+    best: RidgeDecoder | None = None
+    best_mse = np.inf
+    for penalty in RIDGE_PENALTIES:
+        reg = penalty * len(x) * np.eye(len(gram))
+        reg[-1, -1] = 0.0  # the bias is not penalised
+        cand = RidgeDecoder(mean, std, np.linalg.solve(gram + reg, rhs), penalty)
+        mse = float(np.mean((cand.decode(val[0], y.shape[1:]) - val[1]) ** 2))
+        if mse < best_mse:
+            best, best_mse = cand, mse
+    assert best is not None
+    return best

@@ -107,11 +107,24 @@ def _attack_once(
     pt = np.concatenate([episodes[k].present for k in train_names])
     val = episodes["val-0"]
     decoder = attacks.train_decoder((xt, vt), (x["val-0"], val.views), cfg.attack, seed)
+    ridge = attacks.fit_ridge((xt, vt), (x["val-0"], val.views))
+    shape = val.views.shape[1:]
+    # the attacker keeps whichever decoder reconstructs its validation episode better
+    errors = {
+        "mlp": float(np.mean((attacks.decode(decoder, x["val-0"], shape) - val.views) ** 2)),
+        "ridge": float(np.mean((ridge.decode(x["val-0"], shape) - val.views) ** 2)),
+    }
+    kind = min(errors, key=errors.__getitem__)
+
+    def reconstruct(xs: np.ndarray) -> np.ndarray:
+        return attacks.decode(decoder, xs, shape) if kind == "mlp" else ridge.decode(xs, shape)
+
     reid = attacks.train_reid((xt, pt), (x["val-0"], val.present), cfg.attack, seed)
-    out: dict[str, Any] = {"episodes": {}, "examples": {}}
+    out: dict[str, Any] = {"episodes": {}, "examples": {}, "decoder": kind,
+                           "decoder_val_mse": errors, "ridge_penalty": ridge.penalty}  # fmt: skip
     for name in sorted(k for k in data if k.startswith("test-")):
         ep = episodes[name]
-        recon = attacks.decode(decoder, x[name], ep.views.shape[1:])
+        recon = reconstruct(x[name])
         quality = reconstruction_quality(ep.views, recon)
         top1 = reid_top1(reid.predict(x[name]), ep.present)
         out["episodes"][name] = {**quality, "reid_top1": top1}
@@ -142,12 +155,13 @@ def attack_design(
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:  # fmt: skip
     """Every attacker seed against one design: figures with intervals, the first seed's examples."""
     runs = design["runs"]
-    per_seed, conv, examples = [], [], {}
+    per_seed, conv, decoders, examples = [], [], [], {}
     for i in range(cfg.attack.seeds):
         seed = stream_seed(cfg.comparison.seed, f"attack/{name}", i)
         res = _attack_once(runs[i % len(runs)], data, episodes, cfg, seed)
         per_seed.append(res["episodes"])
         conv.append(res["convergence"])
+        decoders.append({k: res[k] for k in ("decoder", "decoder_val_mse", "ridge_penalty")})
         if i == 0:
             examples = res["examples"]
     frames = {k: len(episodes[k].views) for k in per_seed[0]}
@@ -155,7 +169,7 @@ def attack_design(
         f: _intervals([{e: s[e][f] for e in s} for s in per_seed], frames, cfg.comparison.seed)
         for f in FIGURES
     }
-    return {**figures, "per_seed": per_seed, "convergence": conv}, examples
+    return {**figures, "per_seed": per_seed, "convergence": conv, "decoders": decoders}, examples
 
 
 def _write_examples(
