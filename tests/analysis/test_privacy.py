@@ -143,3 +143,13 @@ def test_corner_needs_a_task_match_and_separated_attack_intervals():
     none = corner_verdicts(_result(20.0, 0.85))["mincam-2px"]
     assert none["in_corner_against"] == [] and "not in the corner" in none["verdict"]
     json.dumps(none)  # JSON-ready
+
+
+def test_ridge_decoder_recovers_a_linear_view_and_picks_its_penalty(rng):
+    patterns = rng.uniform(0, 1, (4, 8, 8))
+    x = rng.uniform(0, 1, (300, 4))
+    views = np.einsum("nk,krc->nrc", x, patterns) / 4
+    ridge = attacks.fit_ridge((x[:200], views[:200]), (x[200:250], views[200:250]))
+    assert ridge.penalty == min(attacks.RIDGE_PENALTIES)  # noiseless: the least penalty
+    q = reconstruction_quality(views[250:], ridge.decode(x[250:], (8, 8)))
+    assert q["psnr_db"] > 40 and q["ssim"] > 0.99

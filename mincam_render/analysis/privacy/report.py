@@ -73,9 +73,10 @@ def _method(page: Report, privacy: Mapping[str, Any]) -> None:
         f"validation episode, {cmp['test_episodes']} test episodes of {cmp['test_frames']}.",
         f"Render: {cmp['fidelity']} (fixed, cheap; every design sees the same transport).",
         f"Attacker: knows the design, trains on the training episodes (never the test ones): "
-        f"an MLP decoder to the {att['view_width']} x {att['view_width']} view (display image, "
-        f"gamma 2.2) and an MLP re-identifier, {att['seeds']} seeds, at most "
-        f"{att['max_steps']} steps each, the best validation state kept.",
+        f"a decoder to the {att['view_width']} x {att['view_width']} view (display image, "
+        "gamma 2.2), an MLP or a ridge regression, whichever reconstructs the validation "
+        f"episode better, and an MLP re-identifier; {att['seeds']} seeds, MLPs of at most "
+        f"{att['max_steps']} steps, the best validation state kept.",
         "PSNR and SSIM: scikit-image, per frame, averaged; re-id: the top-scored person is in "
         "the room, over frames with someone inside.",
     ])  # fmt: skip
