@@ -222,7 +222,9 @@ def _design_runs(
         seed = stream_seed(cfg.seed, f"train/{design.name}", i)
         run_dir = out / "runs" / f"{design.name}-seed{i}"
         common = {
-            "config": dataclasses.replace(cfg.train, seed=seed, head=design.head),
+            "config": dataclasses.replace(
+                cfg.train, seed=seed, head=design.head, privacy_weight=design.privacy_weight
+            ),
             "episodes": splits["tests"],
             "progress": progress,
         }

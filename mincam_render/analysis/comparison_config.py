@@ -25,12 +25,16 @@ class Design:
             without the model, then frozen while a fresh head is trained with it,
             and tested with it.
         head: the inference network (replaces the recipe's ``TrainConfig.head``).
+        privacy_weight: masks trained with the adversarial privacy term of this
+            weight (replaces the recipe's ``TrainConfig.privacy_weight``); 0: the
+            task alone. A minimalist camera's option only.
     """
 
     pixels: int | None = None
     grid: tuple[int, int] | None = None
     sensor_model: bool = True
     head: HeadKind = HeadKind.MLP
+    privacy_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if (self.pixels is None) == (self.grid is None):
@@ -40,14 +44,23 @@ class Design:
         if self.grid is not None:
             object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
         object.__setattr__(self, "head", HeadKind(self.head))
+        if not 0 <= self.privacy_weight <= 1e3:
+            raise ValueError(f"{self}: privacy_weight must lie in [0, 1000]")
+        if self.privacy_weight and self.grid is not None:
+            raise ValueError(f"{self}: a privacy weight trains masks; a baseline has none")
 
     @property
     def name(self) -> str:
-        """``mincam-8px``, ``mincam-8px-nosensor``, ``baseline-8x8``; ``-tcn`` for that head."""
+        """``mincam-8px``, ``mincam-8px-nosensor``, ``baseline-8x8``; ``-tcn`` for that head.
+
+        A privacy weight of 1 adds ``-private1`` (before the head's suffix).
+        """
         suffix = "" if self.head is HeadKind.MLP else f"-{self.head.value}"
         if self.grid is not None:
             return f"baseline-{self.grid[0]}x{self.grid[1]}{suffix}"
-        return f"mincam-{self.pixels}px" + ("" if self.sensor_model else "-nosensor") + suffix
+        private = f"-private{self.privacy_weight:g}" if self.privacy_weight else ""
+        sensor = "" if self.sensor_model else "-nosensor"
+        return f"mincam-{self.pixels}px{sensor}{private}{suffix}"
 
     @property
     def is_mincam(self) -> bool:

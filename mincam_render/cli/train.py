@@ -107,6 +107,13 @@ _RECIPE_OPTIONS = {
         "convolutions over the history); prune keeps the run's.",
     ),
     "seed": ("--seed", click.IntRange(0), None),
+    "privacy_weight": (
+        "--privacy-weight",
+        FiniteFloat(0, 1000),
+        "Adversarial privacy term: the masks minimise the task loss minus this times the "
+        "loss of a decoder reconstructing the scene from the pixels (docs/privacy.md); "
+        "0: the task alone. Minimalist cameras of static tasks only.",
+    ),
 }
 
 

@@ -208,9 +208,19 @@ def merge(base: dict, over: dict) -> dict:
 
 
 def to_dict(obj: Any) -> Any:
-    """JSON-ready dict of a description (enums as values, tuples as lists)."""
+    """JSON-ready dict of a description (enums as values, tuples as lists).
+
+    A description may leave out fields that are off (``description_omits()``,
+    e.g. an unused option added after a dataset format): resolved descriptions,
+    and so dataset identities and fidelity-plan keys, stay as they were.
+    """
     if dataclasses.is_dataclass(obj):
-        return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        omits: tuple[str, ...] = getattr(obj, "description_omits", tuple)()
+        return {
+            f.name: to_dict(getattr(obj, f.name))
+            for f in dataclasses.fields(obj)
+            if f.name not in omits
+        }
     if isinstance(obj, tuple | list):
         return [to_dict(v) for v in obj]
     if isinstance(obj, __import__("enum").Enum):

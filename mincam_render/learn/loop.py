@@ -188,8 +188,9 @@ def _train_steps(
     st, config = run.state, run.config
     while not run.done():
         loss = train_step(
-            run.model, run.source, run.opt, run.gen, config.gain_range, config.perturbation
-        )
+            run.model, run.source, run.opt, run.gen, config.gain_range, config.perturbation,
+            config.privacy_weight,
+        )  # fmt: skip
         st.step += 1
         bar.update(1)
         logs.train_loss(loss, st.step, clock)

@@ -91,12 +91,21 @@ def _build_model(
     sensor_model: bool,
     config: TrainConfig,
 ) -> Model:
-    """A baseline camera of ``baseline_grid``, else a minimalist camera of ``pixels`` pixels."""
+    """A baseline camera of ``baseline_grid``, else a minimalist camera of ``pixels`` pixels.
+
+    With ``config.privacy_weight`` > 0 the minimalist camera carries a
+    :class:`~mincam_render.learn.privacy_term.PrivacyAdversary` (``model.adversary``).
+    """
     if baseline_grid is not None:
+        if config.privacy_weight > 0:
+            raise ValueError(
+                f"privacy_weight = {config.privacy_weight}: the privacy term trains masks; "
+                "a baseline camera has none"
+            )
         return build_baseline(
             train, baseline_grid, count_loss=config.count_loss, seed=config.seed, head=config.head
         )
-    return build_mincam(
+    model = build_mincam(
         train,
         pixels,
         sensor_model=sensor_model,
@@ -104,6 +113,26 @@ def _build_model(
         seed=config.seed,
         head=config.head,
     )
+    if config.privacy_weight > 0:
+        attach_adversary(model, seed=config.seed)
+    return model
+
+
+def attach_adversary(model: MincamCamera, *, seed: int) -> None:
+    """Give ``model`` a privacy adversary (``model.adversary``, saved in its state).
+
+    Raises:
+        ValueError: a temporal camera (the term reconstructs single frames).
+    """
+    from mincam_render.learn.privacy_term import ADVERSARY_GRID, PrivacyAdversary
+
+    if model.history != 1:
+        raise ValueError(
+            f"privacy_weight: a camera with a history of {model.history} frames; the privacy "
+            "term is for static tasks"
+        )
+    grid = min(ADVERSARY_GRID, *model.camera.mask_resolution)
+    model.adversary = PrivacyAdversary(model.num_pixels, grid=grid, seed=seed)
 
 
 def _frozen_mask_camera(
@@ -179,12 +208,14 @@ def config_record(config: TrainConfig) -> dict[str, Any]:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
     ``head`` appears only when not the paper's MLP, ``perturbation`` only when
-    training is robust. Runs written before either was a choice then resume (their
-    recipe compares equal).
+    training is robust, ``privacy_weight`` only when not 0. Runs written before
+    any was a choice then resume (their recipe compares equal).
     """
     record = asdict(config)
     if config.perturbation is None:
         del record["perturbation"]
+    if not config.privacy_weight:
+        del record["privacy_weight"]
     if config.head is HeadKind.MLP:
         del record["head"]
     else:
@@ -286,6 +317,7 @@ def load_mincam(run_dir: str | os.PathLike, data: TrainingData) -> MincamCamera:
         sensor_model=desc["sensor_model"],
         history=desc["history"],
     )
-    model.load_state_dict(state)
+    # a privacy-trained run's adversary is not part of the camera that is measured
+    model.load_state_dict({k: v for k, v in state.items() if not k.startswith("adversary.")})
     model.eval()
     return model

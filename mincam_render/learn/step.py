@@ -14,7 +14,7 @@ import torch
 
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.builders import learning_rate_for
-from mincam_render.learn.models import MincamCamera, Model, task_loss
+from mincam_render.learn.models import MincamCamera, Model, task_loss, temporal_features
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel
 
@@ -29,6 +29,9 @@ def build_optimizer(model: Model, config: TrainConfig) -> torch.optim.Adam:
     groups = [{"params": [p for p in model.head.parameters() if p.requires_grad], "lr": lr}]
     if isinstance(model, MincamCamera) and model.logits.requires_grad:
         groups.append({"params": [model.logits], "lr": config.mask_lr})
+    adversary = getattr(model, "adversary", None)
+    if adversary is not None:  # its own objective; the head's rate for its fan-in
+        groups.append({"params": list(adversary.parameters()), "lr": learning_rate_for(128)})
     try:
         # one kernel for all parameters: 0.08 ms per step against 0.22 ms (8 px head)
         return torch.optim.Adam(groups, fused=True)
@@ -95,23 +98,36 @@ def train_step(
     generator: torch.Generator,
     gain_range: tuple[float, float],
     perturbation: PerturbationModel | None = None,
+    privacy_weight: float = 0.0,
 ) -> torch.Tensor:
-    """One optimisation step of :func:`train_model` (Adam on the task loss); the loss, detached.
+    """One optimisation step of :func:`train_model` (Adam); the task loss, detached.
 
     A batch, a random global gain per sample (augmentation), with ``perturbation``
     a built camera drawn for the batch (robust training), the camera with
     sensor noise, the loss, backward, the optimiser, and the projection of the
-    mask logits (a saturated mask must be able to move back).
+    mask logits (a saturated mask must be able to move back). A camera with a
+    privacy adversary (``model.adversary``) adds
+    :func:`~mincam_render.learn.privacy_term.privacy_objective` with ``privacy_weight``.
     """
     batch = source.next(generator)
     gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
     draw = batch_draw(model, perturbation, generator)
-    out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
-    loss, _ = task_loss(model.head, out, batch.labels)
+    adversary = getattr(model, "adversary", None)
+    if adversary is None:  # any model with a forward (sim2real's measured heads too)
+        out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
+        loss, _ = task_loss(model.head, out, batch.labels)
+        total = loss
+    else:
+        from mincam_render.learn.privacy_term import privacy_objective
+
+        v = model.measure(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
+        loss, _ = task_loss(model.head, model.head(temporal_features(v)), batch.labels)
+        frames = batch.transport if batch.windows is None else batch.transport[batch.windows[:, -1]]
+        total = loss + privacy_objective(adversary, v[:, -1], frames, privacy_weight)
     for group in opt.param_groups:  # zero_grad(set_to_none=True) without its overhead
         for p in group["params"]:
             p.grad = None
-    loss.backward()
+    total.backward()
     adam_step(opt)
     if isinstance(model, MincamCamera):
         model.project_logits_()

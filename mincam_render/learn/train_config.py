@@ -68,6 +68,11 @@ class TrainConfig:
             shift, rotation, print tone, printable range, blur, gain mismatch, dark
             offset; :mod:`mincam_render.optics.perturbation`); None trains the
             design as drawn (nominal). A minimalist camera's option only.
+        privacy_weight: weight ``w`` of the adversarial privacy term
+            (:mod:`mincam_render.learn.privacy_term`): the masks minimise the task
+            loss minus ``w`` times the loss of a decoder trained alongside to
+            reconstruct the scene from the pixels; 0 trains for the task alone.
+            A static minimalist camera's option only.
 
     """
 
@@ -86,6 +91,7 @@ class TrainConfig:
     seed: int = 0
     torch_threads: int | None = 1
     perturbation: PerturbationModel | None = None
+    privacy_weight: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo in (
@@ -125,6 +131,9 @@ class TrainConfig:
                 f"TrainConfig.perturbation = {self.perturbation!r}: allowed a PerturbationModel "
                 "or None"
             )
+        w = self.privacy_weight
+        if isinstance(w, bool) or not isinstance(w, int | float) or not 0 <= w <= 1e3:
+            raise ValueError(f"TrainConfig.privacy_weight = {w!r}: allowed a number in [0, 1000]")
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")

@@ -199,6 +199,7 @@ class WorkspaceFamily(IndoorFamily):
                     "radius_m": a.radius_m,
                     "inside": inside_room(self.config.room, p.x, p.y),
                 }
+                | ({"identity": a.identity} if self.config.people.roster else {})
                 for a, p in st.people
             ],
             "door_angle_deg": math.degrees(st.door_angle_rad),

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import subprocess
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +162,64 @@ def test_energy_report_loads_its_figures_in_a_headless_browser(tmp_path, energy_
     assert loaded and total, f"the page script did not run: {dom[:500]}"
     assert int(total.group(1)) == 3 and int(loaded.group(1)) == 3
     assert "paper: ~600 lx" in dom and "HM01B0" in dom
+
+
+def _interval(mean: float, half: float) -> dict:
+    return {"mean": mean, "ci95": [mean - half, mean + half]}
+
+
+def _privacy_result() -> dict:
+    """A privacy audit's result of two designs (the structure ``analyze_privacy`` writes)."""
+    from mincam_render.analysis.privacy import corner_verdicts, default_comparison
+    from mincam_render.analysis.privacy.config import AttackConfig, PrivacyConfig
+
+    conv = {"decoder": {"converged": True}, "reid": {"converged": False}}
+    design = {
+        "pixels": 2, "task_state": "converged", "task_seeds": 2, "convergence": [conv] * 3,
+        "task_error": _interval(1.0, 0.1), "psnr_db": _interval(12.0, 0.4),
+        "ssim": _interval(0.3, 0.02), "reid_top1": _interval(0.4, 0.05),
+    }  # fmt: skip
+    baseline = dict(design, pixels=64, psnr_db=_interval(18.0, 0.4), reid_top1=_interval(0.8, 0.05))
+    privacy = {
+        "task": "workspace", "error_name": "people_count RMSE", "roster": 6,
+        "designs": {"mincam-2px": design, "baseline-8x8": baseline},
+        "trivial": {"task_error": _interval(1.6, 0.2), "psnr_db": _interval(11.0, 0.3),
+                    "ssim": _interval(0.25, 0.02), "reid_top1": _interval(0.35, 0.04)},
+        "config": json.loads(json.dumps(asdict(PrivacyConfig(
+            comparison=default_comparison(), attack=AttackConfig())), default=str)),
+    }  # fmt: skip
+    privacy["corner"] = corner_verdicts(privacy)
+    return privacy
+
+
+@pytest.fixture(scope="module")
+def privacy_page(tmp_path_factory):
+    from mincam_render.analysis.privacy import write_privacy_report
+
+    rng = np.random.default_rng(0)
+    examples = {
+        "frames": np.array([3, 40]),
+        "true": rng.uniform(0, 1, (2, 16, 16)).astype(np.float32),
+        "designs": np.array(["mincam-2px", "baseline-8x8"]),
+        "recon": rng.uniform(0, 1, (2, 2, 16, 16)).astype(np.float32),
+    }
+    out = tmp_path_factory.mktemp("privacy")
+    return write_privacy_report(_privacy_result(), examples, out)
+
+
+@needs_chromium
+def test_privacy_report_loads_its_figures_in_a_headless_browser(tmp_path, privacy_page):
+    html = Path(privacy_page["html"])
+    assert not re.search(r'src="(?!data:)', html.read_text()), "external resources"
+    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", html.as_uri())
+    dom = proc.stdout
+    assert "Privacy audit" in dom, proc.stderr[-2000:]
+    loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
+    total = re.search(r'data-figures-total="(\d+)"', dom)
+    assert loaded and total, f"the page script did not run: {dom[:500]}"
+    assert int(total.group(1)) == 2 and int(loaded.group(1)) == 2
+    assert "mincam-2px: in the corner against baseline-8x8" in dom
+    assert "trivial (mean view; most frequent person)" in dom
+    saved = json.loads(Path(privacy_page["json"]).read_text())
+    assert saved["corner"]["mincam-2px"]["in_corner_against"] == ["baseline-8x8"]
+    assert Path(privacy_page["png"]).read_bytes()[:4] == b"\x89PNG"

@@ -7,6 +7,7 @@ from click.testing import CliRunner
 
 from mincam_render.analysis.comparison_config import ComparisonConfig
 from mincam_render.analysis.fidelity_bench import FidelityBenchConfig
+from mincam_render.analysis.privacy.config import AttackConfig
 from mincam_render.analysis.robustness import RobustnessConfig
 from mincam_render.cli.main import main
 from mincam_render.data.exr import read_transport_exr, write_transport_exr
@@ -198,11 +199,12 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
-        (("train",), [], TrainConfig, 10),
-        (("sweep",), [], TrainConfig, 10),
-        (("prune",), ["--run", "r"], TrainConfig, 10),
+        (("train",), [], TrainConfig, 11),
+        (("sweep",), [], TrainConfig, 11),
+        (("prune",), ["--run", "r"], TrainConfig, 11),
         (("train",), [], PerturbationModel, 9),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
+        (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
         (("pipeline",), [], ComparisonConfig, 11),
         (("study",), ["--out", "o"], ComparisonConfig, 11),

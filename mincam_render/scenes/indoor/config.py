@@ -218,7 +218,12 @@ class FloorLampConfig:
 
 @dataclass(frozen=True, kw_only=True)
 class PeopleConfig:
-    """How people look and behave; each visit draws uniformly within these ranges."""
+    """How people look and behave; each visit draws uniformly within these ranges.
+
+    With ``roster = N > 0`` the looks are drawn once, from ``roster_seed``, for
+    N fixed people (identity 0 .. N-1), and every visit is one of them not
+    already present, so episodes of any seed show the same people.
+    """
 
     height_m: tuple[float, float] = spec((1.55, 1.95), unit="m", range=(0.5, 2.5), doc="stature")
     build: tuple[float, float] = spec(
@@ -236,6 +241,19 @@ class PeopleConfig:
     )
     sit_probability: float = spec(0.6, range=(0.0, 1.0), doc="a stop is on a free chair")
     stops: tuple[int, int] = spec((1, 4), range=(1, 100), doc="stops per visit")
+    roster: int = spec(
+        0,
+        range=(0, 1000),
+        doc="0: every visit is a new person; N: every visit is one of N fixed people "
+        "(same looks and gait in every episode; privacy studies)",
+    )
+    roster_seed: int = spec(
+        0, range=(0, 2**31 - 1), doc="seed of the roster's looks (not the episode's seed)"
+    )
+
+    def description_omits(self) -> tuple[str, ...]:
+        """Without a roster its fields are left out of resolved descriptions (format 4 as is)."""
+        return ("roster", "roster_seed") if self.roster == 0 else ()
 
     def __post_init__(self) -> None:
         check_min_max(

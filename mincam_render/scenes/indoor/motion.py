@@ -14,7 +14,7 @@ import numpy as np
 
 from mincam_render.scenes.indoor.config import FurnitureConfig, PeopleConfig, RoomConfig
 from mincam_render.scenes.indoor.door import Door
-from mincam_render.scenes.indoor.people import Appearance, Pose
+from mincam_render.scenes.indoor.people import Appearance, Pose, draw_roster
 
 #: Navigation grid cell (m) and the clearance kept from walls and furniture (m).
 NAV_CELL_M = 0.1
@@ -222,7 +222,17 @@ def simulate_people(
     they came; the door opens when someone is near it or someone props it open.
     Without a door, ``population`` people wander the room for the whole sequence.
     People avoid furniture but not each other (they may overlap briefly).
+    With ``people.roster`` set, every visitor is one of the roster's people not
+    already present (:func:`~mincam_render.scenes.indoor.people.draw_roster`).
+
+    Raises:
+        ValueError: a roster smaller than ``slots`` (someone present would have no look).
     """
+    if 0 < people.roster < slots:
+        raise ValueError(
+            f"people.roster = {people.roster}: need at least max_people = {slots} people "
+            "(one look for everyone present at once), or 0 for no roster"
+        )
     dt = 1.0 / fps
     burn = int(round(burn_in_s * fps))
     sim = _PeopleSimulation(rng=rng, slots=slots, people=people, nav=nav, seats=seats, door=door)
@@ -268,6 +278,7 @@ class _PeopleSimulation:
     ) -> None:
         self.rng, self.people, self.nav, self.seats, self.door = rng, people, nav, seats, door
         self.appearances: list[Appearance] = []
+        self.roster = draw_roster(people)
         self.agents: list[_Agent | None] = [None] * slots
         self.seat_owner: list[int | None] = [None] * len(seats)
         self.entrance = door.waypoints() if door is not None else None
@@ -278,13 +289,21 @@ class _PeopleSimulation:
 
     def new_agent(self, pos: np.ndarray, stops: int) -> _Agent:
         """A visitor at ``pos`` (x, y) with ``stops`` stops to make, of a newly drawn look."""
-        self.appearances.append(Appearance.draw(self.rng, self.people))
+        self.appearances.append(self.next_look())
         return _Agent(
             appearance=len(self.appearances) - 1,
             pos=np.asarray(pos, float),
             heading_rad=float(self.rng.uniform(-math.pi, math.pi)),
             stops_left=stops,
         )
+
+    def next_look(self) -> Appearance:
+        """A new visitor's look: a fresh draw, or a roster person not present (uniformly)."""
+        if not self.roster:
+            return Appearance.draw(self.rng, self.people)
+        present = {self.appearances[a.appearance].identity for a in self.agents if a is not None}
+        absent = [p for p in self.roster if p.identity not in present]
+        return absent[int(self.rng.integers(len(absent)))]
 
     def populate(self, population: int) -> None:
         """Without a door: ``population`` people (at most one a slot) anywhere on the floor."""

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -17,7 +17,10 @@ PARK_POSITION_M = (0.0, 0.0, -50.0)
 
 @dataclass(frozen=True)
 class Appearance:
-    """One visitor's body: stature (m), build (width scale), albedos, walking speed (m/s)."""
+    """One visitor's body: stature (m), build (width scale), albedos, walking speed (m/s).
+
+    ``identity``: the roster's person (0 .. N-1), or -1 for a one-off visitor.
+    """
 
     height_m: float
     build: float
@@ -25,6 +28,7 @@ class Appearance:
     lower_albedo: float
     skin_albedo: float
     speed_m_s: float
+    identity: int = -1
 
     @property
     def radius_m(self) -> float:
@@ -41,6 +45,16 @@ class Appearance:
             skin_albedo=float(rng.uniform(*people.skin_albedo)),
             speed_m_s=float(rng.uniform(*people.walk_speed_m_s)),
         )
+
+
+def draw_roster(people: PeopleConfig) -> tuple[Appearance, ...]:
+    """The ``people.roster`` fixed people, drawn from ``people.roster_seed`` (numpy).
+
+    The draw depends on the description only, never on an episode's seed, so
+    every episode shows the same people (identity ``i`` is the ``i``-th draw).
+    """
+    rng = np.random.default_rng(people.roster_seed)
+    return tuple(replace(Appearance.draw(rng, people), identity=i) for i in range(people.roster))
 
 
 #: A person standing still, used for slots nobody occupies.

@@ -1,0 +1,255 @@
+"""The attacks: what a design's read-out gives away to a learned decoder and a classifier (torch).
+
+The attacker knows the design (its masks, or the baseline's grid and exposure)
+and owns episodes of the same room with their full views and who was present
+(the design's training episodes); it never sees the test episodes it is scored
+on. From the design's read-out of a frame (with sensor noise, as deployed) it
+learns
+
+* a **decoder** to the full view (display image in [0, 1]; an MLP with two
+  hidden layers, sigmoid output, mean squared error), and
+* a **re-identification** classifier: which of the roster's people are in the
+  room (an MLP, one logit per person, binary cross-entropy), scored top-1.
+
+Both keep the state of the lowest validation loss (the validation episode).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from mincam_render.analysis.privacy.config import AttackConfig
+from mincam_render.learn.training_data import TrainingData
+
+#: Frames measured at once (bounds memory at 32 x 32 texels x 8 detectors).
+MEASURE_CHUNK = 512
+
+
+@contextlib.contextmanager
+def one_thread() -> Iterator[None]:
+    """Torch on one intra-op thread inside the block (restored after).
+
+    The attackers are tiny networks: on a small shared machine torch's spinning
+    worker threads make them many times slower (as ``TrainConfig.torch_threads``).
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def design_camera(run_dir: str | os.PathLike, data: TrainingData) -> Any:
+    """The trained camera (``MincamCamera`` or ``BaselineCamera``) of a finished run."""
+    from mincam_render.learn.train import build_baseline, load_mincam, load_run
+
+    run, state = load_run(run_dir)
+    if run["model"]["kind"] == "mincam":
+        return load_mincam(run_dir, data)
+    model = build_baseline(data, tuple(run["model"]["grid"]))
+    model.load_state_dict(state)
+    model.eval()
+    return model
+
+
+def measurements(camera: Any, data: TrainingData, *, seed: int) -> np.ndarray:
+    """The read-out ``[frame, pixel]`` of every frame of ``data``, with sensor noise (numpy).
+
+    Volts for a minimalist camera, 0-1 (DN / 255) for a baseline; the noise is
+    drawn from ``seed`` so the attacker's data is reproducible.
+    """
+    gen = torch.Generator().manual_seed(int(seed))
+    out = []
+    with torch.no_grad(), one_thread():
+        for start in range(0, len(data), MEASURE_CHUNK):
+            idx = torch.arange(start, min(start + MEASURE_CHUNK, len(data)))
+            frames = data.frames_w(idx)
+            v = camera.measure(frames, noise=True, generator=gen)
+            out.append(v.reshape(len(idx), -1).numpy())
+    return np.concatenate(out).astype(np.float32)
+
+
+class _Standardise(nn.Module):
+    """Fixed per-feature standardisation with the attacker's training statistics."""
+
+    mean: torch.Tensor  # buffer: [feature]
+    std: torch.Tensor  # buffer: [feature]
+
+    def __init__(self, x: np.ndarray) -> None:
+        super().__init__()
+        self.register_buffer("mean", torch.from_numpy(x.mean(axis=0)).float())
+        self.register_buffer("std", torch.from_numpy(x.std(axis=0) + 1e-6).float())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.mean) / self.std
+
+
+def _mlp(x_train: np.ndarray, outputs: int, hidden: int) -> nn.Module:
+    return nn.Sequential(
+        _Standardise(x_train),
+        nn.Linear(x_train.shape[1], hidden),
+        nn.ReLU(),
+        nn.Linear(hidden, hidden),
+        nn.ReLU(),
+        nn.Linear(hidden, outputs),
+    )
+
+
+@dataclass
+class Fitted:
+    """A trained attacker: the model (best validation state), its history, its steps."""
+
+    model: nn.Module
+    history: list[dict[str, float]]
+    best_step: int
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """Raw outputs ``[frame, output]`` (numpy) of inputs ``[frame, feature]``."""
+        with torch.no_grad():
+            return self.model(torch.from_numpy(np.asarray(x, np.float32))).numpy()
+
+
+def _fit(
+    model: nn.Module,
+    loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    train: tuple[np.ndarray, np.ndarray],
+    val: tuple[np.ndarray, np.ndarray],
+    cfg: AttackConfig,
+    seed: int,
+) -> Fitted:
+    """Adam on ``loss_of(outputs, targets)`` in batches; the state of the lowest validation loss."""
+    with one_thread():
+        return _fit_steps(model, loss_of, train, val, cfg, seed)
+
+
+def _fit_steps(
+    model: nn.Module,
+    loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    train: tuple[np.ndarray, np.ndarray],
+    val: tuple[np.ndarray, np.ndarray],
+    cfg: AttackConfig,
+    seed: int,
+) -> Fitted:
+    gen = torch.Generator().manual_seed(int(seed))
+    xt, yt = (torch.from_numpy(np.asarray(a, np.float32)) for a in train)
+    xv, yv = (torch.from_numpy(np.asarray(a, np.float32)) for a in val)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    best, best_state, best_step, history = float("inf"), None, 0, []
+    for step in range(1, cfg.max_steps + 1):
+        idx = torch.randint(len(xt), (cfg.batch_size,), generator=gen)
+        loss = loss_of(model(xt[idx]), yt[idx])
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        if step % cfg.eval_every == 0 or step == cfg.max_steps:
+            with torch.no_grad():
+                val_loss = float(loss_of(model(xv), yv))
+            history.append({"step": step, "val_loss": val_loss})
+            if val_loss < best:
+                best, best_step = val_loss, step
+                best_state = {k: v.clone() for k, v in model.state_dict().items()}
+    if best_state is not None:
+        model.load_state_dict(best_state)
+    model.eval()
+    return Fitted(model, history, best_step)
+
+
+def _seeded(seed: int, build: Callable[[], nn.Module]) -> nn.Module:
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(int(seed))
+        return build()
+
+
+def train_decoder(
+    train: tuple[np.ndarray, np.ndarray],
+    val: tuple[np.ndarray, np.ndarray],
+    cfg: AttackConfig,
+    seed: int,
+) -> Fitted:
+    """Decoder from read-outs ``[frame, pixel]`` to display views ``[frame, row, col]`` in [0, 1].
+
+    ``predict`` returns logits; :func:`decode` turns them into images.
+    """
+    x, y = train
+    shape = y.shape[1:]
+    flat = (x, y.reshape(len(y), -1))
+    model = _seeded(seed, lambda: _mlp(x, int(np.prod(shape)), cfg.hidden))
+
+    def loss_of(out: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        return F.mse_loss(torch.sigmoid(out), target)
+
+    return _fit(model, loss_of, flat, (val[0], val[1].reshape(len(val[1]), -1)), cfg, seed)
+
+
+def decode(fitted: Fitted, x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Display images ``[frame, row, col]`` in [0, 1] reconstructed from read-outs ``x``."""
+    logits = fitted.predict(x)
+    return (1.0 / (1.0 + np.exp(-logits))).reshape(len(x), *shape).astype(np.float32)
+
+
+def train_reid(
+    train: tuple[np.ndarray, np.ndarray],
+    val: tuple[np.ndarray, np.ndarray],
+    cfg: AttackConfig,
+    seed: int,
+) -> Fitted:
+    """Classifier from read-outs ``[frame, pixel]`` to who is present ``[frame, identity]``."""
+    x, y = train
+    model = _seeded(seed, lambda: _mlp(x, y.shape[1], cfg.hidden))
+    return _fit(model, F.binary_cross_entropy_with_logits, train, val, cfg, seed)
+
+
+#: Ridge penalties tried by :func:`fit_ridge` (times the number of training frames).
+RIDGE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)
+
+
+@dataclass
+class RidgeDecoder:
+    """A linear decoder (ridge regression, closed form) from read-outs to display views."""
+
+    mean: np.ndarray  # [feature]
+    std: np.ndarray  # [feature]
+    weights: np.ndarray  # [feature + 1, pixel]
+    penalty: float
+
+    def decode(self, x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """Display images ``[frame, row, col]``, clipped to [0, 1]."""
+        z = (np.asarray(x, np.float64) - self.mean) / self.std
+        y = np.hstack([z, np.ones((len(z), 1))]) @ self.weights
+        return np.clip(y, 0.0, 1.0).reshape(len(x), *shape).astype(np.float32)
+
+
+def fit_ridge(
+    train: tuple[np.ndarray, np.ndarray], val: tuple[np.ndarray, np.ndarray]
+) -> RidgeDecoder:
+    """Ridge regression from read-outs to views, its penalty chosen on ``val`` (numpy).
+
+    The linear attacker: for a conventional camera its read-out is a downsampled
+    image of the scene, which a linear map upsamples; the MLP may need far more
+    data to match it.
+    """
+    x, y = np.asarray(train[0], np.float64), np.asarray(train[1], np.float64)
+    mean, std = x.mean(axis=0), x.std(axis=0) + 1e-6
+    a = np.hstack([(x - mean) / std, np.ones((len(x), 1))])
+    gram, rhs = a.T @ a, a.T @ y.reshape(len(y), -1)
+    best: RidgeDecoder | None = None
+    best_mse = np.inf
+    for penalty in RIDGE_PENALTIES:
+        reg = penalty * len(x) * np.eye(len(gram))
+        reg[-1, -1] = 0.0  # the bias is not penalised
+        cand = RidgeDecoder(mean, std, np.linalg.solve(gram + reg, rhs), penalty)
+        mse = float(np.mean((cand.decode(val[0], y.shape[1:]) - val[1]) ** 2))
+        if mse < best_mse:
+            best, best_mse = cand, mse
+    assert best is not None
+    return best

@@ -1,0 +1,123 @@
+"""What a privacy audit renders, trains and attacks, as data (no torch or Mitsuba import)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.learn.train_config import TrainConfig
+
+#: The workspace with a roster of six people (max six present, so each has a look).
+ROSTER_OVERRIDES = {"max_people": 6, "people": {"roster": 6}}
+#: A cheap, fixed render (no fidelity planning): direct light and one bounce,
+#: 4 samples per texel. Every design sees the same noisy transport, so the
+#: comparison between designs stays fair; absolute task errors are not the
+#: shipped studies'.
+AUDIT_FIDELITY = {
+    "spp": 4,
+    "max_depth": 3,
+    "shared_render": False,
+    "dtype": "float16",
+    "differential": False,
+}
+
+
+#: Weight of the privacy term of the audit's privacy-trained design (8 px).
+AUDIT_PRIVACY_WEIGHT = 1.0
+
+
+def default_designs() -> tuple[Design, ...]:
+    """Minimalist cameras of 1, 2, 4, 8 px, 8 px with the privacy term, baselines 2x2 .. 32x32.
+
+    The workspace renders 8 detectors at 32 x 32 texels: no 16 px design and no
+    64 x 64 baseline without a larger render.
+    """
+    return (
+        *(Design(pixels=k) for k in (1, 2, 4, 8)),
+        Design(pixels=8, privacy_weight=AUDIT_PRIVACY_WEIGHT),
+        *(Design(grid=(g, g)) for g in (2, 4, 8, 16, 32)),
+    )
+
+
+def default_comparison() -> ComparisonConfig:
+    """The audit's episodes and task training: the workspace at 1 fps with a roster.
+
+    Sized for a shared 2-core machine: 2 task seeds of at most 1,000 steps per
+    design (the attacks have 3 seeds each).
+
+    1 fps spreads 300 frames over 5 minutes of office activity (a few visits
+    of each person per episode); the task is the workspace's (people count RMSE).
+    """
+    return ComparisonConfig(
+        family="workspace",
+        seed=0,
+        fps=1.0,
+        overrides=ROSTER_OVERRIDES,
+        train_episodes=3,
+        train_frames=300,
+        val_frames=200,
+        test_frames=200,
+        test_episodes=3,
+        seeds=2,
+        designs=default_designs(),
+        train=TrainConfig(max_steps=1000),
+        fidelity=AUDIT_FIDELITY,
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class AttackConfig:
+    """How the attacker learns (the same for every design).
+
+    Args:
+        view_width: pixels per side of the full view the decoder reconstructs.
+        view_spp: samples per pixel of the full views.
+        seeds: attacker seeds (>= 3 for an interval).
+        max_steps: Adam steps of each attacker at most.
+        batch_size: samples per step.
+        hidden: units of each of the two hidden layers.
+        lr: Adam learning rate.
+        eval_every: steps between validation checks (the best state is kept).
+        examples: test frames shown in the report's reconstructions.
+    """
+
+    view_width: int = 64
+    view_spp: int = 4
+    seeds: int = 3
+    max_steps: int = 600
+    batch_size: int = 64
+    hidden: int = 256
+    lr: float = 1e-3
+    eval_every: int = 100
+    examples: int = 4
+
+    def __post_init__(self) -> None:
+        for name, lo in (
+            ("view_width", 8),
+            ("view_spp", 1),
+            ("seeds", 1),
+            ("max_steps", 1),
+            ("batch_size", 2),
+            ("hidden", 1),
+            ("eval_every", 1),
+            ("examples", 0),
+        ):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ValueError(f"AttackConfig.{name} = {v!r}: allowed an integer >= {lo}")
+        if not 0 < self.lr < 1:
+            raise ValueError(f"AttackConfig.lr = {self.lr!r}: allowed (0, 1)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PrivacyConfig:
+    """A privacy audit: the comparison's episodes and designs, and the attacker.
+
+    Args:
+        comparison: episodes, designs (a privacy-trained design is one with
+            ``Design.privacy_weight``) and task training (:func:`default_comparison`).
+        attack: the attacker (:class:`AttackConfig`).
+    """
+
+    comparison: ComparisonConfig = field(default_factory=default_comparison)
+    attack: AttackConfig = field(default_factory=AttackConfig)

@@ -1,0 +1,106 @@
+"""Full views of a rendered dataset: what an attacker would like to recover from its frames.
+
+For every frame of a dataset, a pinhole image from the camera's pose (its
+board centre, looking where it looks, with the masks' field of view) of the
+frame's scene state: ``view[frame, row, col]``, luminance radiance
+(W/(m^2 sr)), row 0 toward the camera's ``up``. The scene is rebuilt from the
+dataset's manifest, so the views show exactly the episode the transport images
+were rendered from. Written next to the dataset as ``views_<width>.npy`` plus a
+JSON sidecar (settings, sha256) into a directory of the caller's choosing;
+a finished file is reused, not rendered again.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mincam_render.data import dataset as ds
+
+log = logging.getLogger(__name__)
+
+
+def view_paths(out_dir: str | os.PathLike, width: int) -> tuple[Path, Path]:
+    """``(views .npy, sidecar .json)`` of views ``width`` pixels wide in ``out_dir``."""
+    out = Path(out_dir)
+    return out / f"views_{width}.npy", out / f"views_{width}.json"
+
+
+def _check_settings(width: int, spp: int) -> None:
+    for name, value, hi in (("width", width, 1024), ("spp", spp, 1 << 16)):
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
+            raise ValueError(f"{name} = {value!r}: allowed an integer in [1, {hi}]")
+
+
+def render_views(
+    dataset_dir: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    width: int = 64,
+    spp: int = 16,
+    progress: bool = False,
+) -> np.ndarray:
+    """Render (or reuse) ``view[frame, row, col]`` (W/(m^2 sr)) of every frame of a dataset.
+
+    Args:
+        dataset_dir: a complete dataset (:func:`~mincam_render.data.dataset.open_dataset`).
+        out_dir: where ``views_<width>.npy`` and its sidecar go (created).
+        width: pixels per side of the square view, [1, 1024].
+        spp: samples per pixel, [1, 65536]; the scene's own integrator (its
+            ``max_depth``) renders them.
+        progress: a progress bar on stderr.
+
+    Returns:
+        float32 ``[frame, width, width]``; memory-mapped when reused from disk.
+
+    Raises:
+        ValueError: bad ``width`` or ``spp``; a sidecar of other settings or dataset.
+    """
+    _check_settings(width, spp)
+    data = ds.open_dataset(dataset_dir)
+    npy, meta = view_paths(out_dir, width)
+    settings = {
+        "width": width,
+        "spp": spp,
+        "dataset_manifest_sha256": ds.sha256_file(Path(dataset_dir) / ds.MANIFEST_NAME),
+    }
+    if npy.is_file() and meta.is_file():
+        kept = json.loads(meta.read_text())
+        if {k: kept.get(k) for k in settings} != settings:
+            raise ValueError(f"{meta}: views of other settings or another dataset; remove them")
+        if ds.sha256_file(npy) == kept["sha256"]:
+            return np.load(npy, mmap_mode="r")
+        log.warning("%s: checksum mismatch; rendering the views again", npy)
+    views = _render_all(data, width, spp, progress)
+    npy.parent.mkdir(parents=True, exist_ok=True)
+    ds.atomic_write_bytes(npy, ds.npy_bytes(views))
+    record = {**settings, "sha256": ds.sha256_file(npy), "unit": "W/(m^2 sr)",
+              "axes": "view[frame, row, col], row 0 toward the camera's up"}  # fmt: skip
+    ds.atomic_write_bytes(meta, ds.json_bytes(record))
+    return views
+
+
+def _render_all(data: Any, width: int, spp: int, progress: bool) -> np.ndarray:
+    """Every frame's view of ``data`` (numpy float32), the family rebuilt from its manifest."""
+    import mitsuba as mi
+    from tqdm import tqdm
+
+    from mincam_render.data.render_job import _load_family
+    from mincam_render.render import mitsuba_scene as ms
+
+    family = _load_family(data.manifest["job"])
+    camera = data.camera
+    scene = family.build_scene()
+    sensor = ms.perspective_sensor(
+        camera.position, camera.look_at, camera.up, camera.fov_deg, width, width
+    )
+    views = np.empty((data.num_frames, width, width), np.float32)
+    for i in tqdm(range(data.num_frames), desc="views", unit="frame", disable=not progress):
+        family.set_frame(scene, i)
+        views[i] = np.asarray(mi.render(scene, sensor=sensor, spp=spp, seed=i))[..., 0]
+    return views
