@@ -119,6 +119,7 @@ class Fitted:
             return self.model(torch.from_numpy(np.asarray(x, np.float32))).numpy()
 
 
+@one_thread()
 def _fit(
     model: nn.Module,
     loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
@@ -128,18 +129,6 @@ def _fit(
     seed: int,
 ) -> Fitted:
     """Adam on ``loss_of(outputs, targets)`` in batches; the state of the lowest validation loss."""
-    with one_thread():
-        return _fit_steps(model, loss_of, train, val, cfg, seed)
-
-
-def _fit_steps(
-    model: nn.Module,
-    loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-    train: tuple[np.ndarray, np.ndarray],
-    val: tuple[np.ndarray, np.ndarray],
-    cfg: AttackConfig,
-    seed: int,
-) -> Fitted:
     gen = torch.Generator().manual_seed(int(seed))
     xt, yt = (torch.from_numpy(np.asarray(a, np.float32)) for a in train)
     xv, yv = (torch.from_numpy(np.asarray(a, np.float32)) for a in val)
