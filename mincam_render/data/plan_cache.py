@@ -54,7 +54,9 @@ def cache_dir() -> Path:
     return Path(platformdirs.user_cache_dir("mincam_render")) / "plans"
 
 
-def plan_fields(identity: dict, family_name: str, renderer: dict[str, str]) -> dict[str, Any]:
+def plan_fields(
+    identity: dict, family_name: str, renderer: dict[str, str], error_scale: str = "frame"
+) -> dict[str, Any]:
     """What a plan depends on: the request identity less the episode, and the renderer.
 
     Args:
@@ -63,9 +65,14 @@ def plan_fields(identity: dict, family_name: str, renderer: dict[str, str]) -> d
             with the same content give the same fields).
         family_name: the scene family's registered name.
         renderer: ``{"variant", "mitsuba", "drjit"}`` versions.
+        error_scale: the family's ``planning_error_scale``. A field only when it
+            is not "frame": version-4 plans were all planned per frame, and
+            their keys stay valid.
     """
     fields = {k: v for k, v in identity.items() if k not in EPISODE_FIELDS}
     fields.update(family_name=family_name, renderer=renderer, planner_version=PLANNER_VERSION)
+    if error_scale != "frame":
+        fields["planning_error_scale"] = error_scale
     return json.loads(json.dumps(fields, sort_keys=True))
 
 

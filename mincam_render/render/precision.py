@@ -13,6 +13,9 @@ import numpy as np
 
 #: Storage dtypes of transport images.
 DTYPES = ("float16", "float32")
+#: What a measurement error is relative to (:func:`measurement_relative_error`):
+#: each frame's own measurement, or the mean measurement over the frames.
+ERROR_SCALES = ("frame", "mean")
 
 
 def frame_scales(transport_w: np.ndarray) -> np.ndarray:
@@ -68,6 +71,7 @@ def measurement_relative_error(
     *,
     num_masks: int = 16,
     seed: int = 0,
+    scale: str = "frame",
 ) -> dict[str, float]:
     """Relative error of measurements ``P = sum_uv T M`` for random printable masks.
 
@@ -75,21 +79,33 @@ def measurement_relative_error(
     half are binary (printable minimum or maximum, 10 % open), which selects few
     texels and so is the harder case for rounding and noise.
 
+    ``scale="frame"`` divides each error by its own frame's ``|P_ref|`` (frames
+    without light are left out); ``scale="mean"`` divides it by the mean of
+    ``|P_ref|`` over the frames (per detector and mask), so a frame ten times
+    dimmer than the others weighs by its absolute error, not ten times more.
+
     Args:
         transport_w: ``T[frame, detector, row, col]`` under test (W).
         reference_w: the reference, same shape (W).
         transmittance_range: printable ``(lo, hi)``.
         num_masks: masks per detector.
         seed: seed of the masks.
+        scale: ``"frame"`` or ``"mean"`` (:data:`ERROR_SCALES`).
 
     Returns:
         ``{"rms": ..., "max": ...}``: RMS over frames, detectors and masks of
-        ``|P - P_ref| / |P_ref|``, and the maximum.
+        ``|P - P_ref| / |P_ref|`` (``|P_ref|`` per frame or its mean over frames),
+        and the maximum.
+
+    Raises:
+        ValueError: shapes differ or are not 4-D; unknown ``scale``.
     """
     t = np.asarray(transport_w, dtype=np.float64)
     ref = np.asarray(reference_w, dtype=np.float64)
     if t.shape != ref.shape or t.ndim != 4:
         raise ValueError(f"shapes {t.shape} and {ref.shape}: expected equal [N, K, R, C]")
+    if scale not in ERROR_SCALES:
+        raise ValueError(f"scale = {scale!r}: allowed {', '.join(ERROR_SCALES)}")
     lo, hi = transmittance_range
     rng = np.random.default_rng(seed)
     _, k, rows, cols = t.shape
@@ -100,6 +116,8 @@ def measurement_relative_error(
     p = np.einsum("nkrc,mkrc->nmk", t, masks)
     p_ref = np.einsum("nkrc,mkrc->nmk", ref, masks)
     denom = np.abs(p_ref)
+    if scale == "mean":
+        denom = np.broadcast_to(denom.mean(axis=0), denom.shape)
     ok = denom > 0
     if not np.any(ok):
         return {"rms": 0.0, "max": 0.0}

@@ -78,6 +78,11 @@ class SceneFamily(abc.ABC):
     config_type: ClassVar[type]
     #: True when the task needs a time history (traffic speed from 30 frames).
     needs_history: ClassVar[bool] = False
+    #: What the fidelity planner's target error is relative to
+    #: (:data:`mincam_render.render.precision.ERROR_SCALES`): each probe frame's
+    #: own measurement ("frame"), or the mean over the probe frames ("mean") for a
+    #: family whose light level is itself the label and varies tenfold by frame.
+    planning_error_scale: ClassVar[str] = "frame"
 
     def __init__(self, config: Any, *, seed: int, num_frames: int) -> None:
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:

@@ -72,9 +72,7 @@ def test_paired_difference_removes_the_episode_difficulty_the_separate_intervals
     seed_noise = np.array([[0.0], [0.01], [-0.01]])
     a = EpisodeErrors(difficulty + seed_noise, np.full(4, 100), "mean")
     b = EpisodeErrors(difficulty + 0.1 + seed_noise[::-1], np.full(4, 100), "mean")
-    assert verdict("a", bootstrap_interval(a), "b", bootstrap_interval(b)).startswith(
-        "no verdict"
-    )
+    assert verdict("a", bootstrap_interval(a), "b", bootstrap_interval(b)).startswith("no verdict")
     diff = paired_difference(a, b)
     assert diff.mean == pytest.approx(-0.1)  # means of the error rates: closed form
     assert -0.1 - 0.02 <= diff.low <= diff.mean <= diff.high <= -0.1 + 0.02

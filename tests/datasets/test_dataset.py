@@ -146,6 +146,22 @@ def test_float16_encoding_error_and_scales(rng):
     np.testing.assert_array_equal(precision.decode_transport(s32, sc32), t)
 
 
+def test_error_relative_to_each_frame_or_to_the_mean_frame():
+    # uniform transport: every mask measures the same multiple of the frame's level,
+    # so a constant error e_i of frame i is e_i / level_i or e_i / mean level
+    levels = np.array([1.0, 10.0])
+    ref = np.ones((2, 1, 4, 4)) * levels[:, None, None, None]
+    test = ref + 0.1 * np.ones((2, 1, 4, 4))  # the same absolute error in both frames
+    per_frame = precision.measurement_relative_error(test, ref, (0.5, 0.5))
+    mean = precision.measurement_relative_error(test, ref, (0.5, 0.5), scale="mean")
+    np.testing.assert_allclose(per_frame["max"], 0.1)
+    np.testing.assert_allclose(per_frame["rms"], np.sqrt((0.1**2 + 0.01**2) / 2))
+    np.testing.assert_allclose(mean["max"], 0.1 / 5.5)
+    np.testing.assert_allclose(mean["rms"], 0.1 / 5.5)
+    with pytest.raises(ValueError, match="scale = 'median'"):
+        precision.measurement_relative_error(test, ref, (0.5, 0.5), scale="median")
+
+
 def test_encode_rejects_non_finite():
     with pytest.raises(ValueError, match="NaN"):
         precision.encode_transport(np.full((1, 1, 2, 2), np.nan, np.float32), "float16")

@@ -67,6 +67,19 @@ def test_other_frame_counts_and_targets_are_planned_apart(variant):
     assert key(AUTO) != key(dataclasses.replace(AUTO, spp=4))
 
 
+def test_only_a_mean_scaled_family_adds_its_error_scale_to_the_plan_key():
+    renderer = {"variant": "llvm_ad_mono", "mitsuba": "3.9.1", "drjit": "1.5.0"}
+    identity = {"family": "lighting", "num_frames": 100, "seed": 4}
+    per_frame = plan_cache.plan_fields(identity, "lighting", renderer)
+    mean = plan_cache.plan_fields(identity, "lighting", renderer, "mean")
+    # version-4 plans (every shipped one) were per frame: their keys are unchanged
+    assert "planning_error_scale" not in per_frame
+    assert mean["planning_error_scale"] == "mean"
+    assert plan_cache.plan_key(per_frame) != plan_cache.plan_key(mean)
+    assert load_family("lighting", seed=0, num_frames=2).planning_error_scale == "mean"
+    assert load_family("workspace", seed=0, num_frames=2).planning_error_scale == "frame"
+
+
 def test_a_damaged_kept_plan_is_ignored_and_measured_again(tmp_path, own_cache, variant, caplog):
     render_dataset(AUTO, tmp_path / "a", workers=0)
     (path,) = own_cache.glob("*.json")

@@ -216,11 +216,13 @@ def _fidelity_plan(
     from mincam_render.data import plan_cache
     from mincam_render.render import backend
     from mincam_render.render.fidelity import decide_fidelity
+    from mincam_render.scenes.registry import family_class
 
     info = backend.describe()
     versions = package_versions()
     renderer = {"variant": info["variant"], **{k: versions[k] for k in ("mitsuba", "drjit")}}
-    fields = plan_cache.plan_fields(identity, family_name, renderer)
+    error_scale = family_class(family_name).planning_error_scale
+    fields = plan_cache.plan_fields(identity, family_name, renderer, error_scale)
     found = plan_cache.find_plan(fields) if use_cache else None
     if found is not None:
         plan, where = found

@@ -23,6 +23,7 @@ if TYPE_CHECKING:
         """What the planner needs of a scene family (``SceneFamily`` has it)."""
 
         num_frames: int
+        planning_error_scale: str
 
         @property
         def name(self) -> str:
@@ -181,8 +182,12 @@ class Probes:
         return np.stack(out)
 
     def error(self, a: np.ndarray, b: np.ndarray) -> dict[str, float]:
-        """Relative measurement error of ``a`` against ``b`` for random printable masks."""
-        return measurement_relative_error(a, b, self.lo_hi)
+        """Relative measurement error of ``a`` against ``b`` for random printable masks.
+
+        Relative to each frame's measurement or their mean, as the family's
+        ``planning_error_scale`` says.
+        """
+        return measurement_relative_error(a, b, self.lo_hi, scale=self.family.planning_error_scale)
 
     def depth_range_m(self) -> dict[str, Any]:
         """Nearest and farthest depth (m) seen from the board centre over the probe frames."""
