@@ -147,7 +147,17 @@ robust_options = apply_options(
             is_flag=True,
             help="Robust training: every batch through a new built camera drawn from the "
             "perturbation model below (docs/robustness.md).",
-        )
+        ),
+        click.option(
+            "--robust-validation-draws",
+            "robust_validation_draws",
+            type=click.IntRange(0, 1000),
+            default=field_default(TrainConfig, "robust_validation_draws"),
+            show_default=True,
+            help="With --robust: validate (decay the learning rate, stop early) on the mean "
+            "loss over this many built cameras, drawn once from --seed; 0: on the camera "
+            "as designed.",
+        ),
     ]
     + [
         click.option(
