@@ -202,7 +202,7 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("train",), [], TrainConfig, 12),
         (("sweep",), [], TrainConfig, 11),
         (("prune",), ["--run", "r"], TrainConfig, 11),
-        (("train",), [], PerturbationModel, 9),
+        (("train",), [], PerturbationModel, 12),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),

@@ -1,0 +1,239 @@
+r"""Camera pose error as a resampling of the mask plane (numpy; the torch side is in fabrication).
+
+A built camera is screwed to the wall a little off its designed pose: turned by
+``(pan, tilt, roll)`` and moved by ``t = (right, up, forward)`` in the designed
+camera's frame. Its transport images differ from the rendered ones; this module
+approximates them from the rendered ones instead of rendering again.
+
+**The model.** Texel ``p`` of a detector's mask plane sees the scene along one
+direction from the detector (its pinhole), in tangent coordinates
+``(a, b) = (right, up) / mask_distance``. The transport of the texel is its
+angular weight times the radiance from that direction,
+``T(p) = G(p) L(p)`` with ``G = cos^4(theta) f(theta)`` (solid angle per unit
+mask area, ``cos^3``, times the diode's cosine and its directional response
+``f``, as :mod:`mincam_render.render.transport` integrates them). The moved
+camera's texel ``p`` sees the scene point that the designed camera saw at
+``h(p)``, with ``h`` the homography
+
+.. math::  h(p) \simeq (I - t n^T / D)^{-1} R \, (a_p, b_p, 1)^T, \qquad n = (0, 0, 1)
+
+of a scene plane at depth ``D`` facing the camera: exact for the rotation ``R``
+at any depth (a camera turned about its pinhole sees the same rays), exact for
+the offset ``t`` on that plane only; content at depth ``z`` is off by the
+parallax ``|t| (1/z - 1/D)`` (rad). Radiance is carried along rays, so
+
+.. math::  T'(p) = G(p)\, L(h(p)) \approx G(p) \sum_q B(q; h(p))\, T(q) / G(q)
+
+with ``B`` the bilinear weights of the rendered texels ``q`` around ``h(p)``.
+The measurement ``P' = sum_p T'(p) M(p)`` is then a measurement of the rendered
+transport through an effective mask, the splat (adjoint of the bilinear
+lookup) of ``G M`` onto the rendered texels:
+
+.. math::  M_{eff}(q) = \frac{1}{G(q)} \sum_p B(q; h(p))\, G(p)\, M(p)
+
+so a pose error costs a few thousand multiply-adds per mask, linear and
+differentiable in ``M``, and every detector takes the same splat (the board is
+rigid; a detector ``b`` off the board centre also moves by ``(R - I) b``,
+~1.7 mm for 5 cm at 2 deg, not modelled).
+
+**What is missing.** Where ``h(p)`` falls outside the rendered field, the
+moved camera sees content no render holds; the lookup then takes the nearest
+rendered texel (border replication), a guess. :attr:`PoseSplat.extrapolated_fraction`
+is the share of the moved camera's angular weight that is guessed this way:
+for the prototype's masks 0.026 for a 2-deg pan (a strip ``11.4 mm x tan 2 deg
+/ cos^2 35 deg = 0.6 mm`` wide along one 16-mm edge), 0.046 for 2 deg about
+all three axes, 0.005 for a 2-cm move at the 2-m plane.
+``benchmarks/bench_pose_error.py`` measures the approximation against real
+re-renders.
+
+Conventions (``docs/robustness.md``): pan turns the view right, tilt up, roll
+clockwise as seen from the camera (like a mask rotation), applied in that order
+about the camera's own axes; the camera turns about its board origin.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from mincam_render.optics.camera import FreeformCamera
+
+CM = 1e-2  #: metres per centimetre
+
+
+def _check_pose(
+    rotation_deg: object, offset_m: object, depth_m: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(rotation, offset)`` as float64 vectors, else a ValueError naming the value."""
+    try:
+        rot = np.asarray(rotation_deg, dtype=np.float64)
+        off = np.asarray(offset_m, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"pose {rotation_deg!r} deg, {offset_m!r} m: need numbers") from None
+    if rot.shape != (3,) or not np.all(np.isfinite(rot)):
+        raise ValueError(
+            f"pose rotation {rotation_deg!r} deg: need 3 finite angles (pan, tilt, roll)"
+        )
+    if off.shape != (3,) or not np.all(np.isfinite(off)):
+        raise ValueError(f"pose offset {offset_m!r} m: need 3 finite numbers (right, up, forward)")
+    if depth_m is not None:
+        if not (isinstance(depth_m, int | float) and math.isfinite(depth_m) and depth_m > 0):
+            raise ValueError(f"pose depth {depth_m!r} m is invalid: allowed a finite depth > 0")
+        if off[2] >= depth_m:
+            raise ValueError(f"pose offset forward {off[2]:g} m reaches the depth {depth_m:g} m")
+    return rot, off
+
+
+def pose_rotation(rotation_deg: object) -> np.ndarray:
+    """``R`` (3x3): the moved camera's axes in the designed camera's ``(right, up, forward)``.
+
+    Column ``i`` is the moved camera's axis ``i``: pan (turning forward toward
+    right), then tilt (forward toward up), then roll (up toward right:
+    clockwise as seen from the camera), each about the camera's current axes.
+    """
+    pan, tilt, roll = np.radians(np.asarray(rotation_deg, dtype=np.float64))
+    cp, sp, ct, st, cr, sr = (f(x) for x in (pan, tilt, roll) for f in (np.cos, np.sin))
+    r_pan = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    r_tilt = np.array([[1.0, 0.0, 0.0], [0.0, ct, st], [0.0, -st, ct]])
+    r_roll = np.array([[cr, sr, 0.0], [-sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    return r_pan @ r_tilt @ r_roll
+
+
+def content_homography(rotation_deg: object, offset_m: object, depth_m: float) -> np.ndarray:
+    """``H`` (3x3): a moved camera's direction ``(a, b, 1)`` -> the designed camera's.
+
+    Both in their own ``(right, up, forward)`` coordinates, for scene points on
+    the plane ``forward = depth_m`` of the designed camera (any depth when the
+    offset is 0).
+    """
+    rot, off = _check_pose(rotation_deg, offset_m, depth_m)
+    plane = np.eye(3) - np.outer(off, [0.0, 0.0, 1.0 / depth_m])
+    return np.linalg.inv(plane) @ pose_rotation(rot)
+
+
+def texel_directions(camera: FreeformCamera) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent coordinates ``(a, b)`` of the texel centres, each ``[rows, cols]``.
+
+    ``a`` along right, ``b`` along up, in units of the mask distance (row 0 up).
+    """
+    rows, cols = camera.mask_resolution
+    th, tw = camera.texel_size_m
+    d = camera.mask_distance_m
+    a = ((np.arange(cols) + 0.5) * tw - 0.5 * camera.mask_size_m) / d
+    b = (0.5 * camera.mask_size_m - (np.arange(rows) + 0.5) * th) / d
+    aa, bb = np.broadcast_arrays(a[None, :], b[:, None])
+    return aa, bb
+
+
+def angular_weight(camera: FreeformCamera, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``G = cos^4(theta) f(theta)`` of directions ``(a, b)``: transport per unit radiance.
+
+    Up to a constant factor (detector area, texel area, ``1 / d^2``), which
+    cancels in every ratio this module takes.
+    """
+    cos_theta = 1.0 / np.sqrt(1.0 + a * a + b * b)
+    g = cos_theta**4
+    if camera.directional_response is not None:
+        g = g * camera.directional_response(np.arccos(np.clip(cos_theta, 0.0, 1.0)))
+    return g
+
+
+@dataclass(frozen=True)
+class PoseSplat:
+    """The effective mask of a pose error as a sparse sum (numpy).
+
+    ``M_eff[q] = sum_i weight[i] M[source[i]]`` over ``i`` with ``target[i] = q``
+    (flat row-major texel indices of one detector's mask).
+
+    Attributes:
+        source: ``[4 N]`` texel ``p`` of the moved camera's mask.
+        target: ``[4 N]`` rendered texel ``q``.
+        weight: ``[4 N]`` ``B(q; h(p)) G(p) / G(q)``.
+        extrapolated_fraction: share of the moved camera's angular weight whose
+            content lies outside the rendered field (border-replicated), in [0, 1]
+            (each texel counted by the share of its width beyond the field).
+    """
+
+    source: np.ndarray
+    target: np.ndarray
+    weight: np.ndarray
+    extrapolated_fraction: float
+
+
+def _bilinear(index: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lower neighbour, upper neighbour and upper weight of continuous texel indices.
+
+    Indices (texel centre ``j`` at ``j``) are clamped to ``[0, n - 1]``: beyond
+    the field the border texel stands in.
+    """
+    x = np.clip(index, 0.0, n - 1.0)
+    lo = np.minimum(np.floor(x), max(n - 2, 0)).astype(np.int64)
+    return lo, np.minimum(lo + 1, n - 1), x - lo
+
+
+def _inside(index: np.ndarray, n: int) -> np.ndarray:
+    """Share of a texel around continuous index ``index`` that lies within ``[-0.5, n - 0.5]``."""
+    beyond = np.clip(np.abs(index - (n - 1) / 2.0) - (n - 1) / 2.0, 0.0, 1.0)
+    return 1.0 - beyond
+
+
+def pose_splat(
+    camera: FreeformCamera, rotation_deg: object, offset_m: object, depth_m: float
+) -> PoseSplat:
+    """The :class:`PoseSplat` of a camera moved by ``rotation_deg`` and ``offset_m``.
+
+    Args:
+        camera: mask geometry (size, distance, texels) and directional response.
+        rotation_deg: ``(pan, tilt, roll)`` (deg).
+        offset_m: ``(right, up, forward)`` (m), in the designed camera's frame.
+        depth_m: depth of the scene plane the offset is exact for (m), > 0.
+
+    Raises:
+        ValueError: not 3 finite angles or offsets, depth not > 0, or an offset
+            forward reaching the plane.
+    """
+    rows, cols = camera.mask_resolution
+    a, b = texel_directions(camera)
+    h = content_homography(rotation_deg, offset_m, depth_m)
+    x = h @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+    ahead = x[2] > 0  # content behind the designed camera: no render holds it
+    w = np.where(ahead, x[2], 1.0)
+    d, (th, tw) = camera.mask_distance_m, camera.texel_size_m
+    col = (x[0] / w * d + 0.5 * camera.mask_size_m) / tw - 0.5
+    row = (0.5 * camera.mask_size_m - x[1] / w * d) / th - 0.5
+    outside = np.where(ahead, 1.0 - _inside(row, rows) * _inside(col, cols), 1.0)
+    g = angular_weight(camera, a, b).ravel()
+    r0, r1, fr = _bilinear(row, rows)
+    c0, c1, fc = _bilinear(col, cols)
+    p = np.arange(a.size)
+    corners = [(r0, c0, (1 - fr) * (1 - fc)), (r0, c1, (1 - fr) * fc)]
+    corners += [(r1, c0, fr * (1 - fc)), (r1, c1, fr * fc)]
+    target = np.concatenate([r * cols + c for r, c, _ in corners])
+    weight = np.concatenate([np.where(ahead, wt, 0.0) for _, _, wt in corners])
+    weight = weight * np.tile(g, 4) / g[target]
+    return PoseSplat(
+        source=np.tile(p, 4),
+        target=target,
+        weight=weight,
+        extrapolated_fraction=float(g @ outside / g.sum()),
+    )
+
+
+def posed_camera(camera: FreeformCamera, rotation_deg: object, offset_m: object) -> FreeformCamera:
+    """``camera`` turned by ``rotation_deg`` about its board origin and moved by ``offset_m``.
+
+    The offset ``(right, up, forward)`` (m) is in the designed camera's frame.
+    What :func:`pose_splat` approximates; renders of it are the reference.
+    """
+    rot, off = _check_pose(rotation_deg, offset_m)
+    frame = camera.frame  # rows: right, up, forward (world)
+    axes = frame.T @ pose_rotation(rot)  # columns: the moved camera's axes (world)
+    position = np.asarray(camera.position) + frame.T @ off
+    return replace(
+        camera,
+        position=tuple(position),
+        look_at=tuple(position + axes[:, 2]),
+        up=tuple(axes[:, 1]),
+    )
