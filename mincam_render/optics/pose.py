@@ -20,7 +20,9 @@ camera's texel ``p`` sees the scene point that the designed camera saw at
 of a scene plane at depth ``D`` facing the camera: exact for the rotation ``R``
 at any depth (a camera turned about its pinhole sees the same rays), exact for
 the offset ``t`` on that plane only; content at depth ``z`` is off by the
-parallax ``|t| (1/z - 1/D)`` (rad). Radiance is carried along rays, so
+parallax ``|t| (1/z - 1/D)`` (rad). Given the view's depth map instead of one
+``D``, every texel's content moves by its own parallax (``R x + t / z``).
+Radiance is carried along rays, so
 
 .. math::  T'(p) = G(p)\, L(h(p)) \approx G(p) \sum_q B(q; h(p))\, T(q) / G(q)
 
@@ -179,8 +181,41 @@ def _inside(index: np.ndarray, n: int) -> np.ndarray:
     return 1.0 - beyond
 
 
+def _content_directions(
+    camera: FreeformCamera,
+    rotation_deg: object,
+    offset_m: object,
+    depth_m: float | np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+) -> np.ndarray:
+    """``x[3, texel]``: the designed camera's direction of what each moved texel sees.
+
+    A scalar depth: the plane homography (:func:`content_homography`). A depth
+    map: each texel's content at its own depth, the designed view's depth at
+    that texel less the forward offset (exact for a pure offset wherever the
+    depth varies slowly; with a rotation too, the depth is taken at the
+    unrotated texel).
+    """
+    if np.ndim(depth_m) == 0:
+        h = content_homography(rotation_deg, offset_m, float(depth_m))  # type: ignore[arg-type]
+        return h @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+    rot, off = _check_pose(rotation_deg, offset_m)
+    z = np.asarray(depth_m, dtype=np.float64)
+    if z.shape != a.shape or np.isnan(z).any() or not np.all(z > max(off[2], 0.0)):
+        raise ValueError(
+            f"pose depth map of shape {z.shape}: need {a.shape} depths (m) beyond the forward "
+            f"offset {off[2]:g} m (inf for misses)"
+        )
+    x = pose_rotation(rot) @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+    return x + off[:, None] / (z.ravel() - off[2])  # the ray scaled by 1 / depth
+
+
 def pose_splat(
-    camera: FreeformCamera, rotation_deg: object, offset_m: object, depth_m: float
+    camera: FreeformCamera,
+    rotation_deg: object,
+    offset_m: object,
+    depth_m: float | np.ndarray,
 ) -> PoseSplat:
     """The :class:`PoseSplat` of a camera moved by ``rotation_deg`` and ``offset_m``.
 
@@ -188,16 +223,17 @@ def pose_splat(
         camera: mask geometry (size, distance, texels) and directional response.
         rotation_deg: ``(pan, tilt, roll)`` (deg).
         offset_m: ``(right, up, forward)`` (m), in the designed camera's frame.
-        depth_m: depth of the scene plane the offset is exact for (m), > 0.
+        depth_m: depth of the scene plane the offset is exact for (m), > 0; or
+            the designed view's depth map ``[rows, cols]`` (m, ``inf`` where a
+            ray misses), each texel's content moved by its own parallax.
 
     Raises:
-        ValueError: not 3 finite angles or offsets, depth not > 0, or an offset
-            forward reaching the plane.
+        ValueError: not 3 finite angles or offsets, depth not > 0, an offset
+            forward reaching the plane, or a depth map of another shape.
     """
     rows, cols = camera.mask_resolution
     a, b = texel_directions(camera)
-    h = content_homography(rotation_deg, offset_m, depth_m)
-    x = h @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+    x = _content_directions(camera, rotation_deg, offset_m, depth_m, a, b)
     ahead = x[2] > 0  # content behind the designed camera: no render holds it
     w = np.where(ahead, x[2], 1.0)
     d, (th, tw) = camera.mask_distance_m, camera.texel_size_m

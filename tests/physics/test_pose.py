@@ -229,3 +229,38 @@ def test_a_pose_error_needs_the_camera_and_a_depth_in_front():
         pose_splat(_camera(), np.zeros(3), (0.0, 0.0, 2.0), 2.0)
     with pytest.raises(ValueError, match="3 finite angles"):
         posed_camera(_camera(), (1.0, 2.0), np.zeros(3))
+
+
+def test_a_uniform_depth_map_is_the_plane_and_a_rotation_ignores_depth(rng):
+    cam = _camera(8)
+    off = np.array([0.02, -0.01, 0.015])
+    plane = pose_splat(cam, np.zeros(3), off, 2.0)
+    mapped = pose_splat(cam, np.zeros(3), off, np.full((8, 8), 2.0))
+    np.testing.assert_array_equal(plane.target, mapped.target)
+    np.testing.assert_allclose(plane.weight, mapped.weight, rtol=0, atol=1e-12)
+    rot = (1.5, -2.0, 3.0)
+    depths = rng.uniform(0.5, 8.0, (8, 8))
+    a, b = pose_splat(cam, rot, np.zeros(3), 2.0), pose_splat(cam, rot, np.zeros(3), depths)
+    np.testing.assert_allclose(a.weight, b.weight, rtol=0, atol=1e-12)
+    far = pose_splat(cam, np.zeros(3), off, np.full((8, 8), np.inf))  # nothing near: no parallax
+    np.testing.assert_allclose(far.weight, pose_splat(cam, np.zeros(3), np.zeros(3), 2.0).weight)
+    with pytest.raises(ValueError, match="depth map"):
+        pose_splat(cam, np.zeros(3), off, np.full((4, 4), 2.0))
+    with pytest.raises(ValueError, match="depth map"):
+        pose_splat(cam, np.zeros(3), off, np.full((8, 8), 0.01))  # behind the forward offset
+
+
+def test_the_depth_map_of_a_tilted_wall_is_its_closed_form(variant):
+    """A wall ``z = 3 + 0.5 y`` in front of a camera looking along +z: depth 3 / (1 - b/2)."""
+    from mincam_render.render import mitsuba_scene as ms
+    from mincam_render.render.fidelity import depth_map_m, nearest_depth_m
+
+    cam = FreeformCamera(mask_resolution=(8, 8), layout=DetectorLayout(positions_m=((0.0, 0.0),)))
+    # front facing the point (0, 0.5, 2): normal (0, 0.5, -1)
+    wall = ms.rectangle((0.0, 0.0, 3.0), (0.0, 0.5, 2.0), (20.0, 20.0), radiance_w_m2_sr=1.0)
+    scene = ms.load_scene(ms.scene_dict({"wall": wall}, max_depth=1))
+    _, b = texel_directions(cam)
+    depth = depth_map_m(scene, cam)
+    np.testing.assert_allclose(depth, 3.0 / (1.0 - 0.5 * b), rtol=1e-5)
+    near = nearest_depth_m(scene, cam)
+    assert near["min"] < 3.0 < near["max"]
