@@ -198,7 +198,7 @@ def _content_directions(
     unrotated texel).
     """
     if np.ndim(depth_m) == 0:
-        h = content_homography(rotation_deg, offset_m, float(depth_m))  # type: ignore[arg-type]
+        h = content_homography(rotation_deg, offset_m, float(depth_m))
         return h @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
     rot, off = _check_pose(rotation_deg, offset_m)
     z = np.asarray(depth_m, dtype=np.float64)
