@@ -220,7 +220,7 @@ def test_draws_are_within_their_ranges_and_reproducible():
     assert abs(a.gamma - 1) <= 0.15 and 0 <= a.blur_sigma_mm <= 0.1
     assert np.abs(a.gain - 1).max() <= 0.05 and np.abs(a.offset_v).max() <= 2e-3
     assert np.abs(a.pose_rotation_deg).max() <= 2.0 and np.abs(a.pose_offset_cm).max() <= 2.0
-    assert a.has_pose_error and a.pose_depth_m == 2.0
+    assert a.has_pose_error and a.pose_depth_m == 4.0
 
 
 def test_camera_texel_size_is_what_the_fabrication_uses():
