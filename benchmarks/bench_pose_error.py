@@ -53,7 +53,7 @@ from provenance import machine, write_result  # noqa: E402
 from mincam_render.optics.camera import FreeformCamera  # noqa: E402
 from mincam_render.optics.fabrication import posed_masks  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationModel  # noqa: E402
-from mincam_render.optics.pose import CM, pose_splat, posed_camera  # noqa: E402
+from mincam_render.optics.pose import CM, pose_warp, posed_camera  # noqa: E402
 from mincam_render.render.fidelity import depth_map_m  # noqa: E402
 from mincam_render.render.precision import measurement_relative_error  # noqa: E402
 from mincam_render.scenes import load_family  # noqa: E402
@@ -77,12 +77,12 @@ def approximated(t: np.ndarray, camera: FreeformCamera, rot: Any, off_m: Any, de
     """
     out, extrapolated = [], []
     for frame, depth in zip(t, depths, strict=True):
-        splat = pose_splat(camera, rot, off_m, depth)
+        warp = pose_warp(camera, rot, off_m, depth)
         m = torch.ones((1, *frame.shape[-2:]), dtype=torch.float64, requires_grad=True)
-        (posed_masks(m, splat) * torch.from_numpy(frame.astype(np.float64))).sum().backward()
+        (posed_masks(m, warp) * torch.from_numpy(frame.astype(np.float64))).sum().backward()
         assert m.grad is not None
         out.append(m.grad.numpy())
-        extrapolated.append(splat.extrapolated_fraction)
+        extrapolated.append(warp.extrapolated_fraction())
     return np.stack(out), float(np.mean(extrapolated))
 
 
@@ -130,9 +130,9 @@ def splat_cost_ms(cam: FreeformCamera, repeats: int = 200) -> dict[str, float]:
     for _ in range(repeats):
         d = model.draw(8, rng)
         t0 = time.perf_counter()
-        splat = pose_splat(cam, d.pose_rotation_deg, d.pose_offset_cm * CM, d.pose_depth_m)
+        warp = pose_warp(cam, d.pose_rotation_deg, d.pose_offset_cm * CM, d.pose_depth_m)
         t1 = time.perf_counter()
-        posed_masks(mask, splat).sum().backward()
+        posed_masks(mask, warp).sum().backward()
         t2 = time.perf_counter()
         build.append(t1 - t0)
         apply.append(t2 - t1)

@@ -27,6 +27,7 @@ differentiable in the logits.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
@@ -34,7 +35,7 @@ from torch.nn import functional as F
 
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.perturbation import PerturbationDraw
-from mincam_render.optics.pose import CM, PoseSplat, pose_splat
+from mincam_render.optics.pose import CM, PoseWarp, pose_warp
 
 MM = 1e-3  #: metres per millimetre
 #: Gaussian kernels reach this many sigmas on each side.
@@ -166,20 +167,44 @@ def place_masks(
     return out.squeeze(1) + fill
 
 
-def posed_masks(mask: torch.Tensor, splat: PoseSplat) -> torch.Tensor:
+class _BilinearSplat(torch.autograd.Function):
+    """The adjoint of ``grid_sample`` (bilinear, border, ``align_corners=False``).
+
+    ``values[n, c, p]`` spread onto the texels they would be sampled from at
+    ``grid[n, p]``: one fused kernel (``grid_sample``'s own input gradient),
+    and its backward is ``grid_sample`` itself. The output has ``values``'
+    shape (the moved and the rendered texels are the same grid).
+    """
+
+    @staticmethod
+    def forward(ctx: Any, values: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(grid)
+        # "input" only gives the output's shape: no input gradient of the grid is asked
+        out, _ = torch.ops.aten.grid_sampler_2d_backward(
+            values, values, grid, 0, 1, False, [True, False]
+        )
+        return out
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (grid,) = ctx.saved_tensors
+        pulled = F.grid_sample(
+            grad, grid, mode="bilinear", padding_mode="border", align_corners=False
+        )
+        return pulled, None
+
+
+def posed_masks(mask: torch.Tensor, warp: PoseWarp) -> torch.Tensor:
     """The effective masks ``M_eff[pixel, row, col]`` of a camera off its pose (torch).
 
-    ``M_eff[q] = sum_i splat.weight[i] M[splat.source[i]]`` over ``target[i] = q``
-    for every pixel: one gather and one ``index_add`` (a few thousand
-    multiply-adds per mask), linear and differentiable in ``mask``.
+    ``M_eff = splat(G M, warp.grid) / G`` for every pixel at once (one fused
+    kernel each way): linear and differentiable in ``mask``.
     """
-    k, rows, cols = mask.shape
-    flat = mask.reshape(k, rows * cols)
-    weight = torch.as_tensor(splat.weight, dtype=mask.dtype, device=mask.device)
-    source = torch.as_tensor(splat.source, device=mask.device)
-    target = torch.as_tensor(splat.target, device=mask.device)
-    out = torch.zeros_like(flat).index_add(1, target, flat.index_select(1, source) * weight)
-    return out.reshape(k, rows, cols)
+    dtype, device = mask.dtype, mask.device
+    source = torch.as_tensor(warp.angular_weight * warp.ahead, dtype=dtype, device=device)
+    grid = torch.as_tensor(warp.grid, dtype=dtype, device=device).unsqueeze(0)
+    out = _BilinearSplat.apply((mask * source).unsqueeze(0), grid)
+    return out.squeeze(0) * torch.as_tensor(1.0 / warp.angular_weight, dtype=dtype, device=device)
 
 
 def fabricated_transmittance(
@@ -226,5 +251,5 @@ def fabricated_transmittance(
         m = place_masks(m, draw.shift_mm / texel_mm, np.radians(draw.rotation_deg), lo)
     if draw.has_pose_error and camera is not None:
         rot, off, depth = draw.pose_rotation_deg, draw.pose_offset_cm * CM, draw.pose_depth_m
-        m = posed_masks(m, pose_splat(camera, rot, off, depth))
+        m = posed_masks(m, pose_warp(camera, rot, off, depth))
     return m

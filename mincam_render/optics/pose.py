@@ -40,7 +40,7 @@ rigid; a detector ``b`` off the board centre also moves by ``(R - I) b``,
 
 **What is missing.** Where ``h(p)`` falls outside the rendered field, the
 moved camera sees content no render holds; the lookup then takes the nearest
-rendered texel (border replication), a guess. :attr:`PoseSplat.extrapolated_fraction`
+rendered texel (border replication), a guess. :meth:`PoseWarp.extrapolated_fraction`
 is the share of the moved camera's angular weight that is guessed this way:
 for the prototype's masks 0.026 for a 2-deg pan (a strip ``11.4 mm x tan 2 deg
 / cos^2 35 deg = 0.6 mm`` wide along one 16-mm edge), 0.046 for 2 deg about
@@ -55,6 +55,7 @@ about the camera's own axes; the camera turns about its board origin.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
@@ -142,37 +143,55 @@ def angular_weight(camera: FreeformCamera, a: np.ndarray, b: np.ndarray) -> np.n
     return g
 
 
-@dataclass(frozen=True)
-class PoseSplat:
-    """The effective mask of a pose error as a sparse sum (numpy).
+@functools.lru_cache(maxsize=8)
+def _texel_rays(camera: FreeformCamera) -> tuple[np.ndarray, np.ndarray]:
+    """``(rays[3, texel], G[rows, cols])`` of a camera: its texel directions ``(a, b, 1)``.
 
-    ``M_eff[q] = sum_i weight[i] M[source[i]]`` over ``i`` with ``target[i] = q``
-    (flat row-major texel indices of one detector's mask).
+    Cached per camera (a frozen dataclass): every draw of a training run reuses
+    them. Read-only arrays.
+    """
+    a, b = texel_directions(camera)
+    rays = np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+    g = angular_weight(camera, a, b)
+    rays.setflags(write=False)
+    g.setflags(write=False)
+    return rays, g
+
+
+@dataclass(frozen=True)
+class PoseWarp:
+    """Where a moved camera's texels look on the rendered mask plane (numpy).
+
+    The effective mask is ``M_eff = splat(G M, grid) / G``
+    (:func:`mincam_render.optics.fabrication.posed_masks`): each moved texel
+    ``p``'s ``G(p) M(p)`` spread bilinearly onto the rendered texels around
+    ``grid[p]``, the border texels standing in beyond the field.
 
     Attributes:
-        source: ``[4 N]`` texel ``p`` of the moved camera's mask.
-        target: ``[4 N]`` rendered texel ``q``.
-        weight: ``[4 N]`` ``B(q; h(p)) G(p) / G(q)``.
-        extrapolated_fraction: share of the moved camera's angular weight whose
-            content lies outside the rendered field (border-replicated), in [0, 1]
-            (each texel counted by the share of its width beyond the field).
+        grid: ``[rows, cols, 2]`` ``(x, y)`` of ``h(p)`` in ``grid_sample``'s units
+            (-1 and 1 at the edges of the field, ``align_corners=False``; y down);
+            content behind the designed camera is put far outside.
+        angular_weight: ``G[rows, cols]`` of the texels (see :func:`angular_weight`).
+        ahead: ``[rows, cols]`` 1.0 where ``h(p)`` is in front of the designed
+            camera, else 0.0 (no render holds that content; it is dropped).
     """
 
-    source: np.ndarray
-    target: np.ndarray
-    weight: np.ndarray
-    extrapolated_fraction: float
+    grid: np.ndarray
+    angular_weight: np.ndarray
+    ahead: np.ndarray
 
+    def extrapolated_fraction(self) -> float:
+        """Share of the moved camera's angular weight whose content lies outside the field.
 
-def _bilinear(index: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Lower neighbour, upper neighbour and upper weight of continuous texel indices.
-
-    Indices (texel centre ``j`` at ``j``) are clamped to ``[0, n - 1]``: beyond
-    the field the border texel stands in.
-    """
-    x = np.clip(index, 0.0, n - 1.0)
-    lo = np.minimum(np.floor(x), max(n - 2, 0)).astype(np.int64)
-    return lo, np.minimum(lo + 1, n - 1), x - lo
+        Each texel counts by the share of its width beyond the field (content
+        behind the designed camera counts whole): what the border stands in for.
+        """
+        rows, cols = self.angular_weight.shape
+        col = ((self.grid[..., 0] + 1.0) * cols - 1.0) / 2.0
+        row = ((self.grid[..., 1] + 1.0) * rows - 1.0) / 2.0
+        inside = _inside(row, rows) * _inside(col, cols) * self.ahead
+        g = self.angular_weight
+        return float((g * (1.0 - inside)).sum() / g.sum())
 
 
 def _inside(index: np.ndarray, n: int) -> np.ndarray:
@@ -182,12 +201,7 @@ def _inside(index: np.ndarray, n: int) -> np.ndarray:
 
 
 def _content_directions(
-    camera: FreeformCamera,
-    rotation_deg: object,
-    offset_m: object,
-    depth_m: float | np.ndarray,
-    a: np.ndarray,
-    b: np.ndarray,
+    rays: np.ndarray, rotation_deg: object, offset_m: object, depth_m: float | np.ndarray
 ) -> np.ndarray:
     """``x[3, texel]``: the designed camera's direction of what each moved texel sees.
 
@@ -198,26 +212,24 @@ def _content_directions(
     unrotated texel).
     """
     if np.ndim(depth_m) == 0:
-        h = content_homography(rotation_deg, offset_m, float(depth_m))
-        return h @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
+        return content_homography(rotation_deg, offset_m, float(depth_m)) @ rays
     rot, off = _check_pose(rotation_deg, offset_m)
-    z = np.asarray(depth_m, dtype=np.float64)
-    if z.shape != a.shape or np.isnan(z).any() or not np.all(z > max(off[2], 0.0)):
+    z = np.asarray(depth_m, dtype=np.float64).ravel()
+    if z.size != rays.shape[1] or np.isnan(z).any() or not np.all(z > max(off[2], 0.0)):
         raise ValueError(
-            f"pose depth map of shape {z.shape}: need {a.shape} depths (m) beyond the forward "
-            f"offset {off[2]:g} m (inf for misses)"
+            f"pose depth map of shape {np.shape(depth_m)}: need one depth (m) per texel, "
+            f"beyond the forward offset {off[2]:g} m (inf for misses)"
         )
-    x = pose_rotation(rot) @ np.stack([a.ravel(), b.ravel(), np.ones(a.size)])
-    return x + off[:, None] / (z.ravel() - off[2])  # the ray scaled by 1 / depth
+    return pose_rotation(rot) @ rays + off[:, None] / (z - off[2])  # the ray scaled by 1/depth
 
 
-def pose_splat(
+def pose_warp(
     camera: FreeformCamera,
     rotation_deg: object,
     offset_m: object,
     depth_m: float | np.ndarray,
-) -> PoseSplat:
-    """The :class:`PoseSplat` of a camera moved by ``rotation_deg`` and ``offset_m``.
+) -> PoseWarp:
+    """The :class:`PoseWarp` of a camera moved by ``rotation_deg`` and ``offset_m``.
 
     Args:
         camera: mask geometry (size, distance, texels) and directional response.
@@ -232,28 +244,17 @@ def pose_splat(
             forward reaching the plane, or a depth map of another shape.
     """
     rows, cols = camera.mask_resolution
-    a, b = texel_directions(camera)
-    x = _content_directions(camera, rotation_deg, offset_m, depth_m, a, b)
-    ahead = x[2] > 0  # content behind the designed camera: no render holds it
-    w = np.where(ahead, x[2], 1.0)
-    d, (th, tw) = camera.mask_distance_m, camera.texel_size_m
-    col = (x[0] / w * d + 0.5 * camera.mask_size_m) / tw - 0.5
-    row = (0.5 * camera.mask_size_m - x[1] / w * d) / th - 0.5
-    outside = np.where(ahead, 1.0 - _inside(row, rows) * _inside(col, cols), 1.0)
-    g = angular_weight(camera, a, b).ravel()
-    r0, r1, fr = _bilinear(row, rows)
-    c0, c1, fc = _bilinear(col, cols)
-    p = np.arange(a.size)
-    corners = [(r0, c0, (1 - fr) * (1 - fc)), (r0, c1, (1 - fr) * fc)]
-    corners += [(r1, c0, fr * (1 - fc)), (r1, c1, fr * fc)]
-    target = np.concatenate([r * cols + c for r, c, _ in corners])
-    weight = np.concatenate([np.where(ahead, wt, 0.0) for _, _, wt in corners])
-    weight = weight * np.tile(g, 4) / g[target]
-    return PoseSplat(
-        source=np.tile(p, 4),
-        target=target,
-        weight=weight,
-        extrapolated_fraction=float(g @ outside / g.sum()),
+    rays, g = _texel_rays(camera)
+    x = _content_directions(rays, rotation_deg, offset_m, depth_m)
+    ahead = x[2] > 0
+    # tangent coordinates over the half field (a_max = w / 2d): grid_sample's units
+    half = 0.5 * camera.mask_size_m / camera.mask_distance_m
+    w = np.where(ahead, x[2] * half, 1.0)
+    grid = np.where(ahead, np.stack([x[0] / w, -x[1] / w]), 3.0)  # behind: far outside
+    return PoseWarp(
+        grid=grid.T.reshape(rows, cols, 2),
+        angular_weight=g,
+        ahead=ahead.astype(np.float64).reshape(rows, cols),
     )
 
 
@@ -261,7 +262,7 @@ def posed_camera(camera: FreeformCamera, rotation_deg: object, offset_m: object)
     """``camera`` turned by ``rotation_deg`` about its board origin and moved by ``offset_m``.
 
     The offset ``(right, up, forward)`` (m) is in the designed camera's frame.
-    What :func:`pose_splat` approximates; renders of it are the reference.
+    What :func:`pose_warp` approximates; renders of it are the reference.
     """
     rot, off = _check_pose(rotation_deg, offset_m)
     frame = camera.frame  # rows: right, up, forward (world)

@@ -16,7 +16,7 @@ from mincam_render.optics.pose import (
     CM,
     angular_weight,
     content_homography,
-    pose_splat,
+    pose_warp,
     posed_camera,
     texel_directions,
 )
@@ -119,10 +119,10 @@ def test_a_uniform_scene_measures_the_same_from_any_pose(rotation_deg, offset_cm
     cam = _camera(16, directional_response=dr)
     g = angular_weight(cam, *texel_directions(cam))
     mask = torch.from_numpy(rng.uniform(0.01, 0.67, (2, 16, 16)))
-    splat = pose_splat(cam, rotation_deg, np.asarray(offset_cm) * CM, 2.0)
-    assert splat.extrapolated_fraction > 0.01
+    warp = pose_warp(cam, rotation_deg, np.asarray(offset_cm) * CM, 2.0)
+    assert warp.extrapolated_fraction() > 0.01
     t = torch.from_numpy(g)
-    moved = (posed_masks(mask, splat) * t).sum(dim=(1, 2))
+    moved = (posed_masks(mask, warp) * t).sum(dim=(1, 2))
     torch.testing.assert_close(moved, (mask * t).sum(dim=(1, 2)), rtol=1e-12, atol=0)
 
 
@@ -130,10 +130,10 @@ def test_a_quarter_roll_rotates_every_mask_like_a_quarter_turn_of_the_mask(rng):
     """Roll 90 deg (clockwise from the camera) = every mask turned clockwise by 90 deg."""
     cam = _camera(6)
     mask = torch.from_numpy(rng.uniform(0.1, 0.6, (3, 6, 6)))
-    splat = pose_splat(cam, (0.0, 0.0, 90.0), np.zeros(3), 2.0)
-    assert splat.extrapolated_fraction == 0.0  # the square field maps onto itself
+    warp = pose_warp(cam, (0.0, 0.0, 90.0), np.zeros(3), 2.0)
+    assert warp.extrapolated_fraction() == 0.0  # the square field maps onto itself
     expected = torch.rot90(mask, k=-1, dims=(1, 2))
-    torch.testing.assert_close(posed_masks(mask, splat), expected, rtol=0, atol=1e-12)
+    torch.testing.assert_close(posed_masks(mask, warp), expected, rtol=0, atol=1e-12)
     torch.testing.assert_close(
         place_masks(mask, np.zeros((3, 2)), np.full(3, np.pi / 2), fill=0.0), expected
     )
@@ -141,7 +141,7 @@ def test_a_quarter_roll_rotates_every_mask_like_a_quarter_turn_of_the_mask(rng):
     t = torch.from_numpy(rng.uniform(0, 1, (6, 6)))
     t = t + t.rot90(1) + t.rot90(2) + t.rot90(3)
     torch.testing.assert_close(
-        (posed_masks(mask, splat) * t).sum(dim=(1, 2)),
+        (posed_masks(mask, warp) * t).sum(dim=(1, 2)),
         (mask * t).sum(dim=(1, 2)),
         rtol=1e-14,
         atol=0,
@@ -153,24 +153,26 @@ def test_a_sideways_move_of_one_texel_at_the_plane_depth_shifts_the_content_one_
     cam = _camera(8)
     depth = 2.0
     offset = cam.texel_size_m[1] / cam.mask_distance_m * depth  # one texel at the plane
-    splat = pose_splat(cam, np.zeros(3), (offset, 0.0, 0.0), depth)
+    warp = pose_warp(cam, np.zeros(3), (offset, 0.0, 0.0), depth)
     mask = torch.from_numpy(rng.uniform(0.1, 0.6, (1, 8, 8)))
     g = torch.from_numpy(angular_weight(cam, *texel_directions(cam)))
     expected = torch.zeros_like(mask)
     # the moved camera's texel p sees what the design saw one texel to the right
     expected[0, :, 1:] = mask[0, :, :-1] * g[:, :-1] / g[:, 1:]
     expected[0, :, -1] += mask[0, :, -1]  # beyond the field: the border column stands in
-    torch.testing.assert_close(posed_masks(mask, splat), expected, rtol=1e-12, atol=1e-14)
+    torch.testing.assert_close(posed_masks(mask, warp), expected, rtol=1e-12, atol=1e-14)
     share = float(g[:, -1].sum() / g.sum())
-    assert splat.extrapolated_fraction == pytest.approx(share, rel=1e-12)
+    assert warp.extrapolated_fraction() == pytest.approx(share, rel=1e-12)
 
 
 def test_the_guessed_share_grows_with_the_angle():
     cam = _camera(32)
     shares = [
-        pose_splat(cam, (a, 0.0, 0.0), np.zeros(3), 2.0).extrapolated_fraction for a in (0, 1, 2, 4)
+        pose_warp(cam, (a, 0.0, 0.0), np.zeros(3), 2.0).extrapolated_fraction()
+        for a in (0, 1, 2, 4)
     ]
-    assert shares[0] == 0.0 and all(b > a for a, b in zip(shares, shares[1:], strict=False))
+    assert shares[0] == pytest.approx(0.0, abs=1e-12)
+    assert all(b > a for a, b in zip(shares, shares[1:], strict=False))
     # a 2-deg pan: a strip ~ d tan(2 deg) (1/cos^2 at the edge) wide along one edge
     assert 0.02 < shares[2] < 0.08
 
@@ -226,7 +228,7 @@ def test_a_pose_error_needs_the_camera_and_a_depth_in_front():
     with pytest.raises(ValueError, match="camera's geometry"):
         fabricated_transmittance(torch.zeros(1, 8, 8), RANGE, draw, (0.5 * MM, 0.5 * MM))
     with pytest.raises(ValueError, match="reaches the depth"):
-        pose_splat(_camera(), np.zeros(3), (0.0, 0.0, 2.0), 2.0)
+        pose_warp(_camera(), np.zeros(3), (0.0, 0.0, 2.0), 2.0)
     with pytest.raises(ValueError, match="3 finite angles"):
         posed_camera(_camera(), (1.0, 2.0), np.zeros(3))
 
@@ -234,20 +236,19 @@ def test_a_pose_error_needs_the_camera_and_a_depth_in_front():
 def test_a_uniform_depth_map_is_the_plane_and_a_rotation_ignores_depth(rng):
     cam = _camera(8)
     off = np.array([0.02, -0.01, 0.015])
-    plane = pose_splat(cam, np.zeros(3), off, 2.0)
-    mapped = pose_splat(cam, np.zeros(3), off, np.full((8, 8), 2.0))
-    np.testing.assert_array_equal(plane.target, mapped.target)
-    np.testing.assert_allclose(plane.weight, mapped.weight, rtol=0, atol=1e-12)
+    plane = pose_warp(cam, np.zeros(3), off, 2.0)
+    mapped = pose_warp(cam, np.zeros(3), off, np.full((8, 8), 2.0))
+    np.testing.assert_allclose(plane.grid, mapped.grid, rtol=0, atol=1e-12)
     rot = (1.5, -2.0, 3.0)
     depths = rng.uniform(0.5, 8.0, (8, 8))
-    a, b = pose_splat(cam, rot, np.zeros(3), 2.0), pose_splat(cam, rot, np.zeros(3), depths)
-    np.testing.assert_allclose(a.weight, b.weight, rtol=0, atol=1e-12)
-    far = pose_splat(cam, np.zeros(3), off, np.full((8, 8), np.inf))  # nothing near: no parallax
-    np.testing.assert_allclose(far.weight, pose_splat(cam, np.zeros(3), np.zeros(3), 2.0).weight)
+    a, b = pose_warp(cam, rot, np.zeros(3), 2.0), pose_warp(cam, rot, np.zeros(3), depths)
+    np.testing.assert_allclose(a.grid, b.grid, rtol=0, atol=1e-12)
+    far = pose_warp(cam, np.zeros(3), off, np.full((8, 8), np.inf))  # nothing near: no parallax
+    np.testing.assert_allclose(far.grid, pose_warp(cam, np.zeros(3), np.zeros(3), 2.0).grid)
     with pytest.raises(ValueError, match="depth map"):
-        pose_splat(cam, np.zeros(3), off, np.full((4, 4), 2.0))
+        pose_warp(cam, np.zeros(3), off, np.full((4, 4), 2.0))
     with pytest.raises(ValueError, match="depth map"):
-        pose_splat(cam, np.zeros(3), off, np.full((8, 8), 0.01))  # behind the forward offset
+        pose_warp(cam, np.zeros(3), off, np.full((8, 8), 0.01))  # behind the forward offset
 
 
 def test_the_depth_map_of_a_tilted_wall_is_its_closed_form(variant):
