@@ -23,7 +23,10 @@ if TYPE_CHECKING:
         """What the planner needs of a scene family (``SceneFamily`` has it)."""
 
         num_frames: int
-        planning_error_scale: str
+
+        @property
+        def planning_error_scale(self) -> str:
+            """What measurement errors are relative to (a class variable of the family)."""
 
         @property
         def name(self) -> str:
