@@ -32,7 +32,7 @@ its own depth; not yet available to training). Also the cost of one draw's
 splat in the mask plane (8 masks of 32x32 texels). Writes
 ``benchmarks/results/pose_error.json``.
 
-Usage (about 10 minutes on 2 shared cores at the defaults):
+Usage (2 minutes on 2 shared cores at the defaults, 12 under heavy load):
     nice -n 10 python benchmarks/bench_pose_error.py [--frames 4] [--spp 1024]
 """
 
