@@ -13,8 +13,15 @@ ratio. Rows: K in {1, 8, 16} pixels x batch {64, 256}, masks 32^2 (the
 workspace 8 px row is the issue's size), on random transport in memory (the
 step's cost does not depend on the content). Before timing, the perturbed
 step at a zero draw is checked to measure exactly what the nominal one does.
-Writes ``benchmarks/results/robust_train.json`` (machine, git revision,
-rows, ratios, the worst ratio).
+The perturbation model is the default one, camera pose error included.
+
+Robust validation (``TrainConfig.robust_validation_draws``, default 8) costs
+per evaluation, not per step: the ``validation`` block times a nominal
+evaluation (:func:`~mincam_render.learn.evaluation.predict` of 2,048 samples,
+8 pixels) and the mean loss under the default draws, median of ``repeats``,
+and their cost per 100 steps (``TrainConfig.eval_every``) of robust training
+at batch 64. Writes ``benchmarks/results/robust_train.json`` (machine, git
+revision, rows, ratios, the worst ratio, validation).
 
 Usage (from a clean tree):
     flock /tmp/mincam_bench.lock python benchmarks/bench_robust_train.py \
@@ -37,6 +44,8 @@ from bench_train_throughput import random_data  # noqa: E402
 from provenance import machine  # noqa: E402
 
 from mincam_render.learn import train as tr  # noqa: E402
+from mincam_render.learn.evaluation import mean_loss_under  # noqa: E402
+from mincam_render.learn.step import validation_draws  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "robust_train.json"
@@ -98,6 +107,37 @@ def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repe
     }
 
 
+def measure_validation(data: tr.TrainingData, pixels: int, repeats: int) -> dict:
+    """Seconds of a nominal evaluation and of robust validation (median), per 100 robust steps."""
+    config = tr.TrainConfig(perturbation=PerturbationModel())
+    model = tr.build_mincam(data, pixels)
+    draws = validation_draws(model, config)
+    limit = config.max_eval_samples
+    nominal, robust = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        tr.predict(model, data, limit=limit)
+        t1 = time.perf_counter()
+        mean_loss_under(model, data, draws, limit=limit)
+        nominal.append(t1 - t0)
+        robust.append(time.perf_counter() - t1)
+    opt, src = tr.build_optimizer(model, config), tr.DatasetBatches(data, config.batch_size)
+    gen = torch.Generator().manual_seed(0)
+    t0 = time.perf_counter()
+    for _ in range(config.eval_every):
+        tr.train_step(model, src, opt, gen, config.gain_range, config.perturbation)
+    steps_s = time.perf_counter() - t0
+    return {
+        "pixels": pixels,
+        "samples": min(limit, len(data)),
+        "draws": len(draws),
+        "nominal_evaluation_s": statistics.median(nominal),
+        "robust_validation_s": statistics.median(robust),
+        "robust_steps_between_evaluations_s": steps_s,
+        "steps_between_evaluations": config.eval_every,
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--steps", type=int, default=200)
@@ -116,6 +156,12 @@ def main() -> None:
                 f"robust {r['ms_per_step']['robust']:.2f} ms per step, "
                 f"slowdown {r['slowdown_robust_over_nominal']:.2f}x"
             )
+    val = measure_validation(random_data(8, 32, 2048), 8, args.repeats)
+    print(
+        f"validation, 8 px, {val['samples']} samples: nominal {val['nominal_evaluation_s']:.2f} s, "
+        f"{val['draws']} draws {val['robust_validation_s']:.2f} s; "
+        f"{val['steps_between_evaluations']} robust steps {val['robust_steps_between_evaluations_s']:.2f} s"
+    )
     worst = max(r["slowdown_robust_over_nominal"] for r in rows)
     result = {
         "benchmark": "bench_robust_train",
@@ -127,6 +173,7 @@ def main() -> None:
         "worst_slowdown": worst,
         "budget": BUDGET,
         "within_budget": worst <= BUDGET,
+        "validation": val,
     }
     print(
         f"worst slowdown {worst:.2f}x (budget {BUDGET:g}x): "

@@ -273,6 +273,12 @@ def fabrication_spec(curve: str, tol: Mapping[str, Any]) -> str:
         "mask_blur": lambda: f"print sharper than a {v['mask_blur_mm']:.2g}-mm Gaussian (sigma)",
         "gain_mismatch": lambda: f"match detector gains to ±{v['gain_mismatch_percent']:.2g} %",
         "dark_offset": lambda: f"trim output offsets to ±{1e3 * v['dark_offset_v']:.2g} mV",
+        "pose_orientation": lambda: (
+            f"mount the camera to ±{v['pose_orientation_deg']:.2g}° (pan, tilt and roll)"
+        ),
+        "pose_position": lambda: (
+            f"place the camera to ±{v['pose_position_cm']:.2g} cm along each axis"
+        ),
         MIX: lambda: f"all at once: {tol['factor']:.2g}x the default ranges",
     }
     text = texts[curve]()

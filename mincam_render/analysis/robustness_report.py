@@ -11,6 +11,7 @@ and of tolerances, and each design's fabrication spec).
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,12 +29,14 @@ TITLES = {
     "mask_blur": "mask blur",
     "gain_mismatch": "detector gain mismatch",
     "dark_offset": "dark offset",
+    "pose_orientation": "camera orientation (mount)",
+    "pose_position": "camera position",
     MIX: "all at once (mix)",
 }
 
 
 def _default_text(curve: Mapping[str, Any]) -> str:
-    units = {"mm": " mm", "deg": " deg", "percent": " %", "_v": " V"}
+    units = {"mm": " mm", "deg": " deg", "percent": " %", "_v": " V", "_cm": " cm", "_m": " m"}
     parts = []
     for name, value in curve["default"].items():
         unit = next((u for k, u in units.items() if name.endswith(k)), "")
@@ -45,7 +48,8 @@ def robustness_figure(designs: Sequence[Mapping[str, Any]]) -> bytes:
     """PNG: mean error increase (%) with its 95 % interval against the magnitude, per curve."""
     from mincam_render.analysis.plots import plt
 
-    fig, axes = plt.subplots(2, 4, figsize=(15, 7), sharex=True)
+    cols = math.ceil(len(CURVES) / 2)
+    fig, axes = plt.subplots(2, cols, figsize=(3.75 * cols, 7), sharex=True)
     allowed = 100 * designs[0]["config"]["allowed_increase"]
     for ax, curve in zip(axes.ravel(), CURVES, strict=True):
         for d in designs:

@@ -137,7 +137,12 @@ _PERTURBATION_HELP = {
     "mask_blur_mm": "Gaussian blur sigma of the print, drawn in [0, this] (mm)",
     "gain_mismatch_percent": "per-detector gain error (%)",
     "dark_offset_v": "per-detector output offset (V)",
+    "pose_orientation_deg": "camera orientation error per axis: pan, tilt, roll (deg)",
+    "pose_position_cm": "camera position error per axis: right, up, forward (cm)",
+    "pose_depth_m": "scene depth at which the position error is modelled exactly (m)",
 }
+#: PerturbationModel fields whose options take other values than [0, 100].
+_PERTURBATION_TYPES = {"pose_depth_m": FiniteFloat(0, 1e4, min_open=True)}
 
 #: --robust and the perturbation model's half-ranges (defaults: the dataclass's).
 robust_options = apply_options(
@@ -147,13 +152,23 @@ robust_options = apply_options(
             is_flag=True,
             help="Robust training: every batch through a new built camera drawn from the "
             "perturbation model below (docs/robustness.md).",
-        )
+        ),
+        click.option(
+            "--robust-validation-draws",
+            "robust_validation_draws",
+            type=click.IntRange(0, 1000),
+            default=field_default(TrainConfig, "robust_validation_draws"),
+            show_default=True,
+            help="With --robust: validate (decay the learning rate, stop early) on the mean "
+            "loss over this many built cameras, drawn once from --seed; 0: on the camera "
+            "as designed.",
+        ),
     ]
     + [
         click.option(
             "--" + f.name.replace("_", "-"),
             f.name,
-            type=FiniteFloat(0, 100),
+            type=_PERTURBATION_TYPES.get(f.name, FiniteFloat(0, 100)),
             default=field_default(PerturbationModel, f.name),
             show_default=True,
             help=f"With --robust: {_PERTURBATION_HELP[f.name]}.",
@@ -266,7 +281,8 @@ def train_cmd(
 
     With --robust, every batch is measured through a new built camera (mask
     shift and rotation, print tone, printable range, blur, detector gain and
-    offset, drawn within the ranges of the options below).
+    offset, camera orientation and position, drawn within the ranges of the
+    options below), and validation uses --robust-validation-draws of them.
 
     \b
     Example:

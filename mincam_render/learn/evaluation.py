@@ -105,6 +105,40 @@ def predict(
     return cat, {k: np.concatenate(v) for k, v in labs.items()}, loss_sum / max(1, len(idx))
 
 
+@torch.no_grad()
+def mean_loss_under(
+    model: Model,
+    data: TrainingData,
+    draws: Sequence[PerturbationDraw],
+    *,
+    batch_size: int = 1024,
+    seed: int = 1234,
+    limit: int | None = None,
+) -> float:
+    """Mean over ``draws`` (built cameras) of :func:`predict`'s loss on ``data``.
+
+    Each draw's loss is exactly :func:`predict`'s with that draw (the same
+    samples, the same sensor noise from ``seed``), so two evaluations differ only
+    by the model. Every batch is gathered once for all draws: the gather, not
+    the measurement, is most of an evaluation's cost.
+    """
+    if not draws:
+        raise ValueError("mean_loss_under needs at least one draw")
+    was_training = model.training
+    model.eval()
+    generators = [torch.Generator().manual_seed(seed) for _ in draws]
+    idx = even_indices(len(data), limit)
+    loss_sums = np.zeros(len(draws))
+    for a in range(0, len(idx), batch_size):
+        batch = data.sample(torch.from_numpy(idx[a : a + batch_size]))
+        inputs = batch.inputs()
+        for i, (draw, g) in enumerate(zip(draws, generators, strict=True)):
+            out = model(**inputs, noise=True, generator=g, draw=draw)
+            loss_sums[i] += float(task_loss(model.head, out, batch.labels)[0]) * len(batch)
+    model.train(was_training)
+    return float(np.mean(loss_sums / max(1, len(idx))))
+
+
 def evaluate(
     model: Model,
     data: TrainingData,

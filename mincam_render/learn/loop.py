@@ -18,6 +18,10 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
   (evaluated every ``eval_every`` steps): after ``patience`` evaluations without
   improvement every learning rate is multiplied by ``lr_decay``, up to
   ``lr_decays`` times; the next plateau stops the run. The best state is kept.
+  Robust training (``perturbation``) validates by default under a fixed set of
+  built cameras (``robust_validation_draws``, drawn once from the seed): the
+  validation loss is their mean, and the history also records the nominal
+  camera's (``val_loss_nominal``).
 * Checkpoints after every evaluation (atomic ``checkpoint.pt``,
   :mod:`~mincam_render.learn.checkpoint`): a killed run started again with the
   same arguments resumes from it and reaches the same state as an
@@ -43,13 +47,14 @@ import torch
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.checkpoint import TrainingState, restore_checkpoint, save_checkpoint
-from mincam_render.learn.evaluation import predict
+from mincam_render.learn.evaluation import mean_loss_under, predict
 from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.run_log import RunLog, TrainingClock
 from mincam_render.learn.snapshots import mask_snapshot, plot_mask_evolution
-from mincam_render.learn.step import build_optimizer, train_step
+from mincam_render.learn.step import build_optimizer, train_step, validation_draws
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.learn.training_data import TrainingData
+from mincam_render.optics.perturbation import PerturbationDraw
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +83,7 @@ class _Run:
     config: TrainConfig
     ckpt_path: Path | None
     state: TrainingState
+    val_draws: list[PerturbationDraw] = field(default_factory=list)
 
     def done(self) -> bool:
         """Whether training has ended (early stopping or ``max_steps``)."""
@@ -173,7 +179,7 @@ def _start(
         state = TrainingState(best_state=_copy_state(model))
         if (first := mask_snapshot(model)) is not None:
             state.snapshots.append((0, first))
-    return _Run(model, source, opt, gen, config, ckpt_path, state)
+    return _Run(model, source, opt, gen, config, ckpt_path, state, validation_draws(model, config))
 
 
 def _train_steps(
@@ -208,15 +214,14 @@ def _evaluate(
     run: _Run, val: TrainingData, loss: torch.Tensor, logs: RunLog, clock: TrainingClock
 ) -> None:
     """Validation loss after a step: history, mask snapshot, logs, best state, early stopping."""
-    st = run.state
-    pred, lab, val_loss = predict(run.model, val, limit=run.config.max_eval_samples)
-    st.elapsed = clock.elapsed()
-    rec = {
-        "step": st.step,
-        "train_loss": loss.item(),
-        "val_loss": val_loss,
-        "wall_time_s": st.elapsed,
-    }
+    st, limit = run.state, run.config.max_eval_samples
+    pred, lab, val_loss = predict(run.model, val, limit=limit)
+    rec = {"step": st.step, "train_loss": loss.item(), "val_loss": val_loss}
+    if run.val_draws:  # robust validation: the mean over the fixed built cameras decides
+        rec["val_loss"] = mean_loss_under(run.model, val, run.val_draws, limit=limit)
+        rec["val_loss_nominal"] = val_loss
+        val_loss = rec["val_loss"]
+    st.elapsed = rec["wall_time_s"] = clock.elapsed()
     st.history.append(rec)
     snap = mask_snapshot(run.model)
     if snap is not None:

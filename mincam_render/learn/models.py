@@ -464,8 +464,9 @@ class MincamCamera(CameraModel):
 
     def fabricated_transmittance(self, draw: PerturbationDraw) -> torch.Tensor:
         """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable)."""
+        cam = self.camera
         return fabricated_transmittance(
-            self.logits, self.camera.transmittance_range, draw, self.camera.texel_size_m
+            self.logits, cam.transmittance_range, draw, cam.texel_size_m, camera=cam
         )
 
     def power(self, frames: torch.Tensor, draw: PerturbationDraw | None = None) -> torch.Tensor:

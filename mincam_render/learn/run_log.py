@@ -105,8 +105,10 @@ class RunLog:
         """Log an evaluation: validation loss and error events, a ``history.jsonl`` line.
 
         Args:
-            record: the history record (``step``, ``train_loss``, ``val_loss``, ``wall_time_s``).
-            pred: predictions ``{name: [n, size]}`` on ``val`` (time order).
+            record: the history record (``step``, ``train_loss``, ``val_loss``, ``wall_time_s``;
+                under robust validation also ``val_loss_nominal``).
+            pred: predictions ``{name: [n, size]}`` on ``val`` (time order) of the
+                camera as designed (``error/val`` is its error).
             lab: labels ``{name: [n, size]}`` of those samples.
             val: the validation split.
             wall: the events' wall time (s since the epoch).
@@ -118,6 +120,10 @@ class RunLog:
         val_metrics = metrics(pred, lab, val_loss, val)
         self.writer.add_scalar("loss/val", val_loss, step, walltime=wall)
         self.writer.add_scalar("error/val", val_metrics["error"], step, walltime=wall)
+        if "val_loss_nominal" in record:  # robust validation: the design's own loss beside
+            self.writer.add_scalar(
+                "loss/val_nominal", record["val_loss_nominal"], step, walltime=wall
+            )
         self.writer.flush()
         with (self.out / "history.jsonl").open("a") as fh:
             fh.write(json.dumps(record) + "\n")

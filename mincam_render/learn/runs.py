@@ -207,13 +207,14 @@ def _run_metrics(
 def config_record(config: TrainConfig) -> dict[str, Any]:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
-    ``head`` appears only when not the paper's MLP, ``perturbation`` only when
-    training is robust, ``privacy_weight`` only when not 0. Runs written before
-    any was a choice then resume (their recipe compares equal).
+    ``head`` appears only when not the paper's MLP, ``perturbation`` and
+    ``robust_validation_draws`` only when training is robust, ``privacy_weight``
+    only when not 0. Runs written before any was a choice then resume (their
+    recipe compares equal).
     """
     record = asdict(config)
     if config.perturbation is None:
-        del record["perturbation"]
+        del record["perturbation"], record["robust_validation_draws"]
     if not config.privacy_weight:
         del record["privacy_weight"]
     if config.head is HeadKind.MLP:

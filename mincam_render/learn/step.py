@@ -10,8 +10,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 import torch
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.builders import learning_rate_for
 from mincam_render.learn.models import MincamCamera, Model, task_loss, temporal_features
@@ -146,3 +148,18 @@ def batch_draw(
     n = perturbation.uniforms_needed(model.num_pixels)
     u = torch.rand(n, generator=generator, dtype=torch.float64).numpy()
     return perturbation.draw_from(u, model.num_pixels)
+
+
+def validation_draws(model: Model, config: TrainConfig) -> list[PerturbationDraw]:
+    """The built cameras robust validation measures with (empty: validate the design).
+
+    ``config.robust_validation_draws`` cameras of ``config.perturbation``, drawn
+    from a stream of ``config.seed`` of their own (not the batches' generator):
+    the same cameras at every evaluation, and a resumed run draws them again.
+    Empty without a perturbation model, for a baseline camera, or with 0 draws.
+    """
+    n = config.robust_validation_draws
+    if config.perturbation is None or not isinstance(model, MincamCamera) or n == 0:
+        return []
+    rng = np.random.default_rng(stream_seed(config.seed, "train/validation_draws"))
+    return [config.perturbation.draw(model.num_pixels, rng) for _ in range(n)]

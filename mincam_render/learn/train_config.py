@@ -68,6 +68,11 @@ class TrainConfig:
             shift, rotation, print tone, printable range, blur, gain mismatch, dark
             offset; :mod:`mincam_render.optics.perturbation`); None trains the
             design as drawn (nominal). A minimalist camera's option only.
+        robust_validation_draws: with ``perturbation``, the validation loss (which
+            decays the learning rate and stops the run) is the mean loss over this
+            many built cameras, drawn once from ``seed`` (the same cameras at every
+            evaluation and after a resume; the nominal camera is not among them);
+            0 validates the camera as designed. Ignored without ``perturbation``.
         privacy_weight: weight ``w`` of the adversarial privacy term
             (:mod:`mincam_render.learn.privacy_term`): the masks minimise the task
             loss minus ``w`` times the loss of a decoder trained alongside to
@@ -91,6 +96,7 @@ class TrainConfig:
     seed: int = 0
     torch_threads: int | None = 1
     perturbation: PerturbationModel | None = None
+    robust_validation_draws: int = 8
     privacy_weight: float = 0.0
 
     def __post_init__(self) -> None:
@@ -101,6 +107,7 @@ class TrainConfig:
             ("patience", 1),
             ("lr_decays", 0),
             ("max_eval_samples", 2),
+            ("robust_validation_draws", 0),
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < lo:

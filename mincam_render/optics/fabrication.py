@@ -11,7 +11,10 @@ mask is made:
 3. the printed range: ``M = lo' + (hi' - lo') y'``;
 4. the print's blur, a Gaussian of ``blur_sigma_mm`` (:func:`blur_mask`);
 5. the mount: each mask shifted and rotated about its centre (:func:`place_masks`,
-   bilinear resampling).
+   bilinear resampling);
+6. the camera's pose: the whole camera turned and moved against the pose the
+   transport was rendered for, the same effective-mask splat for every
+   detector (:func:`posed_masks`, :mod:`mincam_render.optics.pose`).
 
 Outside the printed design the film carries the darkest printable ink (the mask
 is printed with an opaque border), so texels that a shift or a blur brings in
@@ -24,12 +27,15 @@ differentiable in the logits.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import torch
 from torch.nn import functional as F
 
+from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.perturbation import PerturbationDraw
+from mincam_render.optics.pose import CM, PoseWarp, pose_warp
 
 MM = 1e-3  #: metres per millimetre
 #: Gaussian kernels reach this many sigmas on each side.
@@ -161,25 +167,71 @@ def place_masks(
     return out.squeeze(1) + fill
 
 
+class _BilinearSplat(torch.autograd.Function):
+    """The adjoint of ``grid_sample`` (bilinear, border, ``align_corners=False``).
+
+    ``values[n, c, p]`` spread onto the texels they would be sampled from at
+    ``grid[n, p]``: one fused kernel (``grid_sample``'s own input gradient),
+    and its backward is ``grid_sample`` itself. The output has ``values``'
+    shape (the moved and the rendered texels are the same grid).
+    """
+
+    @staticmethod
+    def forward(ctx: Any, values: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(grid)
+        # "input" only gives the output's shape: no input gradient of the grid is asked
+        out, _ = torch.ops.aten.grid_sampler_2d_backward(
+            values, values, grid, 0, 1, False, [True, False]
+        )
+        return out
+
+    @staticmethod
+    def backward(ctx: Any, grad: torch.Tensor) -> tuple[torch.Tensor, None]:
+        (grid,) = ctx.saved_tensors
+        pulled = F.grid_sample(
+            grad, grid, mode="bilinear", padding_mode="border", align_corners=False
+        )
+        return pulled, None
+
+
+def posed_masks(mask: torch.Tensor, warp: PoseWarp) -> torch.Tensor:
+    """The effective masks ``M_eff[pixel, row, col]`` of a camera off its pose (torch).
+
+    ``M_eff = splat(G M, warp.grid) / G`` for every pixel at once (one fused
+    kernel each way): linear and differentiable in ``mask``.
+    """
+    dtype, device = mask.dtype, mask.device
+    source = torch.as_tensor(warp.angular_weight * warp.ahead, dtype=dtype, device=device)
+    grid = torch.as_tensor(warp.grid, dtype=dtype, device=device).unsqueeze(0)
+    out = _BilinearSplat.apply((mask * source).unsqueeze(0), grid)
+    return out.squeeze(0) * torch.as_tensor(1.0 / warp.angular_weight, dtype=dtype, device=device)
+
+
 def fabricated_transmittance(
     logits: torch.Tensor,
     transmittance_range: tuple[float, float],
     draw: PerturbationDraw,
     texel_size_m: tuple[float, float],
+    camera: FreeformCamera | None = None,
 ) -> torch.Tensor:
-    """Transmittance ``M[pixel, row, col]`` of the masks as built (steps 1-5 above; torch).
+    """Transmittance ``M[pixel, row, col]`` of the masks as built (steps 1-6 above; torch).
+
+    With a pose error, the effective masks (``M_eff`` of :mod:`~mincam_render.optics.pose`)
+    that measure the rendered transport as the moved camera would.
 
     Args:
         logits: ``M_t[pixel, row, col]`` mask logits.
         transmittance_range: nominal printable ``(lo, hi)``.
         draw: the built camera; ``draw.num_pixels`` must equal the number of masks.
         texel_size_m: ``(rows, cols)`` texel size (m).
+        camera: the camera's geometry; needed only when the draw has a pose error.
 
     Returns:
         ``M[pixel, row, col]``, equal to the nominal transmittance for an identity draw.
 
     Raises:
-        ValueError: the draw is for another number of pixels.
+        ValueError: the draw is for another number of pixels, or has a pose
+            error and no camera was given.
 
     """
     if draw.num_pixels != logits.shape[0]:
@@ -187,6 +239,8 @@ def fabricated_transmittance(
             f"the perturbation draw is for {draw.num_pixels} pixels; the camera has "
             f"{logits.shape[0]} masks"
         )
+    if draw.has_pose_error and camera is None:
+        raise ValueError("a draw with a camera pose error needs the camera's geometry")
     y = print_tone(torch.sigmoid(logits), draw.gamma, draw.dot_gain)
     lo, hi = draw.transmittance_range(transmittance_range)
     m = lo + (hi - lo) * y
@@ -195,4 +249,7 @@ def fabricated_transmittance(
         m = blur_mask(m, (draw.blur_sigma_mm / texel_mm[0], draw.blur_sigma_mm / texel_mm[1]), lo)
     if draw.shift_mm.any() or draw.rotation_deg.any():
         m = place_masks(m, draw.shift_mm / texel_mm, np.radians(draw.rotation_deg), lo)
+    if draw.has_pose_error and camera is not None:
+        rot, off, depth = draw.pose_rotation_deg, draw.pose_offset_cm * CM, draw.pose_depth_m
+        m = posed_masks(m, pose_warp(camera, rot, off, depth))
     return m

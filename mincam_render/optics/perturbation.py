@@ -31,10 +31,21 @@ Defaults and their reasoning (``docs/robustness.md`` has the sources):
 * ``dark_offset_v`` 2 mV: the transimpedance amplifier's output offset (input
   offset voltage of a precision op-amp, ~1 mV, times its noise gain) plus dark
   current times the gain (``1e-11 A x 1e7 V/A = 0.1 mV``).
+* ``pose_orientation_deg`` 2 deg per axis (pan, tilt, roll): a board screwed to
+  a wall or bracket and aimed by eye; 1 mm of play in a screw hole 3 cm from the
+  pivot turns it by 2 deg.
+* ``pose_position_cm`` 2 cm per axis (right, up, forward): screw holes marked
+  with a tape measure from a drawing of the room.
+* ``pose_depth_m`` 4 m (a setting, not a half-range): the scene depth at which a
+  position error is modelled exactly (:mod:`mincam_render.optics.pose`); the
+  median depth of the workspace's view (3.8 m). Of planes at 1, 2 and 4 m, the
+  4-m one came closest to re-renders (``benchmarks/bench_pose_error.py``); the
+  nearest depth (0.8 m, the ceiling above the camera) came farthest.
 
-Camera pose error (position, orientation) changes the transport itself and needs
-transport rendered under jittered poses; it is not part of this model yet
-(``docs/robustness.md``).
+The camera pose terms change the transport itself; they are approximated in
+the mask plane (:mod:`mincam_render.optics.pose`: exact for rotations, for
+offsets at ``pose_depth_m``), measured against re-renders by
+``benchmarks/bench_pose_error.py``.
 
 Arrays are numpy; the torch side (the fabricated mask plane) is
 :mod:`mincam_render.optics.fabrication`.
@@ -59,6 +70,8 @@ class PerturbationTerm(enum.Enum):
     MASK_BLUR = "mask_blur"
     GAIN_MISMATCH = "gain_mismatch"
     DARK_OFFSET = "dark_offset"
+    POSE_ORIENTATION = "pose_orientation"
+    POSE_POSITION = "pose_position"
 
 
 #: The :class:`PerturbationModel` fields of each term.
@@ -70,9 +83,14 @@ TERM_FIELDS: dict[PerturbationTerm, tuple[str, ...]] = {
     PerturbationTerm.MASK_BLUR: ("mask_blur_mm",),
     PerturbationTerm.GAIN_MISMATCH: ("gain_mismatch_percent",),
     PerturbationTerm.DARK_OFFSET: ("dark_offset_v",),
+    PerturbationTerm.POSE_ORIENTATION: ("pose_orientation_deg",),
+    PerturbationTerm.POSE_POSITION: ("pose_position_cm",),
 }
+#: The half-ranges (every field of the model but the settings).
+MAGNITUDES: tuple[str, ...] = tuple(f for fs in TERM_FIELDS.values() for f in fs)
 
-#: Field -> (unit, upper bound, whether the bound is open): the allowed range ``[0, bound]``.
+#: Field -> (unit, upper bound, whether the bound is open): the allowed range ``[0, bound]``
+#: (``(0, bound]`` for the settings, which are not half-ranges).
 _LIMITS: dict[str, tuple[str, float, bool]] = {
     "mask_shift_mm": ("mm", 16.0, False),
     "mask_rotation_deg": ("deg", 45.0, False),
@@ -83,13 +101,19 @@ _LIMITS: dict[str, tuple[str, float, bool]] = {
     "mask_blur_mm": ("mm", 16.0, False),
     "gain_mismatch_percent": ("%", 100.0, True),
     "dark_offset_v": ("V", 10.0, False),
+    # beyond ~30 deg a good part of the view is content no render holds
+    "pose_orientation_deg": ("deg", 30.0, False),
+    "pose_position_cm": ("cm", 100.0, False),
+    "pose_depth_m": ("m", 1e4, False),
 }
 
 
 def _check_magnitude(owner: str, name: str, value: object) -> float:
     """``value`` as a float in ``[0, bound]`` of :data:`_LIMITS`, else ValueError naming it."""
     unit, bound, open_ = _LIMITS[name]
-    allowed = f"[0, {bound:g}{')' if open_ else ']'}" + (f" {unit}" if unit else "")
+    setting = name not in MAGNITUDES
+    allowed = f"{'(' if setting else '['}0, {bound:g}{')' if open_ else ']'}"
+    allowed += f" {unit}" if unit else ""
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
         raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed a number in {allowed}")
     v = float(value)
@@ -97,7 +121,7 @@ def _check_magnitude(owner: str, name: str, value: object) -> float:
         raise ValueError(
             f"{owner}.{name} = {value!r} is invalid: allowed a finite number in {allowed}"
         )
-    if v < 0 or v > bound or (open_ and v == bound):
+    if v < 0 or v > bound or (open_ and v == bound) or (setting and v == 0):
         raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed {allowed}")
     return v
 
@@ -117,6 +141,12 @@ class PerturbationModel:
         mask_blur_mm: Gaussian blur sigma of the print, drawn in ``[0, a]`` (mm), [0, 16].
         gain_mismatch_percent: per-detector gain error (%), [0, 100).
         dark_offset_v: per-detector output offset (V), [0, 10].
+        pose_orientation_deg: camera orientation error per axis (pan, tilt,
+            roll; deg), [0, 30].
+        pose_position_cm: camera position error per axis (right, up, forward;
+            cm), [0, 100].
+        pose_depth_m: the depth at which a position error is modelled exactly
+            (m), (0, 1e4]; a setting, not scaled with the half-ranges.
 
     Raises:
         ValueError: a field is negative, NaN, infinite or above its bound (the
@@ -133,6 +163,9 @@ class PerturbationModel:
     mask_blur_mm: float = 0.1
     gain_mismatch_percent: float = 5.0
     dark_offset_v: float = 2e-3
+    pose_orientation_deg: float = 2.0
+    pose_position_cm: float = 2.0
+    pose_depth_m: float = 4.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -141,23 +174,23 @@ class PerturbationModel:
 
     @classmethod
     def zero(cls) -> PerturbationModel:
-        """The camera as designed: every term 0."""
-        return cls(**{f.name: 0.0 for f in fields(cls)})
+        """The camera as designed: every term 0 (settings at their defaults)."""
+        return cls(**dict.fromkeys(MAGNITUDES, 0.0))
 
     def only(self, term: PerturbationTerm) -> PerturbationModel:
-        """This model with every term but ``term`` set to 0."""
+        """This model with every term but ``term`` set to 0 (settings kept)."""
         keep = TERM_FIELDS[PerturbationTerm(term)]
-        return replace(PerturbationModel.zero(), **{n: getattr(self, n) for n in keep})
+        return replace(self, **{n: 0.0 for n in MAGNITUDES if n not in keep})
 
     def scaled(self, factor: float) -> PerturbationModel:
-        """Every half-range times ``factor`` (>= 0; the result is validated)."""
+        """Every half-range times ``factor`` (>= 0; the result is validated; settings kept)."""
         if not (math.isfinite(factor) and factor >= 0):
             raise ValueError(f"factor = {factor!r} is invalid: allowed a finite number >= 0")
-        return replace(self, **{f.name: getattr(self, f.name) * factor for f in fields(self)})
+        return replace(self, **{n: getattr(self, n) * factor for n in MAGNITUDES})
 
     def is_zero(self) -> bool:
-        """Whether every term is 0 (a draw is then the identity)."""
-        return all(getattr(self, f.name) == 0.0 for f in fields(self))
+        """Whether every half-range is 0 (a draw is then the identity)."""
+        return all(getattr(self, n) == 0.0 for n in MAGNITUDES)
 
     def draw(self, num_pixels: int, rng: np.random.Generator) -> PerturbationDraw:
         """One built camera of ``num_pixels`` freeform pixels (uniform draws of every term)."""
@@ -166,7 +199,7 @@ class PerturbationModel:
     @staticmethod
     def uniforms_needed(num_pixels: int) -> int:
         """How many U(0, 1) numbers :meth:`draw_from` takes for ``num_pixels`` pixels."""
-        return 5 * int(num_pixels) + 5
+        return 5 * int(num_pixels) + 11
 
     def draw_from(self, u: np.ndarray, num_pixels: int) -> PerturbationDraw:
         """The built camera of :meth:`uniforms_needed` uniforms ``u`` in [0, 1) (numpy).
@@ -179,7 +212,8 @@ class PerturbationModel:
         u = np.asarray(u, np.float64)
         if u.shape != (self.uniforms_needed(k),):
             raise ValueError(f"u has shape {u.shape}: expected ({self.uniforms_needed(k)},)")
-        shift, rot, scalars, gain, offset = np.split(u, [2 * k, 3 * k, 3 * k + 5, 4 * k + 5])
+        splits = [2 * k, 3 * k, 3 * k + 5, 4 * k + 5, 5 * k + 5, 5 * k + 8]
+        shift, rot, scalars, gain, offset, orientation, position = np.split(u, splits)
         gamma, dot, lo, hi, blur = scalars
         return PerturbationDraw(
             shift_mm=self.mask_shift_mm * (2 * shift.reshape(k, 2) - 1),
@@ -191,6 +225,9 @@ class PerturbationModel:
             blur_sigma_mm=self.mask_blur_mm * blur,
             gain=1.0 + self.gain_mismatch_percent * (2 * gain - 1) / 100.0,
             offset_v=self.dark_offset_v * (2 * offset - 1),
+            pose_rotation_deg=self.pose_orientation_deg * (2 * orientation - 1),
+            pose_offset_cm=self.pose_position_cm * (2 * position - 1),
+            pose_depth_m=self.pose_depth_m,
         )
 
 
@@ -216,6 +253,11 @@ class PerturbationDraw:
         blur_sigma_mm: Gaussian blur sigma of the print (mm), >= 0.
         gain: ``[pixel]`` factor on each detector's power, > 0.
         offset_v: ``[pixel]`` added to each detector's output voltage (V).
+        pose_rotation_deg: camera ``(pan, tilt, roll)`` (deg): pan turns the view
+            right, tilt up, roll clockwise as seen from the camera
+            (:func:`mincam_render.optics.pose.pose_rotation`).
+        pose_offset_cm: camera displacement ``(right, up, forward)`` (cm).
+        pose_depth_m: depth at which the displacement is modelled exactly (m), > 0.
 
     """
 
@@ -228,6 +270,9 @@ class PerturbationDraw:
     blur_sigma_mm: float = 0.0
     gain: np.ndarray = field(default_factory=lambda: np.ones(0))
     offset_v: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pose_rotation_deg: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pose_offset_cm: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    pose_depth_m: float = 4.0
 
     def __post_init__(self) -> None:
         shift = np.array(self.shift_mm, dtype=np.float64)
@@ -251,6 +296,18 @@ class PerturbationDraw:
             )
         if not np.all(self.gain > 0):
             raise ValueError(f"PerturbationDraw.gain = {self.gain!r} is invalid: allowed > 0")
+        for name in ("pose_rotation_deg", "pose_offset_cm"):
+            object.__setattr__(self, name, _vector(name, getattr(self, name), (3,)))
+        if not (math.isfinite(self.pose_depth_m) and self.pose_depth_m > 0):
+            raise ValueError(
+                f"PerturbationDraw.pose_depth_m = {self.pose_depth_m!r} m is invalid: "
+                "allowed a finite depth > 0"
+            )
+
+    @property
+    def has_pose_error(self) -> bool:
+        """Whether the camera is off its designed pose (orientation or position)."""
+        return bool(self.pose_rotation_deg.any() or self.pose_offset_cm.any())
 
     @property
     def num_pixels(self) -> int:

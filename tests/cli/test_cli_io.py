@@ -199,10 +199,10 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
-        (("train",), [], TrainConfig, 11),
+        (("train",), [], TrainConfig, 12),
         (("sweep",), [], TrainConfig, 11),
         (("prune",), ["--run", "r"], TrainConfig, 11),
-        (("train",), [], PerturbationModel, 9),
+        (("train",), [], PerturbationModel, 12),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
 from support import linear_task
 
 from mincam_render.learn import train as tr
-from mincam_render.learn.step import batch_draw
+from mincam_render.learn.evaluation import mean_loss_under
+from mincam_render.learn.step import batch_draw, validation_draws
 from mincam_render.optics.perturbation import PerturbationModel
 
 CFG = tr.TrainConfig(
@@ -63,3 +66,83 @@ def test_a_baseline_camera_refuses_a_draw():
     draw = PerturbationModel().draw(1, np.random.default_rng(0))
     with pytest.raises(ValueError, match="baseline"):
         model.measure(torch.from_numpy(data.transport), draw=draw)
+
+
+# ---- robust validation: a fixed set of built cameras decides early stopping ----------
+
+VAL_CFG = dataclasses.replace(CFG, robust_validation_draws=4)
+
+
+def test_validation_draws_are_fixed_by_the_seed_and_absent_when_validating_the_design():
+    model = tr.build_mincam(linear_task(40, k=3), 3)
+    a, b = validation_draws(model, VAL_CFG), validation_draws(model, VAL_CFG)
+    assert len(a) == 4 and [d.shift_mm.tolist() for d in a] == [d.shift_mm.tolist() for d in b]
+    assert not np.array_equal(a[0].shift_mm, a[1].shift_mm)
+    other = validation_draws(model, dataclasses.replace(VAL_CFG, seed=1))
+    assert not np.array_equal(a[0].shift_mm, other[0].shift_mm)
+    assert validation_draws(model, dataclasses.replace(VAL_CFG, robust_validation_draws=0)) == []
+    assert validation_draws(model, dataclasses.replace(VAL_CFG, perturbation=None)) == []
+
+
+def test_robust_validation_resumes_with_the_same_draws(variant, tmp_path):
+    train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
+    full = tr.build_mincam(train, 2, seed=3)
+    res = tr.train_model(full, train, val, VAL_CFG, out_dir=tmp_path / "full")
+    first = tr.build_mincam(train, 2, seed=3)
+    tr.train_model(first, train, val, VAL_CFG, out_dir=tmp_path / "killed", stop_after_steps=12)
+    again = tr.build_mincam(train, 2, seed=3)
+    resumed = tr.train_model(again, train, val, VAL_CFG, out_dir=tmp_path / "killed")
+    # the evaluations after the resume (steps 15, 20) saw the same built cameras
+    assert [h["val_loss"] for h in resumed.history] == [h["val_loss"] for h in res.history]
+    assert all(h["val_loss"] != h["val_loss_nominal"] for h in res.history)
+
+
+def test_zero_validation_draws_validate_the_design_exactly(variant):
+    train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
+    cfg = dataclasses.replace(VAL_CFG, robust_validation_draws=0, max_steps=10)
+    model = tr.build_mincam(train, 2, seed=3)
+    res = tr.train_model(model, train, val, cfg)
+    _, _, nominal = tr.predict(model, val, limit=cfg.max_eval_samples)
+    # the model holds its best state: bit for bit the loss of the camera as designed
+    assert res.best_val_loss == nominal
+    assert "val_loss_nominal" not in res.history[-1]
+    # a nominal run ignores the draws: the same run whatever their number
+    runs = []
+    for n in (0, 8):
+        m = tr.build_mincam(train, 2, seed=3)
+        c = dataclasses.replace(cfg, perturbation=None, robust_validation_draws=n)
+        runs.append((tr.train_model(m, train, val, c).history, m.logits.detach().clone()))
+    assert [h["val_loss"] for h in runs[0][0]] == [h["val_loss"] for h in runs[1][0]]
+    assert torch.equal(runs[0][1], runs[1][1])
+
+
+def test_validation_under_draws_differs_from_the_design_unless_the_ranges_are_zero(variant):
+    data = linear_task(60)
+    model = tr.build_mincam(data, 2, seed=3)
+    # a trained design (its head reads the pixels) with masks far from uniform
+    tr.train_model(model, data, data, dataclasses.replace(CFG, perturbation=None, max_steps=40))
+    with torch.no_grad():
+        model.logits.add_(torch.from_numpy(np.random.default_rng(2).normal(0, 2, (2, 8, 8))))
+    _, _, nominal = tr.predict(model, data)
+    perturbed = mean_loss_under(model, data, validation_draws(model, VAL_CFG))
+    assert abs(perturbed / nominal - 1) > 0.01
+    zero = dataclasses.replace(VAL_CFG, perturbation=PerturbationModel.zero())
+    assert mean_loss_under(model, data, validation_draws(model, zero)) == pytest.approx(
+        nominal, rel=1e-12
+    )
+    with pytest.raises(ValueError, match="at least one draw"):
+        mean_loss_under(model, data, [])
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True])
+def test_train_config_refuses_bad_validation_draws(bad):
+    with pytest.raises(ValueError, match="TrainConfig.robust_validation_draws"):
+        tr.TrainConfig(robust_validation_draws=bad)
+
+
+def test_the_loss_under_one_draw_is_predicts_loss_with_that_draw(variant):
+    data = linear_task(50)
+    model = tr.build_mincam(data, 2, seed=3)
+    draw = validation_draws(model, VAL_CFG)[1]
+    expected = tr.predict(model, data, draw=draw, batch_size=16, limit=40)[2]
+    assert mean_loss_under(model, data, [draw], batch_size=16, limit=40) == expected

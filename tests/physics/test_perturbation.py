@@ -18,6 +18,7 @@ from mincam_render.optics.fabrication import (
 )
 from mincam_render.optics.maskplane import transmittance
 from mincam_render.optics.perturbation import (
+    MAGNITUDES,
     TERM_FIELDS,
     PerturbationDraw,
     PerturbationModel,
@@ -43,10 +44,12 @@ def test_each_term_at_magnitude_zero_is_exactly_the_design(term, rng):
 
 @pytest.mark.parametrize("term", list(PerturbationTerm), ids=lambda t: t.value)
 def test_each_term_alone_changes_only_its_own_fields(term, rng):
-    model = PerturbationModel().only(term)
+    base = PerturbationModel(pose_depth_m=3.5)
+    model = base.only(term)
     for f in dataclasses.fields(model):
-        expected = getattr(PerturbationModel(), f.name) if f.name in TERM_FIELDS[term] else 0.0
-        assert getattr(model, f.name) == expected
+        kept = f.name in TERM_FIELDS[term] or f.name not in MAGNITUDES  # settings stay
+        assert getattr(model, f.name) == (getattr(base, f.name) if kept else 0.0)
+    assert model.scaled(2.0).pose_depth_m == 3.5 and PerturbationModel.zero().is_zero()
 
 
 @pytest.mark.parametrize(("rows", "cols"), [(2, 0), (0, -3), (1, 2)])
@@ -113,8 +116,10 @@ def test_tone_curve_is_monotone_and_stays_in_the_printable_range(gamma, dot_gain
 
 def test_fabricated_masks_stay_within_the_printed_range(rng):
     logits = _logits(rng, k=4, res=16) * 4
+    # the mask as built (a pose error makes effective masks, not transmittances)
+    built = PerturbationModel(pose_orientation_deg=0.0, pose_position_cm=0.0)
     for _ in range(5):
-        draw = PerturbationModel().scaled(2.0).draw(4, rng)
+        draw = built.scaled(2.0).draw(4, rng)
         lo, hi = draw.transmittance_range(RANGE)
         m = fabricated_transmittance(logits, RANGE, draw, TEXEL_M)
         assert float(m.min()) >= lo - 1e-12 and float(m.max()) <= hi + 1e-12
@@ -173,6 +178,11 @@ def test_gain_mismatch_scales_measurements_exactly_and_offset_adds_volts(rng):
         ({"gain_mismatch_percent": float("inf")}, "gain_mismatch_percent"),
         ({"dark_offset_v": "2mV"}, "dark_offset_v"),
         ({"mask_blur_mm": True}, "mask_blur_mm"),
+        ({"pose_orientation_deg": -2.0}, "pose_orientation_deg"),
+        ({"pose_orientation_deg": 31.0}, "pose_orientation_deg"),
+        ({"pose_position_cm": -0.5}, "pose_position_cm"),
+        ({"pose_depth_m": 0.0}, "pose_depth_m"),
+        ({"pose_depth_m": -2.0}, "pose_depth_m"),
     ],
 )
 def test_bad_magnitudes_are_refused_naming_the_field(kwargs, field):
@@ -209,6 +219,8 @@ def test_draws_are_within_their_ranges_and_reproducible():
     assert np.abs(a.shift_mm).max() <= 0.3 and np.abs(a.rotation_deg).max() <= 2.0
     assert abs(a.gamma - 1) <= 0.15 and 0 <= a.blur_sigma_mm <= 0.1
     assert np.abs(a.gain - 1).max() <= 0.05 and np.abs(a.offset_v).max() <= 2e-3
+    assert np.abs(a.pose_rotation_deg).max() <= 2.0 and np.abs(a.pose_offset_cm).max() <= 2.0
+    assert a.has_pose_error and a.pose_depth_m == 4.0
 
 
 def test_camera_texel_size_is_what_the_fabrication_uses():

@@ -204,15 +204,31 @@ class Probes:
 def nearest_depth_m(scene: mi.Scene, camera: FreeformCamera) -> dict[str, float]:
     """Nearest and farthest scene depth (m, along the board normal) seen from the board centre.
 
-    Casts a ``DEPTH_GRID^2`` grid of rays from the board centre through the mask's
-    field of view. Misses count as infinitely far.
+    Over a ``DEPTH_GRID^2`` grid of rays from the board centre through the
+    mask's field of view (:func:`depth_map_m`). Misses count as infinitely far.
+    """
+    depth = depth_map_m(scene, camera, (DEPTH_GRID, DEPTH_GRID))
+    depth = depth[np.isfinite(depth)]
+    if depth.size == 0:
+        return {"min": math.inf, "max": math.inf}
+    return {"min": float(depth.min()), "max": float(depth.max())}
+
+
+def depth_map_m(
+    scene: mi.Scene, camera: FreeformCamera, shape: tuple[int, int] | None = None
+) -> np.ndarray:
+    """``depth[row, col]`` (m, along the board normal) seen from the board centre.
+
+    One ray from the board centre through each cell centre of a ``shape`` grid
+    over the mask (default: the mask's texels; row 0 up). Misses are ``inf``.
     """
     import mitsuba as mi
 
     right, up, fwd = camera.frame
-    n = DEPTH_GRID
-    s = ((np.arange(n) + 0.5) / n - 0.5) * camera.mask_size_m
-    ss, tt = np.meshgrid(s, -s)
+    rows, cols = shape or camera.mask_resolution
+    s = ((np.arange(cols) + 0.5) / cols - 0.5) * camera.mask_size_m
+    t = (0.5 - (np.arange(rows) + 0.5) / rows) * camera.mask_size_m
+    ss, tt = np.meshgrid(s, t)
     dirs = ss.reshape(-1, 1) * right + tt.reshape(-1, 1) * up + camera.mask_distance_m * fwd
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     origin = np.broadcast_to(np.asarray(camera.position), dirs.shape)
@@ -221,12 +237,9 @@ def nearest_depth_m(scene: mi.Scene, camera: FreeformCamera) -> dict[str, float]
         mi.Vector3f(*[mi.Float(dirs[:, i]) for i in range(3)]),
     )
     si = scene.ray_intersect(ray)
-    t = np.asarray(si.t.numpy(), dtype=np.float64)
-    valid = np.isfinite(t) & (t < 1e30)
-    depth = t[valid] * (dirs[valid] @ fwd)
-    if depth.size == 0:
-        return {"min": math.inf, "max": math.inf}
-    return {"min": float(depth.min()), "max": float(depth.max())}
+    hit = np.asarray(si.t.numpy(), dtype=np.float64)
+    depth = np.where(np.isfinite(hit) & (hit < 1e30), hit * (dirs @ fwd), np.inf)
+    return depth.reshape(rows, cols)
 
 
 class Stages:
