@@ -406,6 +406,7 @@ def run_comparison(
         "element_names": {s.name: list(s.element_names) for s in train.label_specs},
         "coverage": coverage,
         "figure": str(out / "comparison.png"),
+        "versions": package_versions(),
     }
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     plot_comparison(result, out / "comparison.png")

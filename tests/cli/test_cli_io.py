@@ -109,6 +109,7 @@ def test_cli_preview_unknown_family(variant, tmp_path):
 
 def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(variant, tmp_path):
     from mincam_render.data.dataset import open_dataset, sha256_file
+    from mincam_render.data.render_job import package_versions
 
     out = tmp_path / "main"
     args = [
@@ -138,6 +139,8 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
         assert np.mean(d["error_per_seed"]) == pytest.approx(d["error"]["mean"])
         assert len(d["convergence"]) == 2 and isinstance(d["converged"], bool)
     assert metrics["trivial"]["error"]["mean"] > 0
+    # the figures name the code and packages that produced them
+    assert metrics["versions"] == package_versions()
     (label,) = metrics["labels"]  # patches: the count, with every design and the trivial
     for name, figure in metrics["labels"][label]["configs"].items():
         source = metrics["trivial"] if name == "trivial" else designs[name]
