@@ -313,6 +313,8 @@ def analyze_privacy(
     their backgrounds and foreground masks, and each design's reconstructions of
     a few test frames, for the report).
     """
+    from tqdm import tqdm
+
     from mincam_render.analysis.comparison import render_episodes, run_comparison
 
     out = Path(out_dir)
@@ -322,7 +324,8 @@ def analyze_privacy(
     episodes = load_episodes(paths, out / "views", cfg, progress)
     trivial = trivial_attack(episodes)
     designs, examples = {}, {}
-    for name, d in result["designs"].items():
+    todo = tqdm(result["designs"].items(), desc="attacks", unit="design", disable=not progress)
+    for name, d in todo:
         attack, ex = attack_design(d, data, episodes, cfg, name, trivial)
         designs[name] = {
             "pixels": d["model"]["pixels"],
