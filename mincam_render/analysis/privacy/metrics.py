@@ -48,19 +48,16 @@ def display(views: np.ndarray, white: float) -> np.ndarray:
 def reconstruction_quality(true: np.ndarray, pred: np.ndarray) -> dict[str, float]:
     """Mean PSNR (dB) and SSIM over frames of display images ``[frame, row, col]`` in [0, 1].
 
-    Per frame with ``skimage.metrics`` (data range 1; SSIM's default 7 x 7
-    window); identical frames give an infinite PSNR and SSIM 1.
+    The whole-view figures of :func:`foreground_quality` (``skimage.metrics``,
+    data range 1, SSIM's default 7 x 7 window); identical frames give an
+    infinite PSNR and SSIM 1.
 
     Raises:
         ValueError: shapes differ or are not ``[frame, row, col]``.
     """
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
-
     t, p = _frames(true, pred, "pred")
-    with np.errstate(divide="ignore"):
-        psnr = [peak_signal_noise_ratio(a, b, data_range=1.0) for a, b in zip(t, p, strict=True)]
-    ssim = [structural_similarity(a, b, data_range=1.0) for a, b in zip(t, p, strict=True)]
-    return {"psnr_db": float(np.mean(psnr)), "ssim": float(np.mean(ssim))}
+    quality = foreground_quality(t, p, np.zeros(t.shape, bool))
+    return {"psnr_db": quality["psnr_db"], "ssim": quality["ssim"]}
 
 
 def foreground_mask(
@@ -97,13 +94,18 @@ def foreground_mask(
 
 
 def foreground_quality(true: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> dict[str, float]:
-    """PSNR (dB) and SSIM of ``pred`` on the foreground ``mask``, averaged over frames.
+    """PSNR (dB) and SSIM of ``pred`` on the foreground ``mask`` and on the whole view.
 
-    Per frame with a foreground: PSNR (``skimage.metrics``, data range 1) of
-    the masked pixels, and the mean of SSIM's map (its default 7 x 7 window,
-    computed on the whole frame) over them. Frames without a foreground are
-    skipped; NaN when no frame has one. ``fg_fraction``: the mean share of
-    foreground pixels per frame; ``fg_frames``: frames with a foreground.
+    Per frame, from one ``skimage.metrics.structural_similarity`` call (its
+    default 7 x 7 window; data range 1): the whole view's SSIM (skimage's mean)
+    and the mean of its SSIM map over the frame's foreground; PSNR
+    (``peak_signal_noise_ratio``) of the whole frame and of its foreground
+    pixels. Averaged over frames; frames without a foreground are skipped for
+    the foreground figures (NaN when no frame has one). ``fg_fraction``: the
+    mean share of foreground pixels per frame; ``fg_frames``: frames with one.
+
+    Returns:
+        ``{"fg_psnr_db", "fg_ssim", "psnr_db", "ssim", "fg_fraction", "fg_frames"}``.
 
     Raises:
         ValueError: shapes differ or are not ``[frame, row, col]``.
@@ -114,19 +116,23 @@ def foreground_quality(true: np.ndarray, pred: np.ndarray, mask: np.ndarray) -> 
     m = np.asarray(mask, bool)
     if m.shape != t.shape:
         raise ValueError(f"mask {m.shape}: need the views' shape {t.shape}")
-    psnr, ssim = [], []
-    for a, b, where in zip(t, p, m, strict=True):
-        if not where.any():
-            continue
-        with np.errstate(divide="ignore"):
-            psnr.append(peak_signal_noise_ratio(a[where], b[where], data_range=1.0))
-        ssim.append(structural_similarity(a, b, data_range=1.0, full=True)[1][where].mean())
+    fg_psnr, fg_ssim, psnr, ssim = [], [], [], []
+    with np.errstate(divide="ignore"):
+        for a, b, where in zip(t, p, m, strict=True):
+            mean_ssim, ssim_map = structural_similarity(a, b, data_range=1.0, full=True)
+            psnr.append(peak_signal_noise_ratio(a, b, data_range=1.0))
+            ssim.append(mean_ssim)
+            if where.any():
+                fg_psnr.append(peak_signal_noise_ratio(a[where], b[where], data_range=1.0))
+                fg_ssim.append(ssim_map[where].mean())
     nan = float("nan")
     return {
-        "fg_psnr_db": float(np.mean(psnr)) if psnr else nan,
-        "fg_ssim": float(np.mean(ssim)) if ssim else nan,
+        "fg_psnr_db": float(np.mean(fg_psnr)) if fg_psnr else nan,
+        "fg_ssim": float(np.mean(fg_ssim)) if fg_ssim else nan,
+        "psnr_db": float(np.mean(psnr)),
+        "ssim": float(np.mean(ssim)),
         "fg_fraction": float(m.mean()),
-        "fg_frames": len(psnr),
+        "fg_frames": len(fg_psnr),
     }
 
 

@@ -38,7 +38,6 @@ from mincam_render.analysis.privacy.metrics import (
     foreground_mask,
     foreground_quality,
     prior_scores,
-    reconstruction_quality,
     reid_top1,
     white_level,
 )
@@ -104,9 +103,8 @@ def load_episodes(
 
 def score_reconstruction(episode: Episode, recon: np.ndarray) -> dict[str, float]:
     """:data:`IMAGE_FIGURES` of reconstructions ``[frame, row, col]`` of ``episode``'s views."""
-    fg = foreground_quality(episode.views, recon, episode.mask)
-    whole = reconstruction_quality(episode.views, recon)
-    return {"fg_psnr_db": fg["fg_psnr_db"], "fg_ssim": fg["fg_ssim"], **whole}
+    quality = foreground_quality(episode.views, recon, episode.mask)
+    return {k: quality[k] for k in IMAGE_FIGURES}
 
 
 def _errors(
@@ -223,14 +221,10 @@ def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float
     for name, ep in episodes.items():
         if not name.startswith("test-"):
             continue
-        fg = foreground_quality(ep.views, ep.background, ep.mask)
+        quality = foreground_quality(ep.views, ep.background, ep.mask)
         scores = prior_scores(present, len(ep.present))
-        out[name] = {
-            **score_reconstruction(ep, ep.background),
-            "reid_top1": reid_top1(scores, ep.present),
-            "fg_fraction": fg["fg_fraction"],
-            "fg_frames": fg["fg_frames"],
-        }
+        keep = (*IMAGE_FIGURES, "fg_fraction", "fg_frames")
+        out[name] = {**{k: quality[k] for k in keep}, "reid_top1": reid_top1(scores, ep.present)}
     return out
 
 
