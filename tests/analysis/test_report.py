@@ -195,6 +195,7 @@ def _privacy_result() -> dict:
         "designs": {"mincam-2px": design, "baseline-8x8": baseline},
         "trivial": {"task_error": _interval(1.6, 0.2), **image, "fg_fraction": 0.04,
                     "reid_top1": _interval(0.35, 0.04)},
+        "prior": {**image, "fg_psnr_gain_db": _interval(0.2, 0.05)},
         "config": json.loads(json.dumps(asdict(PrivacyConfig(
             comparison=default_comparison(), attack=AttackConfig())), default=str)),
     }  # fmt: skip
@@ -233,6 +234,7 @@ def test_privacy_report_loads_its_figures_in_a_headless_browser(tmp_path, privac
     assert "mincam-2px: in the corner against baseline-8x8" in dom
     assert "trivial (background: sees no one; most frequent person)" in dom
     assert "conv 2, ridge 1" in dom  # the decoder each attacker seed kept
+    assert "prior (background + where people usually are; read-out ignored)" in dom
     assert "conv: people PSNR (dB)" in dom  # every decoder's figure
     saved = json.loads(Path(privacy_page["json"]).read_text())
     assert saved["corner"]["mincam-2px"]["in_corner_against"] == ["baseline-8x8"]

@@ -145,7 +145,9 @@ def reconstruct(decoder: Decoder, x: np.ndarray, background: np.ndarray) -> np.n
 
 
 #: Ridge penalties tried by :func:`fit_ridge` (times the number of training frames).
-RIDGE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)
+#: The largest shrink the map to the mean training image (the read-out ignored):
+#: a read-out that tells little about the people is best decoded near there.
+RIDGE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 
 
 @dataclass

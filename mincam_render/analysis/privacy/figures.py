@@ -42,6 +42,8 @@ def _plot_curve(ax: Axes, privacy: Mapping[str, Any], key: str, label: str) -> N
                     fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
     t = privacy["trivial"]
     ax.axvline(t[key]["mean"], color="0.4", ls="--", lw=1, label="trivial attacker")
+    if key in privacy["prior"]:
+        ax.axvline(privacy["prior"][key]["mean"], color="C3", ls="-.", lw=1, label="prior")
     ax.axhline(t["task_error"]["mean"], color="0.4", ls=":", lw=1, label="trivial task predictor")
     ax.set_xlabel(label)
     ax.set_ylabel(f"task error ({privacy['error_name']})")
@@ -61,10 +63,11 @@ def curve_figure(privacy: Mapping[str, Any]) -> tuple[Figure, str]:
         "Task error (test people-count RMSE) against the attacker's success: left, the PSNR of "
         "the view decoded from the design's read-out on its foreground (the pixels the people "
         "change; the attacker is given the empty room, so the trivial attacker, the dashed "
-        "line, sees no one); right, how often the attacker's top guess of who is in the room "
-        "is right. Blue: minimalist cameras; green: trained with the privacy term; orange: "
-        "conventional baselines (grid size). Bars: 95 % intervals (task: training seeds x test "
-        "episodes; attacks: attacker seeds x test episodes)."
+        "line, sees no one; dash-dotted, the prior: where people usually are, read-out "
+        "ignored); right, how often the attacker's top guess of who is in the room is right. "
+        "Blue: minimalist cameras; green: trained with the privacy term; orange: conventional "
+        "baselines (grid size). Bars: 95 % intervals (task: training seeds x test episodes; "
+        "attacks: attacker seeds x test episodes)."
     )
 
 

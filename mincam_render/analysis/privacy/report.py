@@ -51,6 +51,8 @@ DESIGN_COLUMNS = (
 
 #: The trivial attacker's row label.
 TRIVIAL_LABEL = "trivial (background: sees no one; most frequent person)"
+#: The prior attacker's row label.
+PRIOR_LABEL = "prior (background + where people usually are; read-out ignored)"
 
 
 def _kept(decoders: list[Mapping[str, Any]]) -> str:
@@ -60,7 +62,7 @@ def _kept(decoders: list[Mapping[str, Any]]) -> str:
 
 
 def design_rows(privacy: Mapping[str, Any]) -> list[list[Any]]:
-    """Table rows: every design, then the trivial attacker and predictor.
+    """Table rows: every design, then the prior, then the trivial attacker and predictor.
 
     Columns: design, pixels, task error, then :data:`DESIGN_COLUMNS`.
     """
@@ -74,7 +76,11 @@ def design_rows(privacy: Mapping[str, Any]) -> list[list[Any]]:
             _iv(d["ssim"]), _iv(d["reid_top1"]), _kept(d["decoders"]),
             f"{attackers} of {len(conv)}",
         ])  # fmt: skip
-    t = privacy["trivial"]
+    t, p = privacy["trivial"], privacy["prior"]
+    rows.append([
+        PRIOR_LABEL, 0, "", "", _iv(p["fg_psnr_db"], 2), _iv(p["fg_psnr_gain_db"], 2),
+        _iv(p["fg_ssim"]), _iv(p["psnr_db"], 2), _iv(p["ssim"]), "", "", "",
+    ])  # fmt: skip
     rows.append([
         TRIVIAL_LABEL, 0, _iv(t["task_error"]), "", _iv(t["fg_psnr_db"], 2), "0",
         _iv(t["fg_ssim"]), _iv(t["psnr_db"], 2), _iv(t["ssim"]), _iv(t["reid_top1"]), "", "",
@@ -102,8 +108,9 @@ def _tables(page: Report, privacy: Mapping[str, Any]) -> None:
         caption="Mean [95 % CI]. Task: over training seeds and test episodes; attacks: over "
         "attacker seeds and test episodes. People: PSNR and SSIM on the foreground (the pixels "
         "the people change); view: the whole image. The attacker is given each frame's "
-        "background (the empty room), so the trivial row is what it knows without the read-out; "
-        "the gain is the people PSNR minus the trivial attacker's, paired on the test episodes.",
+        "background (the empty room): the trivial row sees no one; the prior adds where people "
+        "usually are in the training views, still without the read-out. The gain is the people "
+        "PSNR minus the trivial attacker's, paired on the test episodes.",
     )
     page.heading("Verdicts (only where intervals separate)")
     page.bullets([c["verdict"] for c in privacy["corner"].values()])

@@ -15,8 +15,10 @@
    foreground and on the whole view, top-1 re-identification.
 4. Intervals over attacker seeds and test episodes
    (:mod:`mincam_render.analysis.statistics`), beside the trivial attacker
-   (each frame's background: it sees no one; the most often present person),
-   and each design's foreground PSNR gain over it, paired on the test episodes.
+   (each frame's background: it sees no one; the most often present person)
+   and the prior (the background plus where people usually are, the read-out
+   ignored), and each one's foreground PSNR gain over the trivial attacker,
+   paired on the test episodes.
 """
 
 from __future__ import annotations
@@ -228,6 +230,22 @@ def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float
     return out
 
 
+def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]:
+    """Per test episode: the figures of each frame's background plus the mean training difference.
+
+    The attacker that knows where people usually are in this room (the mean of
+    what they added to the training views) but ignores the read-out: what a
+    decoder learns beyond it comes from the design.
+    """
+    train = [e for k, e in episodes.items() if k.startswith("train-")]
+    usual = np.concatenate([e.difference for e in train]).mean(axis=0)
+    return {
+        name: score_reconstruction(ep, np.clip(ep.background + usual, 0.0, 1.0))
+        for name, ep in episodes.items()
+        if name.startswith("test-")
+    }
+
+
 def attack_design(
     design: Mapping[str, Any],
     data: Mapping[str, Any],
@@ -298,6 +316,23 @@ def _trivial_record(
     }
 
 
+def _prior_record(
+    prior: Mapping[str, Mapping[str, float]],
+    trivial: Mapping[str, Mapping[str, float]],
+    frames: Mapping[str, int],
+    seed: int,
+) -> dict[str, Any]:
+    """``privacy.json``'s ``prior``: image figures with intervals, the paired gain over trivial."""
+    gain = paired_difference(
+        _errors([prior], "fg_psnr_db", frames), _errors([trivial], "fg_psnr_db", frames), seed=seed
+    )
+    return {
+        **_intervals([prior], frames, IMAGE_FIGURES, seed),
+        "fg_psnr_gain_db": gain.as_dict(),
+        "episodes": dict(prior),
+    }
+
+
 def analyze_privacy(
     cfg: PrivacyConfig, out_dir: str | os.PathLike, *, workers: int = 2, progress: bool = False
 ) -> dict[str, Any]:
@@ -316,7 +351,7 @@ def analyze_privacy(
     data = render_episodes(cfg.comparison, out / "episodes", workers=workers, progress=False)
     paths = {k: v["dataset"] for k, v in result["episodes"].items()}
     episodes = load_episodes(paths, out / "views", cfg, progress)
-    trivial = trivial_attack(episodes)
+    trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     designs, examples = {}, {}
     todo = tqdm(result["designs"].items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
@@ -340,6 +375,7 @@ def analyze_privacy(
         "trivial": _trivial_record(
             trivial, frames, result["trivial"]["error"], cfg.comparison.seed
         ),
+        "prior": _prior_record(prior, trivial, frames, cfg.comparison.seed),
         "comparison": str(out / "metrics.json"),
     }
     privacy["corner"] = corner_verdicts(privacy)
