@@ -306,7 +306,7 @@ def test_ridge_decoder_recovers_a_linear_view_and_picks_its_penalty(rng):
     assert q["psnr_db"] > 40 and q["ssim"] > 0.99
 
 
-def test_every_attacker_seed_scores_every_decoder_and_the_gain_is_paired(variant, tmp_path, rng):
+def test_every_attacker_seed_scores_every_decoder_and_the_gains_are_paired(variant, tmp_path, rng):
     from mincam_render.analysis.privacy.config import PrivacyConfig
     from mincam_render.analysis.privacy.study import FIGURES, attack_design
 
@@ -317,10 +317,10 @@ def test_every_attacker_seed_scores_every_decoder_and_the_gain_is_paired(variant
     episodes = {n: _episode(n, rng, frames=40) for n in names}
     attack = AttackConfig(seeds=3, max_steps=20, eval_every=10, hidden=8, conv_channels=8,
                           view_width=8)  # fmt: skip
-    trivial = trivial_attack(episodes)
+    trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     result, examples = attack_design(
         {"runs": [str(tmp_path)]}, data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
-        trivial,
+        {"trivial": trivial, "prior": prior},
     )  # fmt: skip
     for f in FIGURES:
         assert result[f]["ci95"][0] <= result[f]["mean"] <= result[f]["ci95"][1]
@@ -333,6 +333,9 @@ def test_every_attacker_seed_scores_every_decoder_and_the_gain_is_paired(variant
     nobody = np.mean([trivial[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
     gain = result["fg_psnr_gain_db"]
     assert gain["mean"] == pytest.approx(result["fg_psnr_db"]["mean"] - nobody, rel=1e-9)
+    usual = np.mean([prior[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
+    over = result["fg_psnr_over_prior_db"]["mean"]
+    assert over == pytest.approx(result["fg_psnr_db"]["mean"] - usual, rel=1e-9)
     assert examples["test-0"].shape == (40, 8, 8)
     json.dumps(result)  # JSON-ready
 

@@ -184,7 +184,8 @@ def _privacy_result() -> dict:
     design = {
         "pixels": 2, "task_state": "converged", "task_seeds": 2, "convergence": [conv] * 3,
         "task_error": _interval(1.0, 0.1), **image, "fg_psnr_db": _interval(14.5, 0.3),
-        "fg_psnr_gain_db": _interval(0.1, 0.05), "reid_top1": _interval(0.4, 0.05),
+        "fg_psnr_gain_db": _interval(0.1, 0.05), "fg_psnr_over_prior_db": _interval(0.0, 0.05),
+        "reid_top1": _interval(0.4, 0.05),
         "decoders": [kept, kept, dict(kept, decoder="ridge")],
         "by_decoder": {k: image for k in ("mlp", "conv", "ridge")},
     }  # fmt: skip

@@ -17,8 +17,8 @@
    (:mod:`mincam_render.analysis.statistics`), beside the trivial attacker
    (each frame's background: it sees no one; the most often present person)
    and the prior (the background plus where people usually are, the read-out
-   ignored), and each one's foreground PSNR gain over the trivial attacker,
-   paired on the test episodes.
+   ignored), and each design's people PSNR gain over both, paired on the test
+   episodes.
 """
 
 from __future__ import annotations
@@ -252,12 +252,13 @@ def attack_design(
     episodes: Mapping[str, Episode],
     cfg: PrivacyConfig,
     name: str,
-    trivial: Mapping[str, Mapping[str, float]],
+    references: Mapping[str, Mapping[str, Mapping[str, float]]],
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Every attacker seed against one design: figures with intervals, the first seed's examples.
 
-    ``trivial``: the trivial attacker's figures per test episode, for the paired
-    foreground PSNR gain (``fg_psnr_gain_db``).
+    ``references``: the ``"trivial"`` and ``"prior"`` attackers' figures per test
+    episode, for the paired people PSNR gains over them (``fg_psnr_gain_db``,
+    ``fg_psnr_over_prior_db``).
     """
     runs = design["runs"]
     results = []
@@ -271,12 +272,10 @@ def attack_design(
         k: _intervals([r["by_decoder"][k] for r in results], frames, IMAGE_FIGURES, seed)
         for k in results[0]["by_decoder"]
     }
-    gain = paired_difference(
-        _errors(per_seed, "fg_psnr_db", frames), _errors([trivial], "fg_psnr_db", frames), seed=seed
-    )
     return {
         **_intervals(per_seed, frames, FIGURES, seed),
-        "fg_psnr_gain_db": gain.as_dict(),
+        "fg_psnr_gain_db": _gain(per_seed, references["trivial"], frames, seed),
+        "fg_psnr_over_prior_db": _gain(per_seed, references["prior"], frames, seed),
         "by_decoder": by_decoder,
         "per_seed": per_seed,
         "convergence": [r["convergence"] for r in results],
@@ -284,6 +283,17 @@ def attack_design(
             {k: r[k] for k in ("decoder", "decoder_val_mse", "ridge_penalty")} for r in results
         ],
     }, results[0]["examples"]
+
+
+def _gain(
+    per_seed: Sequence[Mapping[str, Mapping[str, float]]],
+    reference: Mapping[str, Mapping[str, float]],
+    frames: Mapping[str, int],
+    seed: int,
+) -> dict[str, Any]:
+    """People PSNR minus a reference attacker's, paired on the test episodes (mean, ci95)."""
+    a, b = _errors(per_seed, "fg_psnr_db", frames), _errors([reference], "fg_psnr_db", frames)
+    return paired_difference(a, b, seed=seed).as_dict()
 
 
 def _write_examples(
@@ -323,12 +333,9 @@ def _prior_record(
     seed: int,
 ) -> dict[str, Any]:
     """``privacy.json``'s ``prior``: image figures with intervals, the paired gain over trivial."""
-    gain = paired_difference(
-        _errors([prior], "fg_psnr_db", frames), _errors([trivial], "fg_psnr_db", frames), seed=seed
-    )
     return {
         **_intervals([prior], frames, IMAGE_FIGURES, seed),
-        "fg_psnr_gain_db": gain.as_dict(),
+        "fg_psnr_gain_db": _gain([prior], trivial, frames, seed),
         "episodes": dict(prior),
     }
 
@@ -355,7 +362,8 @@ def analyze_privacy(
     designs, examples = {}, {}
     todo = tqdm(result["designs"].items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
-        attack, ex = attack_design(d, data, episodes, cfg, name, trivial)
+        references = {"trivial": trivial, "prior": prior}
+        attack, ex = attack_design(d, data, episodes, cfg, name, references)
         designs[name] = {
             "pixels": d["model"]["pixels"],
             "task_error": d["error"],
