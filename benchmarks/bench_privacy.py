@@ -10,15 +10,19 @@ Usage:
    fixed cheap fidelity (4 spp, depth 3); mincam 1, 2, 4, 8 px, 8 px with the
    privacy term (weight 1) and baselines 2x2 .. 32x32, each trained for the
    people count with 2 seeds of at most 1,000 steps.
-2. **Attacks.** A 64 x 64 full view of every frame (4 spp); per design, 3 attacker
-   seeds (at most 600 steps each) train a decoder to the view and a
+2. **Attacks.** A 64 x 64 full view of every frame (4 spp) and its background
+   (the frame with its people removed, same seed); per design, 3 attacker seeds
+   (networks of at most 600 steps) train decoders of what the people add to the
+   view (MLP, convolutional, ridge; the best on validation kept) and a
    re-identifier of the roster on the training episodes and are scored on the
-   test episodes.
+   test episodes: PSNR/SSIM on the foreground (the people's pixels) and on the
+   whole view, top-1 re-identification; the trivial attacker sees no one.
 3. **Output.** ``--out`` (JSON: machine, git revision, timings, the audit),
    ``privacy.md`` (the table) and ``privacy.png`` (the curve) beside it; the
    report (HTML) in ``--work``.
 
-Everything resumes from ``--work`` (episodes, views, task runs); attacks run again.
+Everything resumes from ``--work`` (episodes, views, backgrounds, task runs);
+attacks run again.
 """
 
 from __future__ import annotations
@@ -53,20 +57,27 @@ def machine() -> dict:
 
 def table(privacy: dict) -> str:
     """Markdown: every design's task error and attack success, the trivial row, the verdicts."""
-    from mincam_render.analysis.privacy.report import design_rows, headline
+    from mincam_render.analysis.privacy.report import (
+        DESIGN_COLUMNS,
+        decoder_rows,
+        design_rows,
+        headline,
+    )
 
-    lines = [
-        "# Privacy audit: workspace, roster of 6",
-        "",
-        f"**{headline(privacy)}**",
-        "",
-        f"| design | pixels | task {privacy['error_name']} | task training | PSNR (dB) | SSIM "
-        "| re-id top-1 | attackers converged |",
-        "|---|---:|---|---|---|---|---|---|",
-    ]
-    lines += ["| " + " | ".join(map(str, row)) + " |" for row in design_rows(privacy)]
+    def markdown(header: list[str], rows: list[list]) -> list[str]:
+        return [
+            "| " + " | ".join(header) + " |",
+            "|" + "|".join("---:" if h == "pixels" else "---" for h in header) + "|",
+            *("| " + " | ".join(map(str, row)) + " |" for row in rows),
+        ]
+
+    header = ["design", "pixels", f"task {privacy['error_name']}", *DESIGN_COLUMNS]
+    lines = ["# Privacy audit: workspace, roster of 6", "", f"**{headline(privacy)}**", ""]
+    lines += markdown(header, design_rows(privacy))
     lines += ["", "Verdicts (only where 95 % intervals separate):", ""]
     lines += [f"- {c['verdict']}" for c in privacy["corner"].values()]
+    lines += ["", "Every decoder (the table above keeps the best on validation per seed):", ""]
+    lines += markdown(*decoder_rows(privacy))
     return "\n".join(lines) + "\n"
 
 

@@ -317,12 +317,14 @@ def report_privacy_cmd(
 ) -> None:
     """What can an attacker recover from K measurements? Task error against attack success.
 
-    Renders workspace episodes with a roster of 6 people and the full 64 x 64
-    view of every frame, trains mincam 1-8 px (and 8 px with the privacy term)
-    and baselines 2x2..32x32 for the people count, then attacks each trained
-    design: a decoder to the full view (PSNR, SSIM) and a re-identifier of who
-    is in the room (top-1 accuracy against chance), trained on other episodes
-    than those it is scored on (docs/privacy.md).
+    Renders workspace episodes with a roster of 6 people, the full 64 x 64
+    view of every frame and its background (the frame without its people),
+    trains mincam 1-8 px (and 8 px with the privacy term) and baselines
+    2x2..32x32 for the people count, then attacks each trained design:
+    decoders of what the people add to the view (PSNR, SSIM on the people's
+    pixels and on the whole view) and a re-identifier of who is in the room
+    (top-1 accuracy against chance), trained on other episodes than those it
+    is scored on (docs/privacy.md).
 
     \b
     Example:

@@ -164,6 +164,20 @@ class SceneFamily(abc.ABC):
         """Set ``scene`` to one static component (see :meth:`background_components`)."""
         raise NotImplementedError(f"family {self.name!r} has no static background")
 
+    #: True when the family can render a frame with its people removed
+    #: (:meth:`set_frame_without_people`), for the privacy audit's backgrounds.
+    removes_people: ClassVar[bool] = False
+
+    def set_frame_without_people(self, scene: mi.Scene, index: int) -> None:
+        """Set ``scene`` to frame ``index`` with its people removed, all else as in the frame.
+
+        Unlike :meth:`set_background` the door, lights and daylight stay the
+        frame's own: the frame's view minus this one's is what the people add
+        (themselves, their shadows, their light on the room). For the privacy
+        audit's backgrounds (:mod:`mincam_render.data.views`).
+        """
+        raise NotImplementedError(f"family {self.name!r} cannot remove its people")
+
     def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
         """Set ``scene`` to frame ``index`` lit by its background's slow light; return labels.
 

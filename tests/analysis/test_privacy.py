@@ -8,15 +8,24 @@ import numpy as np
 import pytest
 from support import linear_task
 
-from mincam_render.analysis.privacy import attacks
+from mincam_render.analysis.privacy import attacks, decoders
 from mincam_render.analysis.privacy.config import AttackConfig
 from mincam_render.analysis.privacy.curve import corner_verdicts
 from mincam_render.analysis.privacy.metrics import (
     display,
+    foreground_mask,
+    foreground_quality,
     prior_scores,
     reconstruction_quality,
     reid_top1,
     white_level,
+)
+from mincam_render.analysis.privacy.study import (
+    IMAGE_FIGURES,
+    Episode,
+    prior_attack,
+    score_reconstruction,
+    trivial_attack,
 )
 from mincam_render.learn import train as tr
 
@@ -39,6 +48,112 @@ def test_constant_offset_gives_the_closed_form_psnr(rng, offset):
 def test_reconstruction_quality_bad_input():
     with pytest.raises(ValueError, match="equal"):
         reconstruction_quality(np.zeros((2, 4, 4)), np.zeros((2, 4, 5)))
+
+
+def _people(rng, frames: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(true, background, block mask)``: a 6 x 5 person of +0.3 on a noisy background,
+    a one-pixel speck of +0.3 and a change of 0.01 (below the threshold) everywhere."""
+    background = rng.uniform(0.2, 0.6, (frames, 16, 16))
+    block = np.zeros(background.shape, bool)
+    block[:, 4:10, 3:8] = True
+    true = background + 0.01 + 0.3 * block
+    true[:, 13, 13] += 0.3  # an isolated Monte Carlo speck
+    return true, background, block
+
+
+def test_foreground_is_what_changes_by_more_than_the_threshold_without_specks(rng):
+    true, background, block = _people(rng)
+    np.testing.assert_array_equal(foreground_mask(true, background), block)
+    with_specks = foreground_mask(true, background, speck_px=0)
+    assert with_specks.sum() == block.sum() + len(block) and with_specks[:, 13, 13].all()
+    # a lower threshold takes the faint change too: every pixel
+    assert foreground_mask(true, background, threshold=0.005, speck_px=0).all()
+
+
+@pytest.mark.parametrize("delta", [0.1, 0.02])
+def test_foreground_psnr_is_the_closed_form_on_the_mask_only(rng, delta):
+    true, background, block = _people(rng)
+    pred = true + delta * block + rng.uniform(-0.2, 0.2, true.shape) * ~block
+    q = foreground_quality(true, pred, block)
+    # MSE on the mask = delta^2 (data range 1): errors off the mask do not count
+    assert q["fg_psnr_db"] == pytest.approx(-20 * np.log10(delta), rel=1e-9)
+    assert q["fg_frames"] == 3 and q["fg_fraction"] == pytest.approx(30 / 256)
+    exact = foreground_quality(true, true.copy(), block)
+    assert exact["fg_psnr_db"] == np.inf and exact["fg_ssim"] == pytest.approx(1.0)
+    # the whole view's PSNR does count them
+    assert reconstruction_quality(true, pred)["psnr_db"] < q["fg_psnr_db"]
+
+
+def test_frames_without_a_foreground_are_skipped(rng):
+    true, background, block = _people(rng)
+    block[1] = False
+    q = foreground_quality(true, true + 0.1 * block, block)
+    assert q["fg_frames"] == 2 and q["fg_psnr_db"] == pytest.approx(20.0)
+    empty = foreground_quality(true, true, np.zeros_like(block))
+    assert np.isnan(empty["fg_psnr_db"]) and np.isnan(empty["fg_ssim"]) and empty["fg_frames"] == 0
+
+
+def test_foreground_bad_input(rng):
+    true, background, block = _people(rng)
+    with pytest.raises(ValueError, match="threshold"):
+        foreground_mask(true, background, threshold=1.5)
+    with pytest.raises(ValueError, match="speck_px"):
+        foreground_mask(true, background, speck_px=-1)
+    with pytest.raises(ValueError, match="equal"):
+        foreground_mask(true, background[:, :8])
+    with pytest.raises(ValueError, match="mask"):
+        foreground_quality(true, true, block[:2])
+
+
+def _episode(name: str, rng, frames: int = 20) -> Episode:
+    """Synthetic display views: a background and one person-sized block of varying brightness."""
+    background = rng.uniform(0.2, 0.6, (1, 8, 8)).repeat(frames, axis=0).astype(np.float32)
+    views = background.copy()
+    views[:, 2:6, 3:5] += rng.uniform(-0.2, 0.3, (frames, 1, 1)).astype(np.float32)
+    present = (rng.random((frames, 3)) < 0.5).astype(np.float32)
+    return Episode(name, name, views, background, present, foreground_mask(views, background))
+
+
+def test_a_decoder_that_sees_no_one_scores_exactly_the_trivial_attacker(rng):
+    import torch
+
+    episodes = {n: _episode(n, rng) for n in ("train-0", "val-0", "test-0", "test-1")}
+    trivial = trivial_attack(episodes)
+    x = rng.standard_normal((20, 4)).astype(np.float32)
+    model = decoders.ConvDecoder(x, 8, hidden=8, channels=8)
+    with torch.no_grad():  # a decoder whose last layer outputs no difference
+        for p in model.upsample[-1].parameters():
+            p.zero_()
+    nobody = attacks.Fitted(model, [], 0)
+    for name in ("test-0", "test-1"):
+        ep = episodes[name]
+        recon = decoders.reconstruct(nobody, x, ep.background)
+        np.testing.assert_array_equal(recon, ep.background)
+        scored = score_reconstruction(ep, recon)
+        assert scored == {k: trivial[name][k] for k in IMAGE_FIGURES}
+        assert 0 < trivial[name]["fg_fraction"] < 1 and np.isfinite(scored["fg_psnr_db"])
+
+
+def test_the_prior_knows_where_people_usually_are_not_where_they_are_now(rng):
+    background = rng.uniform(0.2, 0.6, (10, 8, 8))
+    usual = np.zeros((8, 8))
+    usual[2:6, 3:5] = 0.2  # in every training frame, one person at the same place
+
+    def episode(name: str, diff: np.ndarray) -> Episode:
+        views = background + diff
+        return Episode(name, name, views, background, np.ones((10, 1)),
+                       foreground_mask(views, background))  # fmt: skip
+
+    moved = np.roll(usual, 3, axis=1)  # the person elsewhere
+    episodes = {"train-0": episode("train-0", usual), "test-0": episode("test-0", usual),
+                "test-1": episode("test-1", moved)}  # fmt: skip
+    prior, trivial = prior_attack(episodes), trivial_attack(episodes)
+    assert prior["test-0"]["fg_psnr_db"] > 100  # the usual place: right (float32 rounding)
+    assert trivial["test-0"]["fg_psnr_db"] == pytest.approx(-20 * np.log10(0.2))
+    # elsewhere, the prior paints a person where none is: no better on the people's pixels,
+    # worse on the whole view
+    assert prior["test-1"]["fg_psnr_db"] <= trivial["test-1"]["fg_psnr_db"] + 1e-9
+    assert prior["test-1"]["psnr_db"] < trivial["test-1"]["psnr_db"]
 
 
 def test_display_maps_the_white_level_to_one_with_gamma():
@@ -69,17 +184,52 @@ def test_trivial_reidentification_accuracy_is_the_class_prior(rng):
 FAST = AttackConfig(max_steps=300, eval_every=50, hidden=64, batch_size=64)
 
 
-def test_decoder_recovers_a_view_that_the_readout_determines(rng):
-    # views are a fixed mix of 3 patterns weighted by the read-out: a decodable scene
-    patterns = rng.uniform(0, 1, (3, 8, 8))
+@pytest.mark.parametrize(("kind", "width"), [("mlp", 8), ("conv", 16), ("ridge", 8)])
+def test_decoders_recover_a_difference_that_the_readout_determines(rng, kind, width):
+    # the people's difference is a fixed mix of 3 patterns weighted by the read-out
+    patterns = rng.uniform(-0.5, 0.5, (3, width, width))
     x = rng.uniform(0, 1, (600, 3)).astype(np.float32)
-    views = (np.einsum("nk,krc->nrc", x, patterns) / 3).astype(np.float32)
-    fit = attacks.train_decoder((x[:400], views[:400]), (x[400:500], views[400:500]), FAST, 0)
-    recon = attacks.decode(fit, x[500:], (8, 8))
-    learned = reconstruction_quality(views[500:], recon)
-    mean = reconstruction_quality(views[500:], np.broadcast_to(views[:400].mean(0), recon.shape))
-    assert learned["psnr_db"] > mean["psnr_db"] + 6, (learned, mean)
-    assert fit.history and fit.best_step > 0
+    diff = (np.einsum("nk,krc->nrc", x, patterns) / 3).astype(np.float32)
+    background = np.full((100, width, width), 0.5, np.float32)
+    fit = decoders.train_decoder(kind, (x[:400], diff[:400]), (x[400:500], diff[400:500]), FAST, 0)
+    recon = decoders.reconstruct(fit, x[500:], background)
+    assert recon.shape == (100, width, width) and recon.dtype == np.float32
+    views = background + diff[500:]
+    learned = reconstruction_quality(views, recon)
+    nobody = reconstruction_quality(views, background)  # the trivial attacker
+    assert learned["psnr_db"] > nobody["psnr_db"] + 6, (learned, nobody)
+
+
+def test_decoder_bad_input(rng):
+    x, d = rng.uniform(0, 1, (20, 2)), rng.uniform(0, 1, (20, 4, 4))
+    with pytest.raises(ValueError, match="allowed mlp, conv, ridge"):
+        decoders.train_decoder("unet", (x, d), (x, d), FAST, 0)
+    with pytest.raises(ValueError, match="rows == cols"):
+        decoders.train_decoder("conv", (x, d[:, :, :3]), (x, d[:, :, :3]), FAST, 0)
+
+
+@pytest.mark.parametrize(("width", "grid"), [(64, (8, 3)), (48, (12, 2)), (16, (8, 1)),
+                                             (8, (8, 0)), (15, (15, 0))])  # fmt: skip
+def test_the_conv_decoders_coarse_grid_doubles_up_to_the_view(width, grid):
+    side, doublings = decoders.coarse_grid(width)
+    assert (side, doublings) == grid and side * 2**doublings == width
+
+
+@pytest.mark.parametrize("width", [64, 12])
+def test_conv_decoder_maps_readouts_to_images_with_exact_gradients(rng, width):
+    import torch
+
+    x = rng.standard_normal((30, 5)).astype(np.float32)
+    torch.manual_seed(0)  # a tiny net: some initial weights leave every ReLU dead
+    model = decoders.ConvDecoder(x, width, hidden=8, channels=8)
+    out = model(torch.from_numpy(x[:4]))
+    assert out.shape == (4, width, width)
+    out.square().mean().backward()
+    assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in model.parameters())
+    # float64 against central differences (random projections of the 2 x 16 x 16 outputs)
+    small = decoders.ConvDecoder(x, 16, hidden=4, channels=4).double()
+    xin = torch.from_numpy(x[:2].astype(np.float64)).requires_grad_()
+    assert torch.autograd.gradcheck(small, (xin,), eps=1e-6, atol=1e-6, fast_mode=True)
 
 
 def test_reidentifier_beats_the_prior_when_the_readout_carries_identity(rng):
@@ -116,16 +266,17 @@ def _iv(mean: float, half: float) -> dict:
 
 
 def _result(mincam_psnr: float, mincam_reid: float) -> dict:
+    # the whole view's PSNR (psnr_db) is the other way round: the corner ignores it
     return {
         "designs": {
-            "mincam-2px": {"task_error": _iv(1.0, 0.1), "psnr_db": _iv(mincam_psnr, 0.5),
-                           "reid_top1": _iv(mincam_reid, 0.05)},
-            "baseline-2x2": {"task_error": _iv(1.5, 0.1), "psnr_db": _iv(15.0, 0.5),
-                             "reid_top1": _iv(0.6, 0.05)},
-            "baseline-8x8": {"task_error": _iv(1.0, 0.1), "psnr_db": _iv(18.0, 0.5),
-                             "reid_top1": _iv(0.8, 0.05)},
-            "baseline-32x32": {"task_error": _iv(0.5, 0.1), "psnr_db": _iv(22.0, 0.5),
-                               "reid_top1": _iv(0.9, 0.05)},
+            "mincam-2px": {"task_error": _iv(1.0, 0.1), "fg_psnr_db": _iv(mincam_psnr, 0.5),
+                           "psnr_db": _iv(40.0, 0.5), "reid_top1": _iv(mincam_reid, 0.05)},
+            "baseline-2x2": {"task_error": _iv(1.5, 0.1), "fg_psnr_db": _iv(15.0, 0.5),
+                             "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.6, 0.05)},
+            "baseline-8x8": {"task_error": _iv(1.0, 0.1), "fg_psnr_db": _iv(18.0, 0.5),
+                             "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.8, 0.05)},
+            "baseline-32x32": {"task_error": _iv(0.5, 0.1), "fg_psnr_db": _iv(22.0, 0.5),
+                               "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.9, 0.05)},
         }
     }  # fmt: skip
 
@@ -138,7 +289,7 @@ def test_corner_needs_a_task_match_and_separated_attack_intervals():
     # less re-identifiable than both, but its PSNR is not below either: not in the corner
     close = corner_verdicts(_result(17.8, 0.4))["mincam-2px"]
     assert close["more_private_than"] == {
-        "psnr_db": [], "reid_top1": ["baseline-2x2", "baseline-8x8"]}  # fmt: skip
+        "fg_psnr_db": [], "reid_top1": ["baseline-2x2", "baseline-8x8"]}  # fmt: skip
     assert close["in_corner_against"] == []
     none = corner_verdicts(_result(20.0, 0.85))["mincam-2px"]
     assert none["in_corner_against"] == [] and "not in the corner" in none["verdict"]
@@ -149,7 +300,57 @@ def test_ridge_decoder_recovers_a_linear_view_and_picks_its_penalty(rng):
     patterns = rng.uniform(0, 1, (4, 8, 8))
     x = rng.uniform(0, 1, (300, 4))
     views = np.einsum("nk,krc->nrc", x, patterns) / 4
-    ridge = attacks.fit_ridge((x[:200], views[:200]), (x[200:250], views[200:250]))
-    assert ridge.penalty == min(attacks.RIDGE_PENALTIES)  # noiseless: the least penalty
-    q = reconstruction_quality(views[250:], ridge.decode(x[250:], (8, 8)))
+    ridge = decoders.fit_ridge((x[:200], views[:200]), (x[200:250], views[200:250]))
+    assert ridge.penalty == min(decoders.RIDGE_PENALTIES)  # noiseless: the least penalty
+    q = reconstruction_quality(views[250:], np.clip(ridge.predict(x[250:]), 0, 1))
     assert q["psnr_db"] > 40 and q["ssim"] > 0.99
+
+
+def test_every_attacker_seed_scores_every_decoder_and_the_gains_are_paired(variant, tmp_path, rng):
+    from mincam_render.analysis.privacy.config import PrivacyConfig
+    from mincam_render.analysis.privacy.study import FIGURES, attack_design
+
+    names = ("train-0", "val-0", "test-0", "test-1")
+    data = {n: linear_task(40, seed=i) for i, n in enumerate(names)}
+    cfg = tr.TrainConfig(max_steps=20, eval_every=10)
+    tr.train_run(data["train-0"], data["val-0"], None, tmp_path, config=cfg, pixels=2)
+    episodes = {n: _episode(n, rng, frames=40) for n in names}
+    attack = AttackConfig(seeds=3, max_steps=20, eval_every=10, hidden=8, conv_channels=8,
+                          view_width=8)  # fmt: skip
+    trivial, prior = trivial_attack(episodes), prior_attack(episodes)
+    result, examples = attack_design(
+        {"runs": [str(tmp_path)]}, data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
+        {"trivial": trivial, "prior": prior},
+    )  # fmt: skip
+    for f in FIGURES:
+        assert result[f]["ci95"][0] <= result[f]["mean"] <= result[f]["ci95"][1]
+    assert len(result["per_seed"]) == 3 and set(result["per_seed"][0]) == {"test-0", "test-1"}
+    assert set(result["by_decoder"]) == set(decoders.DECODERS)
+    for kept in result["decoders"]:  # each seed keeps its best decoder on validation
+        errors = kept["decoder_val_mse"]
+        assert kept["decoder"] == min(errors, key=errors.__getitem__)
+    # paired on the same test episodes (equal frames): the point is the difference of means
+    nobody = np.mean([trivial[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
+    gain = result["fg_psnr_gain_db"]
+    assert gain["mean"] == pytest.approx(result["fg_psnr_db"]["mean"] - nobody, rel=1e-9)
+    usual = np.mean([prior[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
+    over = result["fg_psnr_over_prior_db"]["mean"]
+    assert over == pytest.approx(result["fg_psnr_db"]["mean"] - usual, rel=1e-9)
+    assert examples["test-0"].shape == (40, 8, 8)
+    json.dumps(result)  # JSON-ready
+
+
+def test_examples_round_trip_with_backgrounds_and_masks(rng, tmp_path):
+    from mincam_render.analysis.privacy.study import _write_examples
+
+    ep = _episode("test-0", rng)
+    recon = {"mincam-2px": ep.views + 0.1, "baseline-2x2": ep.background}
+    _write_examples(tmp_path / "examples.npz", ep, recon, 3)
+    with np.load(tmp_path / "examples.npz") as saved:
+        frames = saved["frames"]
+        assert len(frames) == 3 and ep.present[frames].any(axis=1).all()  # occupied frames
+        np.testing.assert_array_equal(saved["true"], ep.views[frames])
+        np.testing.assert_array_equal(saved["background"], ep.background[frames])
+        np.testing.assert_array_equal(saved["mask"], ep.mask[frames])
+        assert saved["designs"].tolist() == ["mincam-2px", "baseline-2x2"]
+        np.testing.assert_array_equal(saved["recon"][1], ep.background[frames])

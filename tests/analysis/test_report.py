@@ -174,17 +174,29 @@ def _privacy_result() -> dict:
     from mincam_render.analysis.privacy.config import AttackConfig, PrivacyConfig
 
     conv = {"decoder": {"converged": True}, "reid": {"converged": False}}
+    image = {
+        "fg_psnr_db": _interval(15.0, 0.4),
+        "fg_ssim": _interval(0.6, 0.02),
+        "psnr_db": _interval(30.0, 0.4),
+        "ssim": _interval(0.9, 0.02),
+    }
+    kept = {"decoder": "conv", "decoder_val_mse": {"mlp": 2.0, "conv": 1.0, "ridge": 3.0}}
     design = {
         "pixels": 2, "task_state": "converged", "task_seeds": 2, "convergence": [conv] * 3,
-        "task_error": _interval(1.0, 0.1), "psnr_db": _interval(12.0, 0.4),
-        "ssim": _interval(0.3, 0.02), "reid_top1": _interval(0.4, 0.05),
+        "task_error": _interval(1.0, 0.1), **image, "fg_psnr_db": _interval(14.5, 0.3),
+        "fg_psnr_gain_db": _interval(0.1, 0.05), "fg_psnr_over_prior_db": _interval(0.0, 0.05),
+        "reid_top1": _interval(0.4, 0.05),
+        "decoders": [kept, kept, dict(kept, decoder="ridge")],
+        "by_decoder": {k: image for k in ("mlp", "conv", "ridge")},
     }  # fmt: skip
-    baseline = dict(design, pixels=64, psnr_db=_interval(18.0, 0.4), reid_top1=_interval(0.8, 0.05))
+    baseline = dict(design, pixels=64, fg_psnr_db=_interval(18.0, 0.4),
+                    reid_top1=_interval(0.8, 0.05))  # fmt: skip
     privacy = {
         "task": "workspace", "error_name": "people_count RMSE", "roster": 6,
         "designs": {"mincam-2px": design, "baseline-8x8": baseline},
-        "trivial": {"task_error": _interval(1.6, 0.2), "psnr_db": _interval(11.0, 0.3),
-                    "ssim": _interval(0.25, 0.02), "reid_top1": _interval(0.35, 0.04)},
+        "trivial": {"task_error": _interval(1.6, 0.2), **image, "fg_fraction": 0.04,
+                    "reid_top1": _interval(0.35, 0.04)},
+        "prior": {**image, "fg_psnr_gain_db": _interval(0.2, 0.05)},
         "config": json.loads(json.dumps(asdict(PrivacyConfig(
             comparison=default_comparison(), attack=AttackConfig())), default=str)),
     }  # fmt: skip
@@ -200,6 +212,8 @@ def privacy_page(tmp_path_factory):
     examples = {
         "frames": np.array([3, 40]),
         "true": rng.uniform(0, 1, (2, 16, 16)).astype(np.float32),
+        "background": rng.uniform(0, 1, (2, 16, 16)).astype(np.float32),
+        "mask": rng.random((2, 16, 16)) < 0.1,
         "designs": np.array(["mincam-2px", "baseline-8x8"]),
         "recon": rng.uniform(0, 1, (2, 2, 16, 16)).astype(np.float32),
     }
@@ -217,9 +231,12 @@ def test_privacy_report_loads_its_figures_in_a_headless_browser(tmp_path, privac
     loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
     total = re.search(r'data-figures-total="(\d+)"', dom)
     assert loaded and total, f"the page script did not run: {dom[:500]}"
-    assert int(total.group(1)) == 2 and int(loaded.group(1)) == 2
+    assert int(total.group(1)) == 3 and int(loaded.group(1)) == 3
     assert "mincam-2px: in the corner against baseline-8x8" in dom
-    assert "trivial (mean view; most frequent person)" in dom
+    assert "trivial (background: sees no one; most frequent person)" in dom
+    assert "conv 2, ridge 1" in dom  # the decoder each attacker seed kept
+    assert "prior (background + where people usually are; read-out ignored)" in dom
+    assert "conv: people PSNR (dB)" in dom  # every decoder's figure
     saved = json.loads(Path(privacy_page["json"]).read_text())
     assert saved["corner"]["mincam-2px"]["in_corner_against"] == ["baseline-8x8"]
     assert Path(privacy_page["png"]).read_bytes()[:4] == b"\x89PNG"

@@ -237,6 +237,39 @@ def test_applying_only_what_changed_renders_as_a_fresh_scene(family):
     np.testing.assert_array_equal(a, b)
 
 
+def test_a_frame_without_its_people_keeps_the_door_and_changes_only_what_they_touch():
+    """The privacy audit's background: every slot parked, the frame's door kept; with the
+    frame's seed, pixels whose light paths miss the people are bit-identical."""
+    import mitsuba as mi
+
+    from mincam_render.render import mitsuba_scene as ms
+    from mincam_render.scenes.indoor import PEOPLE_VERTICES_PARAM
+
+    family = _family(fps=1.0, num_frames=20)  # 20 s: people come in through the open door
+    assert family.removes_people
+    i = max(range(20), key=lambda k: (len(family.state(k).people) > 0,
+                                      family.state(k).door_angle_rad))  # fmt: skip
+    state = family.state(i)
+    assert state.people and state.door_angle_rad > 0.1
+    cam = family.camera()
+    sensor = ms.perspective_sensor(cam.position, cam.look_at, cam.up, cam.fov_deg, 32, 32)
+    scene = family.build_scene()
+    family.set_frame(scene, i)
+    view = np.asarray(mi.render(scene, sensor=sensor, spp=4, seed=i))[..., 0]
+    family.set_frame_without_people(scene, i)
+    empty = np.asarray(mi.render(scene, sensor=sensor, spp=4, seed=i))[..., 0]
+    params = mi.traverse(scene)
+    vertices = np.asarray(params[PEOPLE_VERTICES_PARAM]).reshape(-1, 3)
+    assert np.all(vertices[:, 2] < -10.0)  # every slot parked below the floor
+    door = np.asarray(params["door.vertex_positions"]).reshape(-1, 3)
+    np.testing.assert_allclose(door, family.rig.door.vertices(state.door_angle_rad), atol=1e-5)
+    changed = np.mean(view != empty)
+    assert 0.0 < changed < 0.5, changed  # the people's pixels (and their light), not the room
+    family.set_frame(scene, i)  # and back: the frame again, bit for bit
+    again = np.asarray(mi.render(scene, sensor=sensor, spp=4, seed=i))[..., 0]
+    np.testing.assert_array_equal(again, view)
+
+
 def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
     import mitsuba as mi
 

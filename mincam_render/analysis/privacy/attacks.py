@@ -6,8 +6,8 @@ and owns episodes of the same room with their full views and who was present
 on. From the design's read-out of a frame (with sensor noise, as deployed) it
 learns
 
-* a **decoder** to the full view (display image in [0, 1]; an MLP with two
-  hidden layers, sigmoid output, mean squared error), and
+* a **decoder** of what the people add to the view (:mod:`.decoders`, which
+  trains with :func:`fit_adam` here), and
 * a **re-identification** classifier: which of the roster's people are in the
   room (an MLP, one logit per person, binary cross-entropy), scored top-1.
 
@@ -79,7 +79,7 @@ def measurements(camera: Any, data: TrainingData, *, seed: int) -> np.ndarray:
     return np.concatenate(out).astype(np.float32)
 
 
-class _Standardise(nn.Module):
+class Standardise(nn.Module):
     """Fixed per-feature standardisation with the attacker's training statistics."""
 
     mean: torch.Tensor  # buffer: [feature]
@@ -91,12 +91,14 @@ class _Standardise(nn.Module):
         self.register_buffer("std", torch.from_numpy(x.std(axis=0) + 1e-6).float())
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(x - mean) / std`` of inputs ``[frame, feature]``."""
         return (x - self.mean) / self.std
 
 
-def _mlp(x_train: np.ndarray, outputs: int, hidden: int) -> nn.Module:
+def mlp(x_train: np.ndarray, outputs: int, hidden: int) -> nn.Sequential:
+    """Standardised inputs, two hidden ReLU layers of ``hidden`` units, ``outputs`` linear."""
     return nn.Sequential(
-        _Standardise(x_train),
+        Standardise(x_train),
         nn.Linear(x_train.shape[1], hidden),
         nn.ReLU(),
         nn.Linear(hidden, hidden),
@@ -114,13 +116,13 @@ class Fitted:
     best_step: int
 
     def predict(self, x: np.ndarray) -> np.ndarray:
-        """Raw outputs ``[frame, output]`` (numpy) of inputs ``[frame, feature]``."""
+        """Raw outputs ``[frame, ...]`` (numpy) of inputs ``[frame, feature]``."""
         with torch.no_grad():
             return self.model(torch.from_numpy(np.asarray(x, np.float32))).numpy()
 
 
 @one_thread()
-def _fit(
+def fit_adam(
     model: nn.Module,
     loss_of: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
     train: tuple[np.ndarray, np.ndarray],
@@ -153,37 +155,11 @@ def _fit(
     return Fitted(model, history, best_step)
 
 
-def _seeded(seed: int, build: Callable[[], nn.Module]) -> nn.Module:
+def seeded(seed: int, build: Callable[[], nn.Module]) -> nn.Module:
+    """``build()`` with torch's generator at ``seed`` (the global one restored after)."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         return build()
-
-
-def train_decoder(
-    train: tuple[np.ndarray, np.ndarray],
-    val: tuple[np.ndarray, np.ndarray],
-    cfg: AttackConfig,
-    seed: int,
-) -> Fitted:
-    """Decoder from read-outs ``[frame, pixel]`` to display views ``[frame, row, col]`` in [0, 1].
-
-    ``predict`` returns logits; :func:`decode` turns them into images.
-    """
-    x, y = train
-    shape = y.shape[1:]
-    flat = (x, y.reshape(len(y), -1))
-    model = _seeded(seed, lambda: _mlp(x, int(np.prod(shape)), cfg.hidden))
-
-    def loss_of(out: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        return F.mse_loss(torch.sigmoid(out), target)
-
-    return _fit(model, loss_of, flat, (val[0], val[1].reshape(len(val[1]), -1)), cfg, seed)
-
-
-def decode(fitted: Fitted, x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Display images ``[frame, row, col]`` in [0, 1] reconstructed from read-outs ``x``."""
-    logits = fitted.predict(x)
-    return (1.0 / (1.0 + np.exp(-logits))).reshape(len(x), *shape).astype(np.float32)
 
 
 def train_reid(
@@ -194,51 +170,5 @@ def train_reid(
 ) -> Fitted:
     """Classifier from read-outs ``[frame, pixel]`` to who is present ``[frame, identity]``."""
     x, y = train
-    model = _seeded(seed, lambda: _mlp(x, y.shape[1], cfg.hidden))
-    return _fit(model, F.binary_cross_entropy_with_logits, train, val, cfg, seed)
-
-
-#: Ridge penalties tried by :func:`fit_ridge` (times the number of training frames).
-RIDGE_PENALTIES = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)
-
-
-@dataclass
-class RidgeDecoder:
-    """A linear decoder (ridge regression, closed form) from read-outs to display views."""
-
-    mean: np.ndarray  # [feature]
-    std: np.ndarray  # [feature]
-    weights: np.ndarray  # [feature + 1, pixel]
-    penalty: float
-
-    def decode(self, x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-        """Display images ``[frame, row, col]``, clipped to [0, 1]."""
-        z = (np.asarray(x, np.float64) - self.mean) / self.std
-        y = np.hstack([z, np.ones((len(z), 1))]) @ self.weights
-        return np.clip(y, 0.0, 1.0).reshape(len(x), *shape).astype(np.float32)
-
-
-def fit_ridge(
-    train: tuple[np.ndarray, np.ndarray], val: tuple[np.ndarray, np.ndarray]
-) -> RidgeDecoder:
-    """Ridge regression from read-outs to views, its penalty chosen on ``val`` (numpy).
-
-    The linear attacker: for a conventional camera its read-out is a downsampled
-    image of the scene, which a linear map upsamples; the MLP may need far more
-    data to match it.
-    """
-    x, y = np.asarray(train[0], np.float64), np.asarray(train[1], np.float64)
-    mean, std = x.mean(axis=0), x.std(axis=0) + 1e-6
-    a = np.hstack([(x - mean) / std, np.ones((len(x), 1))])
-    gram, rhs = a.T @ a, a.T @ y.reshape(len(y), -1)
-    best: RidgeDecoder | None = None
-    best_mse = np.inf
-    for penalty in RIDGE_PENALTIES:
-        reg = penalty * len(x) * np.eye(len(gram))
-        reg[-1, -1] = 0.0  # the bias is not penalised
-        cand = RidgeDecoder(mean, std, np.linalg.solve(gram + reg, rhs), penalty)
-        mse = float(np.mean((cand.decode(val[0], y.shape[1:]) - val[1]) ** 2))
-        if mse < best_mse:
-            best, best_mse = cand, mse
-    assert best is not None
-    return best
+    model = seeded(seed, lambda: mlp(x, y.shape[1], cfg.hidden))
+    return fit_adam(model, F.binary_cross_entropy_with_logits, train, val, cfg, seed)

@@ -75,7 +75,9 @@ class AttackConfig:
         seeds: attacker seeds (>= 3 for an interval).
         max_steps: Adam steps of each attacker at most.
         batch_size: samples per step.
-        hidden: units of each of the two hidden layers.
+        hidden: units of each hidden layer (the MLPs' two, the conv decoder's one).
+        conv_channels: feature maps of the conv decoder's coarsest grid (halved
+            at each doubling, at least 8).
         lr: Adam learning rate.
         eval_every: steps between validation checks (the best state is kept).
         examples: test frames shown in the report's reconstructions.
@@ -87,6 +89,7 @@ class AttackConfig:
     max_steps: int = 600
     batch_size: int = 64
     hidden: int = 256
+    conv_channels: int = 32
     lr: float = 1e-3
     eval_every: int = 100
     examples: int = 4
@@ -99,6 +102,7 @@ class AttackConfig:
             ("max_steps", 1),
             ("batch_size", 2),
             ("hidden", 1),
+            ("conv_channels", 1),
             ("eval_every", 1),
             ("examples", 0),
         ):

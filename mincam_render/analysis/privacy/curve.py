@@ -3,7 +3,8 @@
 A minimalist design is *in the corner against* a baseline when the baseline
 is no better at the task (its task-error interval does not lie wholly below
 the design's) and the design's attack success is lower with separated 95 %
-intervals, for the reconstruction (PSNR) and for re-identification (top-1).
+intervals, for the reconstruction of the people (PSNR on the view's
+foreground) and for re-identification (top-1).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 #: Attack figures where a higher value means a more successful attacker.
-ATTACK_FIGURES = ("psnr_db", "reid_top1")
+ATTACK_FIGURES = ("fg_psnr_db", "reid_top1")
 
 
 def _below(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
@@ -25,7 +26,7 @@ def corner_verdicts(privacy: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
 
     Args:
         privacy: ``privacy.json``'s contents (``designs`` with ``task_error``,
-            ``psnr_db``, ``reid_top1`` as ``{"mean", "ci95"}``).
+            ``fg_psnr_db``, ``reid_top1`` as ``{"mean", "ci95"}``).
 
     Returns:
         ``{design: {"task_matched": [baselines no better at the task],

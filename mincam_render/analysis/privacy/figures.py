@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
 #: Attack figures on the curve's x axes: (key, axis label).
 CURVE_AXES = (
-    ("psnr_db", "reconstruction PSNR (dB, higher = more revealed)"),
+    ("fg_psnr_db", "PSNR of the people's pixels (dB, higher = more revealed)"),
     ("reid_top1", "re-identification top-1 accuracy"),
 )
 
@@ -42,6 +42,8 @@ def _plot_curve(ax: Axes, privacy: Mapping[str, Any], key: str, label: str) -> N
                     fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
     t = privacy["trivial"]
     ax.axvline(t[key]["mean"], color="0.4", ls="--", lw=1, label="trivial attacker")
+    if key in privacy["prior"]:
+        ax.axvline(privacy["prior"][key]["mean"], color="C3", ls="-.", lw=1, label="prior")
     ax.axhline(t["task_error"]["mean"], color="0.4", ls=":", lw=1, label="trivial task predictor")
     ax.set_xlabel(label)
     ax.set_ylabel(f"task error ({privacy['error_name']})")
@@ -59,10 +61,13 @@ def curve_figure(privacy: Mapping[str, Any]) -> tuple[Figure, str]:
     fig.tight_layout()
     return fig, (
         "Task error (test people-count RMSE) against the attacker's success: left, the PSNR of "
-        "the full view decoded from the design's read-out; right, how often the attacker's top "
-        "guess of who is in the room is right. Blue: minimalist cameras; green: trained with "
-        "the privacy term; orange: conventional baselines (grid size). Bars: 95 % intervals "
-        "(task: training seeds x test episodes; attacks: attacker seeds x test episodes)."
+        "the view decoded from the design's read-out on its foreground (the pixels the people "
+        "change; the attacker is given the empty room, so the trivial attacker, the dashed "
+        "line, sees no one; dash-dotted, the prior: where people usually are, read-out "
+        "ignored); right, how often the attacker's top guess of who is in the room is right. "
+        "Blue: minimalist cameras; green: trained with the privacy term; orange: conventional "
+        "baselines (grid size). Bars: 95 % intervals (task: training seeds x test episodes; "
+        "attacks: attacker seeds x test episodes)."
     )
 
 
@@ -74,34 +79,80 @@ def matched_baseline(privacy: Mapping[str, Any], design: str) -> str | None:
     return min(names, key=lambda n: abs(designs[n]["task_error"]["mean"] - target), default=None)
 
 
-def examples_figure(
-    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
-) -> tuple[Figure, str]:
-    """Rows: test frames; columns: the true view, each design's reconstruction (first seed)."""
-    from mincam_render.analysis.plots import plt
-
+def _design_order(examples: Mapping[str, np.ndarray]) -> tuple[list[str], list[str]]:
+    """``(names in the file's order, names to show: minimalist, then baselines)``."""
     names = [str(n) for n in examples["designs"]]
     order = [n for n in names if n.startswith("mincam-")] + [
         n for n in names if n.startswith("baseline-")
     ]
-    rows, cols = len(examples["frames"]), 1 + len(order)
-    fig, axes = plt.subplots(rows, cols, figsize=(1.25 * cols, 1.35 * rows), squeeze=False)
-    for r in range(rows):
-        images = [examples["true"][r]] + [examples["recon"][names.index(n)][r] for n in order]
-        for c, img in enumerate(images):
+    return names, order
+
+
+def _short(name: str) -> str:
+    return name.replace("baseline-", "").replace("mincam-", "")
+
+
+def _grid(
+    columns: list[tuple[str, list[np.ndarray]]], frames: int, **imshow: Any
+) -> tuple[Figure, np.ndarray]:
+    """One row per frame, one titled column per ``(title, images)``: images without ticks."""
+    from mincam_render.analysis.plots import plt
+
+    cols = len(columns)
+    fig, axes = plt.subplots(frames, cols, figsize=(1.25 * cols, 1.35 * frames), squeeze=False)
+    for c, (title, images) in enumerate(columns):
+        for r in range(frames):
             ax = axes[r][c]
-            ax.imshow(img, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+            ax.imshow(images[r], interpolation="nearest", **imshow)
             ax.set_xticks([])
             ax.set_yticks([])
-            if r == 0:
-                title = "true view" if c == 0 else order[c - 1].replace("baseline-", "")
-                ax.set_title(title.replace("mincam-", ""), fontsize=7)
+        axes[0][c].set_title(title, fontsize=7)
     fig.tight_layout(pad=0.3)
+    return fig, axes
+
+
+def examples_figure(
+    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+) -> tuple[Figure, str]:
+    """Rows: test frames; columns: the true view, each design's reconstruction (first seed)."""
+    names, order = _design_order(examples)
+    columns = [("true view", list(examples["true"]))] + [
+        (_short(n), list(examples["recon"][names.index(n)])) for n in order
+    ]
+    fig, _ = _grid(columns, len(examples["frames"]), cmap="gray", vmin=0, vmax=1)
     pairs = ", ".join(
         f"{n} ~ {matched_baseline(privacy, n)}" for n in order if n.startswith("mincam-")
     )
     return fig, (
         f"Test frames {', '.join(map(str, examples['frames']))} of the first test episode: "
         "the true view (display image) and what the first attacker seed decodes from each "
-        f"design's read-out. Baselines closest in task error: {pairs}."
+        "design's read-out (the room's background given, the people decoded). Baselines "
+        f"closest in task error: {pairs}."
+    )
+
+
+#: Display difference shown at full colour in the foreground figure.
+DIFFERENCE_RANGE = 0.4
+
+
+def foreground_figure(
+    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+) -> tuple[Figure, str]:
+    """The same frames as :func:`examples_figure`, as differences from the frame's background."""
+    names, order = _design_order(examples)
+    bg = examples["background"]
+    columns = [("people (true)", list(examples["true"] - bg))] + [
+        (_short(n), list(examples["recon"][names.index(n)] - bg)) for n in order
+    ]
+    frames = len(examples["frames"])
+    lim = DIFFERENCE_RANGE
+    fig, axes = _grid(columns, frames, cmap="RdBu_r", vmin=-lim, vmax=lim)
+    for r in range(frames):
+        axes[r][0].contour(examples["mask"][r], levels=[0.5], colors="k", linewidths=0.4)
+    return fig, (
+        "What the people add to each view: the true view minus the frame's background (the "
+        "same frame with its people removed; black outline: the foreground mask the PSNR and "
+        "SSIM of the people are scored on) and each design's decoded difference (first "
+        f"attacker seed). Red brighter, blue darker than the empty room; full colour at "
+        f"+-{lim:g} display units."
     )

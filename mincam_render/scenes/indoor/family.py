@@ -172,6 +172,11 @@ class IndoorFamily(SceneFamily):
             raise ValueError(f"{key!r} is not a background component of family {self.name!r}")
         self.rig.apply(scene, state)
 
+    removes_people = True
+
+    def set_frame_without_people(self, scene: mi.Scene, index: int) -> None:
+        self.rig.apply(scene, replace(self.state(index), people=()))
+
     def set_frame_in_window(
         self, scene: mi.Scene, index: int, interval_s: float
     ) -> dict[str, np.ndarray]:
