@@ -22,7 +22,9 @@ Usage:
    report (HTML) in ``--work``.
 
 Everything resumes from ``--work`` (episodes, views, backgrounds, task runs);
-attacks run again.
+attacks run again. ``--verdicts-only`` runs nothing: it derives the verdicts
+(:func:`corner_verdicts`) again from ``--out``'s kept figures and rewrites it
+and its table.
 """
 
 from __future__ import annotations
@@ -59,9 +61,11 @@ def table(privacy: dict) -> str:
     """Markdown: every design's task error and attack success, the trivial row, the verdicts."""
     from mincam_render.analysis.privacy.report import (
         DESIGN_COLUMNS,
+        PAIRED_HEADER,
         decoder_rows,
         design_rows,
         headline,
+        paired_rows,
     )
 
     def markdown(header: list[str], rows: list[list]) -> list[str]:
@@ -76,9 +80,23 @@ def table(privacy: dict) -> str:
     lines += markdown(header, design_rows(privacy))
     lines += ["", "Verdicts (only where 95 % intervals separate):", ""]
     lines += [f"- {c['verdict']}" for c in privacy["corner"].values()]
+    lines += ["", "Attack figures design − task-matched baseline, paired on the test episodes "
+              "(beside the verdict, not as it):", ""]  # fmt: skip
+    lines += markdown(PAIRED_HEADER, paired_rows(privacy))
     lines += ["", "Every decoder (the table above keeps the best on validation per seed):", ""]
     lines += markdown(*decoder_rows(privacy))
     return "\n".join(lines) + "\n"
+
+
+def rederive_verdicts(path: Path) -> None:
+    """Derive the corner verdicts again from a kept ``privacy.json``; rewrite it and its table."""
+    from mincam_render.analysis.privacy import corner_verdicts
+
+    record = json.loads(path.read_text())
+    record["corner"] = corner_verdicts(record)
+    path.write_text(json.dumps(record, indent=2, default=str) + "\n")
+    path.with_suffix(".md").write_text(table(record))
+    print(table(record))
 
 
 def main() -> None:
@@ -87,7 +105,11 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=REPO / "runs" / "privacy")
     parser.add_argument("--out", type=Path, default=REPO / "benchmarks/results/privacy.json")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--verdicts-only", action="store_true")
     args = parser.parse_args()
+    if args.verdicts_only:
+        rederive_verdicts(args.out)
+        return
 
     import numpy as np
 

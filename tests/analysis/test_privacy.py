@@ -265,20 +265,37 @@ def _iv(mean: float, half: float) -> dict:
     return {"mean": mean, "ci95": [mean - half, mean + half]}
 
 
-def _result(mincam_psnr: float, mincam_reid: float) -> dict:
+#: Test episodes of the synthetic audits: hard, middling, easy for every attacker.
+_EPISODE_OFFSETS = (-1.0, 0.0, 1.0)
+
+
+def _per_seed(psnr: float, reid: float) -> list[dict]:
+    """3 attacker seeds x 3 test episodes around the means; episodes move every design alike."""
+    return [
+        {f"test-{e}": {"fg_psnr_db": psnr + 2.0 * o + 0.01 * s, "reid_top1": reid + 0.1 * o}
+         for e, o in enumerate(_EPISODE_OFFSETS)}
+        for s in range(3)
+    ]  # fmt: skip
+
+
+def _design(task: float, task_half: float, psnr: float, reid: float, view: float) -> dict:
     # the whole view's PSNR (psnr_db) is the other way round: the corner ignores it
+    return {"task_error": _iv(task, task_half), "fg_psnr_db": _iv(psnr, 0.5),
+            "psnr_db": _iv(view, 0.5), "reid_top1": _iv(reid, 0.05),
+            "per_seed": _per_seed(psnr, reid)}  # fmt: skip
+
+
+def _result(mincam_psnr: float, mincam_reid: float) -> dict:
     return {
         "designs": {
-            "mincam-2px": {"task_error": _iv(1.0, 0.1), "fg_psnr_db": _iv(mincam_psnr, 0.5),
-                           "psnr_db": _iv(40.0, 0.5), "reid_top1": _iv(mincam_reid, 0.05)},
-            "baseline-2x2": {"task_error": _iv(1.5, 0.1), "fg_psnr_db": _iv(15.0, 0.5),
-                             "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.6, 0.05)},
-            "baseline-8x8": {"task_error": _iv(1.0, 0.1), "fg_psnr_db": _iv(18.0, 0.5),
-                             "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.8, 0.05)},
-            "baseline-32x32": {"task_error": _iv(0.5, 0.1), "fg_psnr_db": _iv(22.0, 0.5),
-                               "psnr_db": _iv(10.0, 0.5), "reid_top1": _iv(0.9, 0.05)},
-        }
-    }  # fmt: skip
+            "mincam-2px": _design(1.0, 0.1, mincam_psnr, mincam_reid, 40.0),
+            "baseline-2x2": _design(1.5, 0.1, 15.0, 0.6, 10.0),
+            "baseline-8x8": _design(1.0, 0.1, 18.0, 0.8, 10.0),
+            "baseline-32x32": _design(0.5, 0.1, 22.0, 0.9, 10.0),
+        },
+        "episodes": {f"test-{e}": {"samples": 200} for e in range(3)},
+        "config": {"comparison": {"seed": 0}},
+    }
 
 
 def test_corner_needs_a_task_match_and_separated_attack_intervals():
@@ -293,7 +310,24 @@ def test_corner_needs_a_task_match_and_separated_attack_intervals():
     assert close["in_corner_against"] == []
     none = corner_verdicts(_result(20.0, 0.85))["mincam-2px"]
     assert none["in_corner_against"] == [] and "not in the corner" in none["verdict"]
+    assert none["paired_more_private_than"] == []
     json.dumps(none)  # JSON-ready
+
+
+def test_corner_reports_the_paired_reading_beside_the_interval_verdict():
+    # 0.4 dB and 0.05 below 8x8 on every episode: the intervals (episode spread) overlap,
+    # the paired differences (the episodes drop out) do not
+    corner = corner_verdicts(_result(17.6, 0.75))["mincam-2px"]
+    assert corner["in_corner_against"] == []
+    assert corner["paired_more_private_than"] == ["baseline-8x8"]
+    paired = corner["paired"]["baseline-8x8"]
+    assert paired["fg_psnr_db"]["mean"] == pytest.approx(17.6 - 18.0)
+    assert paired["reid_top1"]["mean"] == pytest.approx(0.75 - 0.8)
+    assert paired["fg_psnr_db"]["ci95"][1] < 0 and paired["reid_top1"]["ci95"][1] < 0
+    assert corner["verdict"].startswith("mincam-2px: not in the corner")
+    assert corner["verdict"].endswith("lower on both attacks than: baseline-8x8")
+    # more re-identifiable than 2x2 on the same episodes: not paired-private against it
+    assert corner["paired"]["baseline-2x2"]["reid_top1"]["ci95"][0] > 0
 
 
 def test_ridge_decoder_recovers_a_linear_view_and_picks_its_penalty(rng):

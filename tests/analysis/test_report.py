@@ -186,14 +186,17 @@ def _privacy_result() -> dict:
         "task_error": _interval(1.0, 0.1), **image, "fg_psnr_db": _interval(14.5, 0.3),
         "fg_psnr_gain_db": _interval(0.1, 0.05), "fg_psnr_over_prior_db": _interval(0.0, 0.05),
         "reid_top1": _interval(0.4, 0.05),
+        "per_seed": [{"test-0": {"fg_psnr_db": 14.5, "reid_top1": 0.4}}] * 3,
         "decoders": [kept, kept, dict(kept, decoder="ridge")],
         "by_decoder": {k: image for k in ("mlp", "conv", "ridge")},
     }  # fmt: skip
     baseline = dict(design, pixels=64, fg_psnr_db=_interval(18.0, 0.4),
-                    reid_top1=_interval(0.8, 0.05))  # fmt: skip
+                    reid_top1=_interval(0.8, 0.05),
+                    per_seed=[{"test-0": {"fg_psnr_db": 18.0, "reid_top1": 0.8}}] * 3)  # fmt: skip
     privacy = {
         "task": "workspace", "error_name": "people_count RMSE", "roster": 6,
         "designs": {"mincam-2px": design, "baseline-8x8": baseline},
+        "episodes": {"test-0": {"samples": 200}},
         "trivial": {"task_error": _interval(1.6, 0.2), **image, "fg_fraction": 0.04,
                     "reid_top1": _interval(0.35, 0.04)},
         "prior": {**image, "fg_psnr_gain_db": _interval(0.2, 0.05)},
@@ -237,6 +240,7 @@ def test_privacy_report_loads_its_figures_in_a_headless_browser(tmp_path, privac
     assert "conv 2, ridge 1" in dom  # the decoder each attacker seed kept
     assert "prior (background + where people usually are; read-out ignored)" in dom
     assert "conv: people PSNR (dB)" in dom  # every decoder's figure
+    assert "task-matched baseline" in dom  # the paired differences beside the verdicts
     saved = json.loads(Path(privacy_page["json"]).read_text())
     assert saved["corner"]["mincam-2px"]["in_corner_against"] == ["baseline-8x8"]
     assert Path(privacy_page["png"]).read_bytes()[:4] == b"\x89PNG"
