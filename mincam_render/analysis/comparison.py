@@ -90,6 +90,7 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
                 overrides={**cfg.overrides, "fps": cfg.fps},
                 splits=ROLE_SPLITS[role],
                 shard_frames=-(-frames // SHARDS_PER_EPISODE),
+                mask_res=cfg.mask_res,
                 **dict(cfg.fidelity),
             )
     return requests

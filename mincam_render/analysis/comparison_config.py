@@ -98,6 +98,8 @@ class ComparisonConfig:
         train: the training recipe (its ``seed`` is replaced per training seed, its
             ``head`` by each design's).
         fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
+        mask_res: mask texels per side rendered (None: the family camera's); a
+            baseline grid can be at most this fine (64 x 64 needs 64).
     """
 
     family: str = "workspace"
@@ -114,6 +116,7 @@ class ComparisonConfig:
     designs: tuple[Design, ...] = (Design(pixels=8), Design(grid=(8, 8)))
     train: TrainConfig = TrainConfig()
     fidelity: Mapping[str, Any] = field(default_factory=dict)
+    mask_res: int | None = None
 
     def __post_init__(self) -> None:
         for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
@@ -126,6 +129,18 @@ class ComparisonConfig:
             raise ValueError(f"light_scale = {self.light_scale!r}: need a finite factor > 0")
         if "fps" in self.overrides:
             raise ValueError("overrides: give the frame rate as fps, not as an override")
+        self._check_grids()
         names = [d.name for d in self.designs]
         if len(names) < 2 or len(set(names)) != len(names):
             raise ValueError(f"designs {names}: need at least two, each once")
+
+    def _check_grids(self) -> None:
+        """Refuse, before any render, a baseline grid finer than the rendered ``mask_res``."""
+        if self.mask_res is None:
+            return
+        for d in self.designs:
+            if d.grid is not None and max(d.grid) > self.mask_res:
+                raise ValueError(
+                    f"{d.name}: a {d.grid[0]}x{d.grid[1]} baseline needs at least "
+                    f"{max(d.grid)} texels per side; mask_res = {self.mask_res}"
+                )

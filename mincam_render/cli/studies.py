@@ -46,6 +46,9 @@ episode_options = apply_options([
     click.option("--detectors", type=click.IntRange(1, 64), default=None,
                  help="Detectors rendered per episode (same as --set camera.detectors=N; "
                  "default: the description's)."),
+    click.option("--mask-res", type=click.IntRange(1, 4096), default=None,
+                 help="Mask texels per side rendered (default: the family camera's); a "
+                 "baseline grid can be at most this fine (64x64 needs 64)."),
     click.option("--light-scale", type=FiniteFloat(1e-9, 1e9), default=C.light_scale,
                  show_default=True,
                  help="Every emitter's radiance times this factor, applied to the rendered "

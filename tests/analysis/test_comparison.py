@@ -131,6 +131,15 @@ def test_episodes_carry_the_overrides_and_the_frame_rate():
         ComparisonConfig(overrides={"fps": 30.0})
 
 
+def test_episodes_render_the_mask_resolution_the_finest_baseline_needs():
+    designs = (Design(pixels=2), Design(grid=(64, 64)))
+    reqs = episode_requests(ComparisonConfig(designs=designs, mask_res=64))
+    assert {r.mask_res for r in reqs.values()} == {64}
+    assert {r.mask_res for r in episode_requests(ComparisonConfig()).values()} == {None}
+    with pytest.raises(ValueError, match="64x64 baseline needs at least 64 texels"):
+        ComparisonConfig(designs=designs, mask_res=32)
+
+
 @pytest.mark.parametrize(
     "args",
     [["--detectors", "2"], ["--set", "camera.detectors=2"]],
