@@ -56,7 +56,7 @@ from torch.nn import functional as F
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.train_config import CountLoss
 from mincam_render.optics.camera import FreeformCamera
-from mincam_render.optics.fabrication import fabricated_transmittance
+from mincam_render.optics.fabrication_fused import fused_fabricated_transmittance
 from mincam_render.optics.maskplane import (
     MaskPlaneBackend,
     logits_for_transmittance,
@@ -463,9 +463,12 @@ class MincamCamera(CameraModel):
         self.logits.detach().clamp_(-MAX_LOGIT, MAX_LOGIT)
 
     def fabricated_transmittance(self, draw: PerturbationDraw) -> torch.Tensor:
-        """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable)."""
+        """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable once).
+
+        One autograd node (:mod:`~mincam_render.optics.fabrication_fused`).
+        """
         cam = self.camera
-        return fabricated_transmittance(
+        return fused_fabricated_transmittance(
             self.logits, cam.transmittance_range, draw, cam.texel_size_m, camera=cam
         )
 

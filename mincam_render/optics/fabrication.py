@@ -26,6 +26,7 @@ differentiable in the logits.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -72,19 +73,29 @@ def print_tone(y: torch.Tensor, gamma: float, dot_gain: float) -> torch.Tensor:
     return y
 
 
+@functools.lru_cache(maxsize=16)
+def _distance_index(n: int, radius: int) -> np.ndarray:
+    """``min(|i - j|, radius + 1)`` over ``[n, n]`` (numpy int, read-only; cached)."""
+    d = np.minimum(np.abs(np.subtract.outer(np.arange(n), np.arange(n))), radius + 1)
+    d.setflags(write=False)
+    return d
+
+
 def gaussian_matrix(n: int, sigma_texels: float) -> np.ndarray:
     """``B[n, n]`` (numpy): row ``i`` the normalised Gaussian around texel ``i`` (sigma > 0).
 
     Weights are normalised over the infinite line (3-sigma support), then cut to
     the ``n`` texels: what a blur takes from beyond the mask is the border's.
-    Built in numpy: the blur's few taps as banded identities cost microseconds,
-    where the same in torch's small ops costs ~10x more per training step.
+    Built in numpy, the taps looked up by texel distance: the blur's few taps
+    cost microseconds, where the same in torch's small ops costs ~10x more per
+    training step. Symmetric (``B[i, j] = taps[|i - j|]``).
     """
     radius = max(1, math.ceil(_KERNEL_SIGMAS * sigma_texels))
-    offsets = np.arange(-radius, radius + 1)
-    taps = np.exp(-0.5 * (offsets / sigma_texels) ** 2)
-    taps /= taps.sum()
-    return sum(t * np.eye(n, k=-int(o)) for t, o in zip(taps, offsets, strict=True))
+    # the few taps in plain floats: cheaper than numpy's calls for 3-7 numbers
+    taps = [math.exp(-0.5 * (o / sigma_texels) ** 2) for o in range(radius + 1)]
+    total = taps[0] + 2.0 * sum(taps[1:])
+    by_distance = np.array([*taps, 0.0]) / total  # distance 0..radius, then beyond
+    return by_distance[_distance_index(n, radius)]
 
 
 def blur_mask(mask: torch.Tensor, sigma_texels: tuple[float, float], fill: float) -> torch.Tensor:
@@ -109,27 +120,39 @@ def blur_mask(mask: torch.Tensor, sigma_texels: tuple[float, float], fill: float
     return b_rows @ (mask - fill) @ b_cols + fill
 
 
+@functools.lru_cache(maxsize=16)
+def _texel_centres(shape: tuple[int, int]) -> np.ndarray:
+    """``[row * col, (x, y, 1)]``: texel centres in ``grid_sample``'s units (read-only; cached)."""
+    rows, cols = shape
+    x = (2 * np.arange(cols) + 1) / cols - 1
+    y = (2 * np.arange(rows) + 1) / rows - 1
+    xx, yy = np.meshgrid(x, y)
+    out = np.stack([xx.ravel(), yy.ravel(), np.ones(rows * cols)], axis=-1)
+    out.setflags(write=False)
+    return out
+
+
 def sampling_grid(
     shape: tuple[int, int], shift_texels: np.ndarray, rotation_rad: np.ndarray
 ) -> np.ndarray:
     """``grid[pixel, row, col, (x, y)]`` of :func:`place_masks` in ``grid_sample``'s units (numpy).
 
     The sampling point ``R(-phi)(p - s)`` of each output texel centre ``p``
-    (texel units about the mask centre), scaled to [-1, 1] (``align_corners=False``).
-    Written out in numpy: ``affine_grid`` and torch's small ops cost ~20x more here,
+    (texel units about the mask centre), scaled to [-1, 1] (``align_corners=False``):
+    an affine map of the texel centres per pixel, one matrix product. Written
+    out in numpy: ``affine_grid`` and torch's small ops cost ~20x more here,
     and the grid needs no gradient.
     """
     rows, cols = shape
-    half_w, half_h = cols / 2.0, rows / 2.0
-    x = ((2 * np.arange(cols) + 1) / cols - 1).reshape(1, 1, -1)
-    y = ((2 * np.arange(rows) + 1) / rows - 1).reshape(1, -1, 1)
-    c = np.cos(rotation_rad).reshape(-1, 1, 1)
-    s = np.sin(rotation_rad).reshape(-1, 1, 1)
-    sy = shift_texels[:, 0].reshape(-1, 1, 1)
-    sx = shift_texels[:, 1].reshape(-1, 1, 1)
-    x_in = c * x + s * (half_h / half_w) * y - (c * sx + s * sy) / half_w
-    y_in = -s * (half_w / half_h) * x + c * y + (s * sx - c * sy) / half_h
-    return np.stack(np.broadcast_arrays(x_in, y_in), axis=-1)
+    hw, hh = cols / 2.0, rows / 2.0
+    c, s = np.cos(rotation_rad), np.sin(rotation_rad)
+    sy, sx = shift_texels[:, 0], shift_texels[:, 1]
+    # x_in = c x + s (h/w) y - (c sx + s sy) / w;  y_in = -s (w/h) x + c y + (s sx - c sy) / h
+    affine = np.stack(
+        [c, -s * (hw / hh), s * (hh / hw), c, -(c * sx + s * sy) / hw, (s * sx - c * sy) / hh],
+        axis=-1,
+    ).reshape(-1, 3, 2)
+    return (_texel_centres((rows, cols)) @ affine).reshape(-1, rows, cols, 2)
 
 
 def place_masks(
@@ -207,6 +230,17 @@ def posed_masks(mask: torch.Tensor, warp: PoseWarp) -> torch.Tensor:
     return out.squeeze(0) * torch.as_tensor(1.0 / warp.angular_weight, dtype=dtype, device=device)
 
 
+def check_draw(logits: torch.Tensor, draw: PerturbationDraw, camera: FreeformCamera | None) -> None:
+    """ValueError unless ``draw`` is for these masks (and has a camera where it moves one)."""
+    if draw.num_pixels != logits.shape[0]:
+        raise ValueError(
+            f"the perturbation draw is for {draw.num_pixels} pixels; the camera has "
+            f"{logits.shape[0]} masks"
+        )
+    if draw.has_pose_error and camera is None:
+        raise ValueError("a draw with a camera pose error needs the camera's geometry")
+
+
 def fabricated_transmittance(
     logits: torch.Tensor,
     transmittance_range: tuple[float, float],
@@ -234,13 +268,7 @@ def fabricated_transmittance(
             error and no camera was given.
 
     """
-    if draw.num_pixels != logits.shape[0]:
-        raise ValueError(
-            f"the perturbation draw is for {draw.num_pixels} pixels; the camera has "
-            f"{logits.shape[0]} masks"
-        )
-    if draw.has_pose_error and camera is None:
-        raise ValueError("a draw with a camera pose error needs the camera's geometry")
+    check_draw(logits, draw, camera)
     y = print_tone(torch.sigmoid(logits), draw.gamma, draw.dot_gain)
     lo, hi = draw.transmittance_range(transmittance_range)
     m = lo + (hi - lo) * y

@@ -202,9 +202,12 @@ class PerturbationModel:
         return 5 * int(num_pixels) + 11
 
     def draw_from(self, u: np.ndarray, num_pixels: int) -> PerturbationDraw:
-        """The built camera of :meth:`uniforms_needed` uniforms ``u`` in [0, 1) (numpy).
+        """The built camera of :meth:`uniforms_needed` uniforms ``u`` in [0, 1] (numpy).
 
         Training draws ``u`` from its torch generator (a resumed run draws the same).
+
+        Raises:
+            ValueError: ``num_pixels`` < 1, ``u`` of another length or outside [0, 1].
         """
         k = int(num_pixels)
         if k < 1:
@@ -212,28 +215,31 @@ class PerturbationModel:
         u = np.asarray(u, np.float64)
         if u.shape != (self.uniforms_needed(k),):
             raise ValueError(f"u has shape {u.shape}: expected ({self.uniforms_needed(k)},)")
-        splits = [2 * k, 3 * k, 3 * k + 5, 4 * k + 5, 5 * k + 5, 5 * k + 8]
-        shift, rot, scalars, gain, offset, orientation, position = np.split(u, splits)
-        gamma, dot, lo, hi, blur = scalars
-        return PerturbationDraw(
-            shift_mm=self.mask_shift_mm * (2 * shift.reshape(k, 2) - 1),
-            rotation_deg=self.mask_rotation_deg * (2 * rot - 1),
-            gamma=1.0 + self.gamma_deviation * (2 * gamma - 1),
-            dot_gain=self.dot_gain_deviation * (2 * dot - 1),
-            min_transmittance_error=self.min_transmittance_error * (2 * lo - 1),
-            max_transmittance_error=self.max_transmittance_error * (2 * hi - 1),
-            blur_sigma_mm=self.mask_blur_mm * blur,
-            gain=1.0 + self.gain_mismatch_percent * (2 * gain - 1) / 100.0,
-            offset_v=self.dark_offset_v * (2 * offset - 1),
-            pose_rotation_deg=self.pose_orientation_deg * (2 * orientation - 1),
-            pose_offset_cm=self.pose_position_cm * (2 * position - 1),
+        if not ((u >= 0.0) & (u <= 1.0)).all():  # NaN fails both
+            raise ValueError("u must be uniforms in [0, 1]")
+        v = 2.0 * u - 1.0  # U(-1, 1): the half-ranges scale it
+        gamma, dot, lo, hi = v[3 * k : 3 * k + 4].tolist()
+        # valid by construction (a validated model, v in [-1, 1]): the draw's own
+        # checks would cost a quarter of a robust step's draw
+        return _trusted_draw(
+            shift_mm=self.mask_shift_mm * v[: 2 * k].reshape(k, 2),
+            rotation_deg=self.mask_rotation_deg * v[2 * k : 3 * k],
+            gamma=1.0 + self.gamma_deviation * gamma,
+            dot_gain=self.dot_gain_deviation * dot,
+            min_transmittance_error=self.min_transmittance_error * lo,
+            max_transmittance_error=self.max_transmittance_error * hi,
+            blur_sigma_mm=self.mask_blur_mm * float(u[3 * k + 4]),
+            gain=1.0 + self.gain_mismatch_percent * v[3 * k + 5 : 4 * k + 5] / 100.0,
+            offset_v=self.dark_offset_v * v[4 * k + 5 : 5 * k + 5],
+            pose_rotation_deg=self.pose_orientation_deg * v[5 * k + 5 : 5 * k + 8],
+            pose_offset_cm=self.pose_position_cm * v[5 * k + 8 :],
             pose_depth_m=self.pose_depth_m,
         )
 
 
 def _vector(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.array(value, dtype=np.float64)
-    if arr.shape != shape or not np.all(np.isfinite(arr)):
+    if arr.shape != shape or not np.isfinite(arr).all():
         raise ValueError(f"PerturbationDraw.{name} must be {shape} finite numbers; got {value!r}")
     return arr
 
@@ -294,7 +300,7 @@ class PerturbationDraw:
                 f"PerturbationDraw.blur_sigma_mm = {self.blur_sigma_mm!r} mm is invalid: "
                 "allowed a finite number >= 0"
             )
-        if not np.all(self.gain > 0):
+        if not (self.gain > 0).all():
             raise ValueError(f"PerturbationDraw.gain = {self.gain!r} is invalid: allowed > 0")
         for name in ("pose_rotation_deg", "pose_offset_cm"):
             object.__setattr__(self, name, _vector(name, getattr(self, name), (3,)))
@@ -334,3 +340,11 @@ class PerturbationDraw:
                 f"for the nominal range {nominal}"
             )
         return lo, hi
+
+
+def _trusted_draw(**values: object) -> PerturbationDraw:
+    """A :class:`PerturbationDraw` of values known valid (float64 arrays of the right shapes)."""
+    draw = object.__new__(PerturbationDraw)
+    for name, value in values.items():
+        object.__setattr__(draw, name, value)
+    return draw

@@ -96,12 +96,19 @@ def pose_rotation(rotation_deg: object) -> np.ndarray:
     right), then tilt (forward toward up), then roll (up toward right:
     clockwise as seen from the camera), each about the camera's current axes.
     """
-    pan, tilt, roll = np.radians(np.asarray(rotation_deg, dtype=np.float64))
-    cp, sp, ct, st, cr, sr = (f(x) for x in (pan, tilt, roll) for f in (np.cos, np.sin))
-    r_pan = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    r_tilt = np.array([[1.0, 0.0, 0.0], [0.0, ct, st], [0.0, -st, ct]])
-    r_roll = np.array([[cr, sr, 0.0], [-sr, cr, 0.0], [0.0, 0.0, 1.0]])
-    return r_pan @ r_tilt @ r_roll
+    pan, tilt, roll = np.radians(np.asarray(rotation_deg, dtype=np.float64)).tolist()
+    cp, sp, ct, st, cr, sr = (f(x) for x in (pan, tilt, roll) for f in (math.cos, math.sin))
+    # R_pan R_tilt R_roll multiplied out (one small array per training draw), with
+    # R_pan = [[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]], R_tilt = [[1, 0, 0], [0, ct, st],
+    # [0, -st, ct]], R_roll = [[cr, sr, 0], [-sr, cr, 0], [0, 0, 1]]
+    a, b = sp * st, cp * st  # row 0 and row 2 of R_pan R_tilt: (cp, -a, sp ct), (-sp, -b, cp ct)
+    return np.array(
+        [
+            [cp * cr + a * sr, cp * sr - a * cr, sp * ct],
+            [-ct * sr, ct * cr, st],
+            [b * sr - sp * cr, -sp * sr - b * cr, cp * ct],
+        ]
+    )
 
 
 def content_homography(rotation_deg: object, offset_m: object, depth_m: float) -> np.ndarray:
@@ -112,8 +119,9 @@ def content_homography(rotation_deg: object, offset_m: object, depth_m: float) -
     offset is 0).
     """
     rot, off = _check_pose(rotation_deg, offset_m, depth_m)
-    plane = np.eye(3) - np.outer(off, [0.0, 0.0, 1.0 / depth_m])
-    return np.linalg.inv(plane) @ pose_rotation(rot)
+    r = pose_rotation(rot)
+    # (I - t n^T / D)^-1 = I + t n^T / (D - t_z) (Sherman-Morrison), n the forward axis
+    return r + np.outer(off / (depth_m - off[2]), r[2])
 
 
 def texel_directions(camera: FreeformCamera) -> tuple[np.ndarray, np.ndarray]:
@@ -247,12 +255,15 @@ def pose_warp(
     rays, g = _texel_rays(camera)
     x = _content_directions(rays, rotation_deg, offset_m, depth_m)
     ahead = x[2] > 0
-    # tangent coordinates over the half field (a_max = w / 2d): grid_sample's units
+    # tangent coordinates over the half field (a_max = w / 2d), y down: grid_sample's units
     half = 0.5 * camera.mask_size_m / camera.mask_distance_m
-    w = np.where(ahead, x[2] * half, 1.0)
-    grid = np.where(ahead, np.stack([x[0] / w, -x[1] / w]), 3.0)  # behind: far outside
+    xy = x[:2] * np.array([[1.0 / half], [-1.0 / half]])
+    if ahead.all():
+        grid = (xy / x[2]).T
+    else:  # content behind the designed camera: far outside
+        grid = np.where(ahead, xy / np.where(ahead, x[2], 1.0), 3.0).T
     return PoseWarp(
-        grid=grid.T.reshape(rows, cols, 2),
+        grid=grid.reshape(rows, cols, 2),
         angular_weight=g,
         ahead=ahead.astype(np.float64).reshape(rows, cols),
     )

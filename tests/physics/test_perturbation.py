@@ -223,6 +223,28 @@ def test_draws_are_within_their_ranges_and_reproducible():
     assert a.has_pose_error and a.pose_depth_m == 4.0
 
 
+@pytest.mark.parametrize("scale", [0.5, 1.0, 2.5])
+def test_draws_at_the_extremes_of_u_pass_the_draws_own_checks(scale):
+    """draw_from skips the draw's checks (valid by construction): the checks agree."""
+    model = PerturbationModel().scaled(scale)
+    n = model.uniforms_needed(3)
+    for u in (np.zeros(n), np.ones(n), np.random.default_rng(7).random(n)):
+        draw = model.draw_from(u, 3)
+        checked = dataclasses.replace(draw)  # runs PerturbationDraw's validation
+        for f in dataclasses.fields(draw):
+            assert np.array_equal(getattr(checked, f.name), getattr(draw, f.name)), f.name
+            assert np.asarray(getattr(draw, f.name)).dtype == np.float64
+
+
+@pytest.mark.parametrize("bad", [-0.1, 1.5, float("nan")])
+def test_uniforms_outside_the_unit_interval_are_refused(bad):
+    model = PerturbationModel()
+    u = np.full(model.uniforms_needed(2), 0.5)
+    u[4] = bad
+    with pytest.raises(ValueError, match=r"u must be uniforms in \[0, 1\]"):
+        model.draw_from(u, 2)
+
+
 def test_camera_texel_size_is_what_the_fabrication_uses():
     cam = FreeformCamera(mask_resolution=(32, 32), layout=DetectorLayout.row(count=1, pitch_m=0.02))
     assert cam.texel_size_m == pytest.approx(TEXEL_M)
