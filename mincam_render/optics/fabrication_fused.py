@@ -18,7 +18,7 @@ with ``x = M - lo'``:
 (:func:`~mincam_render.optics.fabrication.print_tone` multiplied out, ``g`` the
 dot gain; ``B`` the blur matrices, ``P_k`` the mount's bilinear resampling with
 the border at ``lo'``, ``G_a = G`` where the content is ahead, else 0). The
-forward is the tone's 4 ops and 1-3 per step taken; the backward the adjoints
+forward is the tone's 2-6 ops and 2-4 per step taken; the backward the adjoints
 in reverse (the splat's is ``grid_sample``, the resampling's is its input
 gradient, the blur's the transposed matrices) times the tone's derivative
 ``dx/dM_t = (hi' - lo')\,\gamma\,y\,(1 - \sigma)\,(1 - 4g + 8g\,y)``. The
@@ -39,7 +39,6 @@ from typing import Any
 import numpy as np
 import torch
 from torch.autograd.function import once_differentiable
-from torch.nn import functional as F
 
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.fabrication import (
@@ -61,7 +60,7 @@ _GRID_SAMPLE_BACKWARD = torch.ops.aten.grid_sampler_2d_backward.default
 class _Plan:
     """One draw's constants of the mask plane (torch, in the logits' dtype and device).
 
-    ``blur``: ``(B_rows, B_cols^T)``; ``mount``: ``grid[pixel, row, col, 2]``;
+    ``blur``: ``(B_rows, B_cols^T)`` (symmetric); ``mount``: ``grid[pixel, row, col, 2]``;
     ``pose``: ``(grid[1, row, col, 2], G_a, 1 / G)``. None where the step is
     skipped (its drawn value is exactly zero).
     """
@@ -149,11 +148,9 @@ class _FabricatedMaskPlane(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, logits: torch.Tensor, plan: _Plan) -> torch.Tensor:
         k, rows, cols = logits.shape
-        if plan.gamma == 1.0:
-            log_s, y = None, torch.sigmoid(logits)
-        else:  # y = sigmoid^gamma as exp(gamma log sigmoid): finite for any logit
-            log_s = F.logsigmoid(logits)
-            y = torch.exp(log_s * plan.gamma)
+        s = y = torch.sigmoid(logits)
+        if plan.gamma != 1.0:  # as print_tone, s = 0 (logit < -88 in float32) giving 0
+            y = torch.exp(torch.log(s) * plan.gamma)
         g4 = 4.0 * plan.dot_gain
         x = y * (plan.span * (1.0 - g4))
         if g4 != 0.0:
@@ -163,7 +160,7 @@ class _FabricatedMaskPlane(torch.autograd.Function):
         if plan.mount is not None:
             x = x.view(k, 1, rows, cols)
             x = torch.grid_sampler_2d(x, plan.mount, _BILINEAR, _ZEROS, False)
-        ctx.save_for_backward(*((y,) if log_s is None else (y, log_s)))
+        ctx.save_for_backward(s, y)
         ctx.plan = plan
         if plan.pose is None:
             return (x + plan.lo).view(k, rows, cols)
@@ -186,20 +183,16 @@ class _FabricatedMaskPlane(torch.autograd.Function):
             g = grad.view(k, 1, rows, cols)
             g, _ = _GRID_SAMPLE_BACKWARD(g, g, plan.mount, _BILINEAR, _ZEROS, False, [True, False])
             grad = g.view(k, rows, cols)
-        if plan.blur is not None:
-            grad = plan.blur[0].t() @ grad @ plan.blur[1].t()
+        if plan.blur is not None:  # the blur matrices are symmetric: their own adjoints
+            grad = plan.blur[0] @ grad @ plan.blur[1]
         return grad * _tone_slope(ctx, plan), None
 
 
 def _tone_slope(ctx: Any, plan: _Plan) -> torch.Tensor:
     """``dx/dM_t = span gamma y (1 - s) (1 - 4g + 8g y)`` of the forward's saved tensors."""
-    y, *log_s = ctx.saved_tensors
+    s, y = ctx.saved_tensors
     scale = plan.span * plan.gamma
-    if not log_s:  # gamma 1: y = s
-        slope = torch.rsub(y, 1.0).mul_(y)
-    else:  # 1 - s = -expm1(log s)
-        slope = torch.expm1(log_s[0]).mul_(y)
-        scale = -scale
+    slope = torch.rsub(s, 1.0).mul_(y)
     if plan.dot_gain == 0.0:
         return slope.mul_(scale)
     g4 = 4.0 * plan.dot_gain
