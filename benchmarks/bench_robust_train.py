@@ -3,7 +3,8 @@ r"""Robust training's cost per step: a perturbed step against the nominal step, 
 Robust training (``TrainConfig.perturbation``) draws a built camera per batch and
 measures the batch through its fabricated masks
 (:mod:`mincam_render.optics.fabrication`: tone curve, printed range, blur,
-shift and rotation by bilinear resampling) and its detectors (gain mismatch,
+shift and rotation by bilinear resampling, the camera pose by a bilinear
+splat) and its detectors (gain mismatch,
 offset). Its budget is at most 2x the nominal step's time (issue 21).
 
 Both are :func:`mincam_render.learn.train.train_step` on the same data, same
@@ -12,8 +13,12 @@ on the shared machine hits both; median over repeats of samples/s, and their
 ratio. Rows: K in {1, 8, 16} pixels x batch {64, 256}, masks 32^2 (the
 workspace 8 px row is the issue's size), on random transport in memory (the
 step's cost does not depend on the content). Before timing, the perturbed
-step at a zero draw is checked to measure exactly what the nominal one does.
-The perturbation model is the default one, camera pose error included.
+step at a zero draw is checked to measure exactly what the nominal one does,
+and the masks of the fused node the step uses
+(:mod:`mincam_render.optics.fabrication_fused`) against the step-by-step
+composition (:func:`~mincam_render.optics.fabrication.fabricated_transmittance`)
+at a random draw. The perturbation model is the default one, camera pose error
+included.
 
 Robust validation (``TrainConfig.robust_validation_draws``, default 8) costs
 per evaluation, not per step: the ``validation`` block times a nominal
@@ -37,6 +42,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -46,6 +52,7 @@ from provenance import machine  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.evaluation import mean_loss_under  # noqa: E402
 from mincam_render.learn.step import validation_draws  # noqa: E402
+from mincam_render.optics.fabrication import fabricated_transmittance  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "robust_train.json"
@@ -66,9 +73,24 @@ def check_zero_draw_is_nominal(data: tr.TrainingData, pixels: int) -> None:
         raise SystemExit("an identity draw changed the measurement: the benchmark would lie")
 
 
+def check_fused_is_reference(data: tr.TrainingData, pixels: int) -> None:
+    """The fused mask plane equals the reference composition at a default draw (float32)."""
+    model = tr.build_mincam(data, pixels)
+    cam = model.camera
+    draw = PerturbationModel().draw(pixels, np.random.default_rng(0))
+    with torch.no_grad():
+        fused = model.fabricated_transmittance(draw)
+        ref = fabricated_transmittance(
+            model.logits, cam.transmittance_range, draw, cam.texel_size_m, camera=cam
+        )
+    if not torch.allclose(fused, ref, rtol=1e-5, atol=1e-6):
+        raise SystemExit("the fused mask plane differs from the reference: the benchmark would lie")
+
+
 def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repeats: int) -> dict:
     """Samples/s of nominal and robust training steps (median of ``repeats``) and the ratio."""
     check_zero_draw_is_nominal(data, pixels)
+    check_fused_is_reference(data, pixels)
     config = tr.TrainConfig(batch_size=batch)
     perturbation = PerturbationModel()
     runs = {}
