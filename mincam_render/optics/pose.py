@@ -259,11 +259,11 @@ def pose_warp(
     half = 0.5 * camera.mask_size_m / camera.mask_distance_m
     xy = x[:2] * np.array([[1.0 / half], [-1.0 / half]])
     if ahead.all():
-        grid = (xy / x[2]).T
+        grid = xy / x[2]
     else:  # content behind the designed camera: far outside
-        grid = np.where(ahead, xy / np.where(ahead, x[2], 1.0), 3.0).T
+        grid = np.where(ahead, xy / np.where(ahead, x[2], 1.0), 3.0)
     return PoseWarp(
-        grid=grid.reshape(rows, cols, 2),
+        grid=np.ascontiguousarray(grid.T).reshape(rows, cols, 2),  # grid_sample's layout
         angular_weight=g,
         ahead=ahead.astype(np.float64).reshape(rows, cols),
     )
