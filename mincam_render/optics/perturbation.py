@@ -54,6 +54,7 @@ Arrays are numpy; the torch side (the fabricated mask plane) is
 from __future__ import annotations
 
 import enum
+import functools
 import math
 from dataclasses import dataclass, field, fields, replace
 
@@ -217,24 +218,48 @@ class PerturbationModel:
             raise ValueError(f"u has shape {u.shape}: expected ({self.uniforms_needed(k)},)")
         if not ((u >= 0.0) & (u <= 1.0)).all():  # NaN fails both
             raise ValueError("u must be uniforms in [0, 1]")
-        v = 2.0 * u - 1.0  # U(-1, 1): the half-ranges scale it
-        gamma, dot, lo, hi = v[3 * k : 3 * k + 4].tolist()
-        # valid by construction (a validated model, v in [-1, 1]): the draw's own
+        # U(-1, 1) times each number's half-range, in one product
+        a = (2.0 * u - 1.0) * _half_ranges(self, k)
+        gamma, dot, lo, hi = a[3 * k : 3 * k + 4].tolist()
+        # valid by construction (a validated model, u in [0, 1]): the draw's own
         # checks would cost a quarter of a robust step's draw
         return _trusted_draw(
-            shift_mm=self.mask_shift_mm * v[: 2 * k].reshape(k, 2),
-            rotation_deg=self.mask_rotation_deg * v[2 * k : 3 * k],
-            gamma=1.0 + self.gamma_deviation * gamma,
-            dot_gain=self.dot_gain_deviation * dot,
-            min_transmittance_error=self.min_transmittance_error * lo,
-            max_transmittance_error=self.max_transmittance_error * hi,
-            blur_sigma_mm=self.mask_blur_mm * float(u[3 * k + 4]),
-            gain=1.0 + self.gain_mismatch_percent * v[3 * k + 5 : 4 * k + 5] / 100.0,
-            offset_v=self.dark_offset_v * v[4 * k + 5 : 5 * k + 5],
-            pose_rotation_deg=self.pose_orientation_deg * v[5 * k + 5 : 5 * k + 8],
-            pose_offset_cm=self.pose_position_cm * v[5 * k + 8 :],
+            shift_mm=a[: 2 * k].reshape(k, 2),
+            rotation_deg=a[2 * k : 3 * k],
+            gamma=1.0 + gamma,
+            dot_gain=dot,
+            min_transmittance_error=lo,
+            max_transmittance_error=hi,
+            blur_sigma_mm=self.mask_blur_mm * float(u[3 * k + 4]),  # in [0, a]
+            gain=1.0 + a[3 * k + 5 : 4 * k + 5] / 100.0,
+            offset_v=a[4 * k + 5 : 5 * k + 5],
+            pose_rotation_deg=a[5 * k + 5 : 5 * k + 8],
+            pose_offset_cm=a[5 * k + 8 :],
             pose_depth_m=self.pose_depth_m,
         )
+
+
+@functools.lru_cache(maxsize=32)
+def _half_ranges(model: PerturbationModel, k: int) -> np.ndarray:
+    """Each uniform's half-range in :meth:`PerturbationModel.draw_from`'s order (read-only).
+
+    The blur's place holds 0: it is drawn in ``[0, a]`` from its uniform directly.
+    """
+    m = model
+    out = np.concatenate(
+        [
+            np.full(2 * k, m.mask_shift_mm),
+            np.full(k, m.mask_rotation_deg),
+            [m.gamma_deviation, m.dot_gain_deviation],
+            [m.min_transmittance_error, m.max_transmittance_error, 0.0],
+            np.full(k, m.gain_mismatch_percent),
+            np.full(k, m.dark_offset_v),
+            np.full(3, m.pose_orientation_deg),
+            np.full(3, m.pose_position_cm),
+        ]
+    )
+    out.setflags(write=False)
+    return out
 
 
 def _vector(name: str, value: object, shape: tuple[int, ...]) -> np.ndarray:

@@ -75,11 +75,11 @@ def _check_pose(
         off = np.asarray(offset_m, dtype=np.float64)
     except (TypeError, ValueError):
         raise ValueError(f"pose {rotation_deg!r} deg, {offset_m!r} m: need numbers") from None
-    if rot.shape != (3,) or not np.all(np.isfinite(rot)):
+    if rot.shape != (3,) or not np.isfinite(rot).all():
         raise ValueError(
             f"pose rotation {rotation_deg!r} deg: need 3 finite angles (pan, tilt, roll)"
         )
-    if off.shape != (3,) or not np.all(np.isfinite(off)):
+    if off.shape != (3,) or not np.isfinite(off).all():
         raise ValueError(f"pose offset {offset_m!r} m: need 3 finite numbers (right, up, forward)")
     if depth_m is not None:
         if not (isinstance(depth_m, int | float) and math.isfinite(depth_m) and depth_m > 0):
