@@ -301,6 +301,21 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
     show_default=True,
     help="Adam steps of each attacker at most (the best validation state is kept).",
 )
+@click.option(
+    "--detectors",
+    type=click.Choice(["8", "16"]),
+    default="8",
+    show_default=True,
+    help="Detectors rendered: mincam designs of 1, 2, 4, ... up to this many pixels.",
+)
+@click.option(
+    "--mask-res",
+    type=click.Choice(["32", "64"]),
+    default="32",
+    show_default=True,
+    help="Mask texels per side rendered: baselines up to this fine (64: adds 64x64). "
+    "16 detectors at 64 texels cost about 8 times the default render.",
+)
 @click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True)
 @out_option(
     "Working and output directory (created; resumes): episodes, views, runs, privacy.html, "
@@ -312,6 +327,8 @@ def report_privacy_cmd(
     task_seeds: int,
     seeds: int,
     max_steps: int,
+    detectors: str,
+    mask_res: str,
     workers: int,
     out: Path,
 ) -> None:
@@ -320,7 +337,8 @@ def report_privacy_cmd(
     Renders workspace episodes with a roster of 6 people, the full 64 x 64
     view of every frame and its background (the frame without its people),
     trains mincam 1-8 px (and 8 px with the privacy term) and baselines
-    2x2..32x32 for the people count, then attacks each trained design:
+    2x2..32x32 (with --detectors 16 --mask-res 64, also 16 px and 64x64) for
+    the people count, then attacks each trained design:
     decoders of what the people add to the view (PSNR, SSIM on the people's
     pixels and on the whole view) and a re-identifier of who is in the room
     (top-1 accuracy against chance), trained on other episodes than those it
@@ -346,7 +364,7 @@ def report_privacy_cmd(
     try:
         other = -(-2 * train_frames // 3)
         comparison = dataclasses.replace(
-            default_comparison(),
+            default_comparison(int(detectors), int(mask_res)),
             train_frames=train_frames,
             val_frames=other,
             test_frames=other,
