@@ -1,8 +1,8 @@
 """Checks of scalar arguments: an integer or a finite number within bounds.
 
 Every refusal is one ``ValueError`` line naming the argument, its value and what
-is allowed, e.g. ``spp = 0 is invalid: allowed an integer in [1, 2^20]`` or
-``mask_blur_mm = nan is invalid: allowed a number in [0, 16] mm``. A bool is
+is allowed, e.g. ``spp = 0: allowed an integer in [1, 2^20]`` or
+``mask_blur_mm = nan: allowed a number in [0, 16] mm``. A bool is
 never a number here (``True`` is not a sample count). Numpy scalars are
 accepted only where the caller asks (``numpy=True``); without it ``check_number``
 takes ``int`` and ``float`` (``numpy.float64`` is a ``float``), ``check_int``
@@ -112,7 +112,7 @@ def _refuse(
         bounds = f" {'<' if hi_open else '<='} {_show(hi)}"
     else:
         bounds = ""
-    return ValueError(f"{name} = {value!r} is invalid: allowed {what}{bounds} {unit}".rstrip())
+    return ValueError(f"{name} = {value!r}: allowed {what}{bounds} {unit}".rstrip())
 
 
 def _show(bound: float) -> str:
