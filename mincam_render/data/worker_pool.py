@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
+from mincam_render.core.checks import check_int
+
 log = logging.getLogger(__name__)
 
 #: A run stalls when no worker reports for this many times the slowest task so far ...
@@ -184,9 +186,8 @@ def run_tasks(
         ValueError: invalid arguments.
         Exception: whatever a task raised.
     """
-    for name, value in (("workers", workers), ("tasks_per_worker", tasks_per_worker)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} = {value!r}: allowed an integer >= 1")
+    check_int("workers", workers, 1)
+    check_int("tasks_per_worker", tasks_per_worker, 1)
     watch = StallWatch(stall_factor, stall_floor_s)
     ctx: Any = mp.get_context(context)  # BaseContext's stub has no Process
     queued = deque(tasks)
