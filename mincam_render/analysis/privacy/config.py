@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import TrainConfig
 
 #: The workspace with a roster of six people (max six present, so each has a look).
@@ -119,11 +120,8 @@ class AttackConfig:
             ("eval_every", 1),
             ("examples", 0),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ValueError(f"AttackConfig.{name} = {v!r}: allowed an integer >= {lo}")
-        if not 0 < self.lr < 1:
-            raise ValueError(f"AttackConfig.lr = {self.lr!r}: allowed (0, 1)")
+            check_int(f"AttackConfig.{name}", getattr(self, name), lo)
+        check_number("AttackConfig.lr", self.lr, 0, 1, lo_open=True, hi_open=True, numpy=True)
 
 
 @dataclass(frozen=True, kw_only=True)
