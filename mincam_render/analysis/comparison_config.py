@@ -134,6 +134,7 @@ class ComparisonConfig:
         """Refuse, before any render, a baseline grid finer than the rendered ``mask_res``."""
         if self.mask_res is None:
             return
+        check_int("mask_res", self.mask_res, 1, 4096)
         for d in self.designs:
             if d.grid is not None and max(d.grid) > self.mask_res:
                 raise ValueError(
