@@ -135,7 +135,8 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, wait
 
-    from mincam_render.data.render_job import _threads_per_worker, _worker_init
+    from mincam_render.data.render_job import _worker_init
+    from mincam_render.data.worker_pool import threads_per_worker
 
     shards = range(workers)
     walls = []
@@ -143,7 +144,7 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
         max_workers=workers,
         mp_context=mp.get_context("spawn"),
         initializer=_worker_init,
-        initargs=(_threads_per_worker(workers), None),
+        initargs=(threads_per_worker(workers), None),
     ) as pool:
         for round_ in range(repeats + 1):
             t0 = time.perf_counter()
