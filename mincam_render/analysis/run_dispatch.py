@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.core.checks import check_int
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train import train_run
 from mincam_render.learn.train_config import TrainConfig
@@ -123,8 +124,7 @@ def train_design_run(
 
 def check_executor(train_workers: int, ray_address: str | None) -> None:
     """Raise ValueError unless ``train_workers`` >= 1, or ``ray_address`` alone, is given."""
-    if isinstance(train_workers, bool) or not isinstance(train_workers, int) or train_workers < 1:
-        raise ValueError(f"train_workers = {train_workers!r}: allowed an integer >= 1")
+    check_int("train_workers", train_workers, 1)
     if ray_address is not None and not ray_address.strip():
         raise ValueError("--ray: give an address (host:port, ray://host:port) or 'local'")
     if ray_address is not None and train_workers > 1:

@@ -151,9 +151,8 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
     assert (unfinished.parent / name).read_bytes() == (out / "runs" / name).read_bytes()
 
 
-@pytest.mark.slow
 def test_ray_tasks_train_every_run_like_this_process(splits, sequential, tmp_path):
-    """About 40 s on 2 loaded cores: Ray starts a local cluster and ships the package."""
+    """16 s on 2 loaded cores (a local Ray cluster started, the package shipped to it)."""
     pytest.importorskip("ray")
     out, runs = sequential
     on_ray = train_runs(CFG, splits, tmp_path, ray_address="local", progress=False)
