@@ -11,7 +11,14 @@ from mincam_render.analysis.privacy.config import AttackConfig
 from mincam_render.analysis.robustness import RobustnessConfig
 
 from .errors import InputError, user_error
-from .options import FiniteFloat, field_default, float_list, out_option
+from .options import (
+    FiniteFloat,
+    apply_options,
+    executor_options,
+    field_default,
+    float_list,
+    out_option,
+)
 
 if TYPE_CHECKING:
     from mincam_render.learn.training_data import TrainingData
@@ -316,7 +323,14 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
     help="Mask texels per side rendered: baselines up to this fine (64: adds 64x64). "
     "16 detectors at 64 texels cost about 8 times the default render.",
 )
-@click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 256),
+    default=2,
+    show_default=True,
+    help="Render worker processes.",
+)
+@apply_options(executor_options)
 @out_option(
     "Working and output directory (created; resumes): episodes, views, runs, privacy.html, "
     ".json, .png.",
@@ -330,6 +344,8 @@ def report_privacy_cmd(
     detectors: str,
     mask_res: str,
     workers: int,
+    train_workers: int,
+    ray_address: str | None,
     out: Path,
 ) -> None:
     """What can an attacker recover from K measurements? Task error against attack success.
@@ -360,6 +376,9 @@ def report_privacy_cmd(
         headline,
         write_privacy_report,
     )
+    from mincam_render.analysis.run_dispatch import TrainingError
+    from mincam_render.data.ray_cluster import RayError
+    from mincam_render.data.render_job import RenderError
 
     try:
         other = -(-2 * train_frames // 3)
@@ -372,10 +391,17 @@ def report_privacy_cmd(
         )
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
         cfg = PrivacyConfig(comparison=comparison, attack=attack)
-        privacy = analyze_privacy(cfg, out, workers=workers, progress=True)
+        privacy = analyze_privacy(
+            cfg,
+            out,
+            workers=workers,
+            train_workers=train_workers,
+            ray_address=ray_address,
+            progress=True,
+        )
         with np.load(out / "examples.npz") as examples:
             paths = write_privacy_report(privacy, dict(examples), out)
-    except (ValueError, KeyError, OSError) as err:
+    except (ValueError, KeyError, OSError, RenderError, TrainingError, RayError) as err:
         raise user_error(err) from None
     click.echo(headline(privacy))
     click.echo(f"wrote {paths['json']}, {paths['html']} and {paths['png']}")
