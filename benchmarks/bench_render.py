@@ -52,7 +52,7 @@ from pathlib import Path
 
 import drjit as dr
 import mitsuba as mi
-from provenance import machine
+from provenance import cpu_times, machine
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data.render_job import (
@@ -70,16 +70,6 @@ from mincam_render.render.differential import BackgroundSettings
 from mincam_render.render.sun_patch import sun_sampled_apart
 from mincam_render.render.transport import render_transport
 from mincam_render.scenes.registry import FAMILY_NAMES
-
-
-def cpu_times() -> tuple[int, int]:
-    """``(steal, total)`` CPU ticks of the machine so far (``/proc/stat``; zeros elsewhere)."""
-    try:
-        with open("/proc/stat") as f:
-            fields = [int(v) for v in f.readline().split()[1:]]
-    except (OSError, ValueError):
-        return 0, 0
-    return (fields[7] if len(fields) > 7 else 0), sum(fields)
 
 
 def rss_bytes() -> int:
@@ -135,7 +125,8 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, wait
 
-    from mincam_render.data.render_job import _threads_per_worker, _worker_init
+    from mincam_render.data.render_job import _worker_init
+    from mincam_render.data.worker_pool import threads_per_worker
 
     shards = range(workers)
     walls = []
@@ -143,7 +134,7 @@ def time_workers(job: dict, workers: int, repeats: int, backgrounds: dict | None
         max_workers=workers,
         mp_context=mp.get_context("spawn"),
         initializer=_worker_init,
-        initargs=(_threads_per_worker(workers), None),
+        initargs=(threads_per_worker(workers), None),
     ) as pool:
         for round_ in range(repeats + 1):
             t0 = time.perf_counter()

@@ -45,6 +45,16 @@ def machine() -> dict[str, Any]:
     }
 
 
+def cpu_times() -> tuple[int, int]:
+    """``(steal, total)`` CPU ticks of the machine so far (``/proc/stat``; zeros elsewhere)."""
+    try:
+        with open("/proc/stat") as f:
+            fields = [int(v) for v in f.readline().split()[1:]]
+    except (OSError, ValueError):
+        return 0, 0
+    return (fields[7] if len(fields) > 7 else 0), sum(fields)
+
+
 def write_result(path: Path, result: dict[str, Any]) -> None:
     """Write a benchmark's results JSON (its folder created) and say where."""
     path.parent.mkdir(parents=True, exist_ok=True)

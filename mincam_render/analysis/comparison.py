@@ -8,7 +8,9 @@
    :func:`mincam_render.core.seeds.stream_seed`. All episodes of one length
    share one fidelity plan (measured on the planning episode).
 2. Train the minimalist camera and the baseline with several training seeds
-   (same recipe and budget), early stopping on the validation episode.
+   (same recipe and budget), early stopping on the validation episode: in
+   this process, in local worker processes or as Ray tasks, with the same
+   result per run (:mod:`mincam_render.analysis.run_dispatch`).
 3. Test every run on every test episode with the paper's post-processing;
    also the trivial predictor (the training mean of every label; the mode for
    binary labels).
@@ -28,6 +30,7 @@ Everything resumes: finished episodes and runs are found on disk and kept.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -38,8 +41,11 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+# Design is re-exported: callers build designs and comparisons from this module
+from mincam_render.analysis.comparison_config import ComparisonConfig
+from mincam_render.analysis.comparison_config import Design as Design
 from mincam_render.analysis.coverage import coverage_table, study_coverage
+from mincam_render.analysis.run_dispatch import check_executor, train_runs
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
@@ -52,14 +58,10 @@ from mincam_render.analysis.statistics import (
 from mincam_render.core.labels import LabelKind
 from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
+from mincam_render.data.ray_cluster import ray_session
 from mincam_render.data.render_job import RenderRequest, package_versions, render_dataset
 from mincam_render.export.masks import export_masks
-from mincam_render.learn.train import (
-    TrainingData,
-    metrics,
-    run_masks,
-    train_run,
-)
+from mincam_render.learn.train import TrainingData, metrics, run_masks
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
 SHARDS_PER_EPISODE = 4
@@ -97,20 +99,35 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
 
 
 def render_episodes(
-    cfg: ComparisonConfig, episodes_dir: Path, *, workers: int = 2, progress: bool = True
+    cfg: ComparisonConfig,
+    episodes_dir: Path,
+    *,
+    workers: int = 2,
+    ray_address: str | None = None,
+    progress: bool = True,
 ) -> dict[str, TrainingData]:
     """Render (or resume) every episode into ``episodes_dir/<name>``; their training views.
 
-    The views are at ``cfg.light_scale`` times the rendered light.
+    The views are at ``cfg.light_scale`` times the rendered light. ``ray_address``:
+    render the shards as Ray tasks there (``workers`` is then ignored).
     """
     data = {}
     for name, request in episode_requests(cfg).items():
         path = episodes_dir / name
-        render_dataset(request, path, workers=workers, progress=progress)
+        render_dataset(request, path, workers=workers, ray_address=ray_address, progress=progress)
         role = name.split("-")[0]
         view = TrainingData.from_dataset(open_dataset(path), role)
         data[name] = view if cfg.light_scale == 1.0 else view.with_light_scaled(cfg.light_scale)
     return data
+
+
+def comparison_splits(data: Mapping[str, TrainingData]) -> dict[str, Any]:
+    """``{"train": the training episodes joined, "val", "tests": {name: episode}}``."""
+    return {
+        "train": TrainingData.concat([v for k, v in data.items() if k.startswith("train-")]),
+        "val": data["val-0"],
+        "tests": {k: v for k, v in data.items() if k.startswith("test-")},
+    }
 
 
 def _episode_record(data: TrainingData) -> dict[str, Any]:
@@ -201,48 +218,6 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
             mean = (mean >= 0.5).astype(np.float32)
         pred[s.name] = np.broadcast_to(mean, (n, s.size)).astype(np.float32)
     return metrics(pred, lab, float("nan"), test)
-
-
-def _design_runs(
-    design: Design,
-    cfg: ComparisonConfig,
-    splits: Mapping[str, Any],
-    out: Path,
-    progress: bool,
-) -> list[dict[str, Any]]:
-    """Train one design with every training seed; each run's metrics (with episodes).
-
-    ``splits``: ``{"train": TrainingData, "val": TrainingData, "tests": {name: TrainingData}}``.
-    A design without the detector model is supplement A's ablation: its masks
-    are trained without the model, then frozen while a fresh head is trained
-    with it (``<run>/head-with-sensor``); that camera is the one tested (with
-    the model), and the masks' own training is kept as ``mask_run``.
-    """
-    runs = []
-    for i in range(cfg.seeds):
-        seed = stream_seed(cfg.seed, f"train/{design.name}", i)
-        run_dir = out / "runs" / f"{design.name}-seed{i}"
-        common = {
-            "config": dataclasses.replace(
-                cfg.train, seed=seed, head=design.head, privacy_weight=design.privacy_weight
-            ),
-            "episodes": splits["tests"],
-            "progress": progress,
-        }
-        run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                        **design.train_kwargs())  # fmt: skip
-        if not design.sensor_model:
-            masks = {"run_dir": str(run_dir), **{k: run[k] for k in _MASK_RUN_KEYS}}
-            run_dir = run_dir / "head-with-sensor"
-            run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                            frozen_masks_from=masks["run_dir"])  # fmt: skip
-            run["mask_run"] = masks
-        runs.append(dict(run, run_dir=str(run_dir), seed_index=i))
-    return runs
-
-
-#: What a comparison keeps of the masks' training in supplement A's ablation.
-_MASK_RUN_KEYS = ("steps", "best_step", "stopped_early", "train_wall_time_s", "episodes")
 
 
 def episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
@@ -345,6 +320,8 @@ def run_comparison(
     out_dir: str | os.PathLike,
     *,
     workers: int = 2,
+    train_workers: int = 1,
+    ray_address: str | None = None,
     masks_dir: str | os.PathLike | None = None,
     episodes_dir: str | os.PathLike | None = None,
     progress: bool = True,
@@ -356,20 +333,58 @@ def run_comparison(
     ``out_dir/runs/``, ``out_dir/metrics.json``, ``out_dir/comparison.png`` and,
     unless ``masks_dir`` is None, every minimalist design's best masks into
     ``masks_dir/<task>/<design>/``.
+
+    Episodes render in ``workers`` processes; the training runs in this process
+    (``train_workers=1``) or ``train_workers`` worker processes
+    (:mod:`~mincam_render.analysis.run_dispatch`). With ``ray_address``
+    (``"local"`` starts a cluster) both render and train as Ray tasks.
+
+    Raises:
+        ValueError: invalid ``train_workers`` or ``ray_address`` (before anything is written).
+        mincam_render.data.ray_cluster.RayError: Ray is missing or unreachable.
+        mincam_render.analysis.run_dispatch.TrainingError: a training worker died or
+            stalled, or a Ray run failed.
     """
+    check_executor(train_workers, ray_address)
+    with ray_session(ray_address) if ray_address is not None else contextlib.nullcontext():
+        return _run_comparison(
+            cfg,
+            Path(out_dir),
+            workers=workers,
+            train_workers=train_workers,
+            ray_address=ray_address,
+            masks_dir=masks_dir,
+            episodes_dir=episodes_dir,
+            progress=progress,
+        )
+
+
+def _run_comparison(
+    cfg: ComparisonConfig,
+    out: Path,
+    *,
+    workers: int,
+    train_workers: int,
+    ray_address: str | None,
+    masks_dir: str | os.PathLike | None,
+    episodes_dir: str | os.PathLike | None,
+    progress: bool,
+) -> dict[str, Any]:
     from mincam_render.analysis.plots import plot_comparison
 
-    out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
-    data = render_episodes(cfg, episodes, workers=workers, progress=progress)
-    tests = {k: v for k, v in data.items() if k.startswith("test-")}
-    train = TrainingData.concat([v for k, v in data.items() if k.startswith("train-")])
-    splits = {"train": train, "val": data["val-0"], "tests": tests}
+    data = render_episodes(
+        cfg, episodes, workers=workers, ray_address=ray_address, progress=progress
+    )
+    splits = comparison_splits(data)
+    train, tests = splits["train"], splits["tests"]
     task = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
     # before training: a split that misses part of the label space is logged at once
     coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
-    runs = {d.name: _design_runs(d, cfg, splits, out, progress) for d in cfg.designs}
+    runs = train_runs(
+        cfg, splits, out, train_workers=train_workers, ray_address=ray_address, progress=progress
+    )
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
     errors = {name: episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
     errors["trivial"] = episode_errors([trivial])

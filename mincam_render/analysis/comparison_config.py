@@ -5,11 +5,11 @@ No PyTorch or Mitsuba import, so the command line shows these defaults at once.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import HeadKind, TrainConfig
 
 
@@ -39,13 +39,12 @@ class Design:
     def __post_init__(self) -> None:
         if (self.pixels is None) == (self.grid is None):
             raise ValueError(f"{self}: give exactly one of pixels (mincam) or grid (baseline)")
-        if self.pixels is not None and self.pixels < 1:
-            raise ValueError(f"pixels = {self.pixels}: need at least 1")
+        if self.pixels is not None:
+            check_int("Design.pixels", self.pixels, 1)
         if self.grid is not None:
             object.__setattr__(self, "grid", (int(self.grid[0]), int(self.grid[1])))
         object.__setattr__(self, "head", HeadKind(self.head))
-        if not 0 <= self.privacy_weight <= 1e3:
-            raise ValueError(f"{self}: privacy_weight must lie in [0, 1000]")
+        check_number("Design.privacy_weight", self.privacy_weight, 0, 1e3, numpy=True)
         if self.privacy_weight and self.grid is not None:
             raise ValueError(f"{self}: a privacy weight trains masks; a baseline has none")
 
@@ -119,14 +118,11 @@ class ComparisonConfig:
     mask_res: int | None = None
 
     def __post_init__(self) -> None:
-        for name, lo in (("train_frames", 30), ("val_frames", 30), ("test_frames", 30)):
-            if getattr(self, name) < lo:
-                raise ValueError(f"{name} = {getattr(self, name)}: need at least {lo} frames")
+        for name in ("train_frames", "val_frames", "test_frames"):
+            check_int(name, getattr(self, name), 30, unit="frames")
         for name in ("train_episodes", "test_episodes", "seeds"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} = {getattr(self, name)}: need at least 1")
-        if not (math.isfinite(self.light_scale) and self.light_scale > 0):
-            raise ValueError(f"light_scale = {self.light_scale!r}: need a finite factor > 0")
+            check_int(name, getattr(self, name), 1)
+        check_number("light_scale", self.light_scale, 0, lo_open=True, numpy=True)
         if "fps" in self.overrides:
             raise ValueError("overrides: give the frame rate as fps, not as an override")
         self._check_grids()
@@ -138,6 +134,7 @@ class ComparisonConfig:
         """Refuse, before any render, a baseline grid finer than the rendered ``mask_res``."""
         if self.mask_res is None:
             return
+        check_int("mask_res", self.mask_res, 1, 4096)
         for d in self.designs:
             if d.grid is not None and max(d.grid) > self.mask_res:
                 raise ValueError(

@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.core.seeds import stream_seed
 
 if TYPE_CHECKING:
@@ -129,9 +130,7 @@ class FidelityBenchConfig:
             ("num_masks", 2, 1000),
             ("repeats", 1, 100),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                raise bad(name, f"an integer in [{lo}, {hi}]")
+            check_int(f"FidelityBenchConfig.{name}", getattr(self, name), lo, hi)
         if self.num_frames > self.sequence_frames:
             raise bad("num_frames", f"at most sequence_frames = {self.sequence_frames}")
         for name, hi in (("spp_levels", 1 << 20), ("mask_res_levels", 4096), ("depth_levels", 64)):

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.perturbation import TERM_FIELDS, PerturbationModel, PerturbationTerm
 
@@ -74,12 +75,16 @@ class RobustnessConfig:
                 "multiples of the defaults, increasing from 0"
             )
         object.__setattr__(self, "levels", levels)
-        if isinstance(self.draws, bool) or not isinstance(self.draws, int) or self.draws < 2:
-            raise ValueError(f"RobustnessConfig.draws = {self.draws!r}: allowed an integer >= 2")
-        if not 0 < self.allowed_increase < 10:
-            raise ValueError(
-                f"RobustnessConfig.allowed_increase = {self.allowed_increase!r}: allowed (0, 10)"
-            )
+        check_int("RobustnessConfig.draws", self.draws, 2)
+        check_number(
+            "RobustnessConfig.allowed_increase",
+            self.allowed_increase,
+            0,
+            10,
+            lo_open=True,
+            hi_open=True,
+            numpy=True,
+        )
 
 
 def curve_model(base: PerturbationModel, curve: str) -> PerturbationModel:

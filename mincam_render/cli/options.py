@@ -163,3 +163,26 @@ def field_default(cls: type, name: str) -> Any:
     if field.default is dataclasses.MISSING:
         raise ValueError(f"{cls.__name__}.{name} has no default")
     return field.default
+
+
+#: Where a comparison's training runs run (``pipeline``, ``study``, ``report privacy``).
+executor_options = [
+    click.option(
+        "--train-workers",
+        type=click.IntRange(1, 256),
+        default=1,
+        show_default=True,
+        help="Training runs at once, each in a local worker process with its own copy of "
+        "the episodes and cores / N torch threads (1 = one after the other in this "
+        "process). Every run's figures are the same either way.",
+    ),
+    click.option(
+        "--ray",
+        "ray_address",
+        default=None,
+        metavar="ADDRESS",
+        help="Render the episodes and train the runs as Ray tasks on this cluster "
+        "('local' starts one; needs the ray extra); the data and every run's files "
+        "travel through Ray, no shared file system needed.",
+    ),
+]

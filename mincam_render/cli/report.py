@@ -11,7 +11,14 @@ from mincam_render.analysis.privacy.config import AttackConfig
 from mincam_render.analysis.robustness import RobustnessConfig
 
 from .errors import InputError, user_error
-from .options import FiniteFloat, field_default, float_list, out_option
+from .options import (
+    FiniteFloat,
+    apply_options,
+    executor_options,
+    field_default,
+    float_list,
+    out_option,
+)
 
 if TYPE_CHECKING:
     from mincam_render.learn.training_data import TrainingData
@@ -301,7 +308,29 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
     show_default=True,
     help="Adam steps of each attacker at most (the best validation state is kept).",
 )
-@click.option("--workers", type=click.IntRange(1, 256), default=2, show_default=True)
+@click.option(
+    "--detectors",
+    type=click.Choice(["8", "16"]),
+    default="8",
+    show_default=True,
+    help="Detectors rendered: mincam designs of 1, 2, 4, ... up to this many pixels.",
+)
+@click.option(
+    "--mask-res",
+    type=click.Choice(["32", "64"]),
+    default="32",
+    show_default=True,
+    help="Mask texels per side rendered: baselines up to this fine (64: adds 64x64). "
+    "16 detectors at 64 texels cost about 8 times the default render.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 256),
+    default=2,
+    show_default=True,
+    help="Render worker processes.",
+)
+@apply_options(executor_options)
 @out_option(
     "Working and output directory (created; resumes): episodes, views, runs, privacy.html, "
     ".json, .png.",
@@ -312,7 +341,11 @@ def report_privacy_cmd(
     task_seeds: int,
     seeds: int,
     max_steps: int,
+    detectors: str,
+    mask_res: str,
     workers: int,
+    train_workers: int,
+    ray_address: str | None,
     out: Path,
 ) -> None:
     """What can an attacker recover from K measurements? Task error against attack success.
@@ -320,7 +353,8 @@ def report_privacy_cmd(
     Renders workspace episodes with a roster of 6 people, the full 64 x 64
     view of every frame and its background (the frame without its people),
     trains mincam 1-8 px (and 8 px with the privacy term) and baselines
-    2x2..32x32 for the people count, then attacks each trained design:
+    2x2..32x32 (with --detectors 16 --mask-res 64, also 16 px and 64x64) for
+    the people count, then attacks each trained design:
     decoders of what the people add to the view (PSNR, SSIM on the people's
     pixels and on the whole view) and a re-identifier of who is in the room
     (top-1 accuracy against chance), trained on other episodes than those it
@@ -342,11 +376,14 @@ def report_privacy_cmd(
         headline,
         write_privacy_report,
     )
+    from mincam_render.analysis.run_dispatch import TrainingError
+    from mincam_render.data.ray_cluster import RayError
+    from mincam_render.data.render_job import RenderError
 
     try:
         other = -(-2 * train_frames // 3)
         comparison = dataclasses.replace(
-            default_comparison(),
+            default_comparison(int(detectors), int(mask_res)),
             train_frames=train_frames,
             val_frames=other,
             test_frames=other,
@@ -354,10 +391,17 @@ def report_privacy_cmd(
         )
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
         cfg = PrivacyConfig(comparison=comparison, attack=attack)
-        privacy = analyze_privacy(cfg, out, workers=workers, progress=True)
+        privacy = analyze_privacy(
+            cfg,
+            out,
+            workers=workers,
+            train_workers=train_workers,
+            ray_address=ray_address,
+            progress=True,
+        )
         with np.load(out / "examples.npz") as examples:
             paths = write_privacy_report(privacy, dict(examples), out)
-    except (ValueError, KeyError, OSError) as err:
+    except (ValueError, KeyError, OSError, RenderError, TrainingError, RayError) as err:
         raise user_error(err) from None
     click.echo(headline(privacy))
     click.echo(f"wrote {paths['json']}, {paths['html']} and {paths['png']}")

@@ -21,6 +21,7 @@ from .errors import user_error
 from .options import (
     FiniteFloat,
     apply_options,
+    executor_options,
     grid,
     grid_list,
     int_list,
@@ -34,8 +35,9 @@ if TYPE_CHECKING:
 
 #: Options of the commands that render independent episodes and compare designs;
 #: named like the ComparisonConfig fields they fill, except --steps (the training
-#: recipe's max_steps), --workers and --spp (how episodes are rendered) and
-#: --detectors (a shorthand for --set camera.detectors=N).
+#: recipe's max_steps), --workers and --spp (how episodes are rendered),
+#: --train-workers and --ray (where runs train) and --detectors (a shorthand for
+#: --set camera.detectors=N).
 episode_options = apply_options([
     click.option("--family", default=C.family, show_default=True,
                  help="Scene family name or scene description (.toml)."),
@@ -77,6 +79,7 @@ episode_options = apply_options([
                  "end sooner)."),
     click.option("--workers", type=click.IntRange(0), default=2, show_default=True,
                  help="Render worker processes (0 = in this process)."),
+    *executor_options,
     click.option("--spp", type=click.IntRange(1, 1 << 20), default=None,
                  help="Render at a fixed quick fidelity (SPP samples per texel, every "
                  "detector, the scene's path depth) instead of the measured (auto) "
@@ -122,13 +125,17 @@ def _compare(
     spp: int | None,
     steps: int,
     workers: int,
+    train_workers: int,
+    ray_address: str | None,
     overrides: dict[str, Any],
     detectors: int | None,
     **episode: Any,
 ) -> dict[str, Any]:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
     from mincam_render.analysis.comparison import run_comparison
+    from mincam_render.analysis.run_dispatch import TrainingError
     from mincam_render.core.config import ConfigError
+    from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
     from mincam_render.learn.train_config import TrainConfig
     from mincam_render.render.mitsuba_scene import SceneError
@@ -149,8 +156,17 @@ def _compare(
             f"test {cfg.test_episodes} x {cfg.test_frames} frames; {len(designs)} designs x "
             f"{cfg.seeds} seeds"
         )
-        result = run_comparison(cfg, out, workers=workers, masks_dir=out / "masks")
-    except (ConfigError, SceneError, RenderError, ValueError, OSError) as err:
+        result = run_comparison(
+            cfg,
+            out,
+            workers=workers,
+            train_workers=train_workers,
+            ray_address=ray_address,
+            masks_dir=out / "masks",
+        )
+    except (
+        ConfigError, SceneError, RenderError, TrainingError, RayError, ValueError, OSError
+    ) as err:  # fmt: skip
         raise user_error(err) from None
     _echo_comparison(result, cfg.seeds)
     click.echo(
@@ -284,7 +300,7 @@ def study_cmd(
 
     \b
     Example:
-      mincam-render study --family patches --out runs/study-patches --spp 16
+      mincam-render study --family patches --out runs/study-patches --spp 16 --train-workers 2
       mincam-render study --family traffic --fps 30 --train-episodes 1 --pixels 1,2,4,8 \\
           --baseline-grids 2x4,4x7,8x14 --heads mlp,tcn --out runs/study-traffic
     """

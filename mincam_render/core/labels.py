@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import enum
 import math
-import operator
 from dataclasses import dataclass
+
+from mincam_render.core.checks import check_int
 
 
 class LabelKind(enum.Enum):
@@ -52,12 +53,7 @@ class LabelSpec:
     headline: str = ""
 
     def __post_init__(self) -> None:
-        try:
-            size = operator.index(self.size)
-        except TypeError:
-            size = 0
-        if isinstance(self.size, bool) or size < 1:
-            raise ValueError(f"LabelSpec {self.name!r}: size = {self.size!r}, allowed >= 1")
+        check_int(f"LabelSpec {self.name!r}: size", self.size, 1, numpy=True)
         if self.element_names and len(self.element_names) != self.size:
             raise ValueError(
                 f"LabelSpec {self.name!r}: {len(self.element_names)} element_names for "

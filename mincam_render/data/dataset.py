@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.optics.camera import (
     DetectorElectronics,
@@ -744,8 +745,7 @@ def _make_torch_dataset_class() -> type:
 
         def __init__(self, dataset: TransportDataset, split: str, history: int = 1) -> None:
             start, stop = dataset._range(split)
-            if isinstance(history, bool) or not isinstance(history, int) or history < 1:
-                raise ValueError(f"history = {history!r}: allowed an integer >= 1 (frames)")
+            check_int("history", history, 1, unit="frames")
             if history > stop - start:
                 raise ValueError(
                     f"history = {history} frames is longer than split {split!r} "

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.data import dataset as ds
 
 log = logging.getLogger(__name__)
@@ -43,9 +44,8 @@ def view_paths(out_dir: str | os.PathLike, width: int, *, people: bool = True) -
 
 
 def _check_settings(width: int, spp: int) -> None:
-    for name, value, hi in (("width", width, 1024), ("spp", spp, 1 << 16)):
-        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
-            raise ValueError(f"{name} = {value!r}: allowed an integer in [1, {hi}]")
+    check_int("width", width, 1, 1024, unit="px")
+    check_int("spp", spp, 1, 1 << 16)
 
 
 def render_views(

@@ -16,6 +16,12 @@ the parent always knows which task each worker holds:
   :class:`WorkerStalled` naming the tasks in flight; it never waits forever;
 - an exception raised by a task is raised again in the parent.
 
+The initializer's arguments go to each worker through its pipe, not as the
+process's arguments: ``spawn`` writes those into a pipe whose read end the parent
+keeps open until the write ends, so a worker that died while starting would
+leave a large argument (a training set) blocked forever; through the worker's
+own pipe its death is a :class:`WorkerDied`.
+
 Workers report progress through a callback ``on_progress(n)`` the task function
 receives as a keyword argument; the parent forwards it to its own callback.
 """
@@ -24,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing as mp
+import os
 import time
 import traceback
 from collections import deque
@@ -31,6 +38,8 @@ from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
+
+from mincam_render.core.checks import check_int
 
 log = logging.getLogger(__name__)
 
@@ -107,14 +116,25 @@ class StallWatch:
             )
 
 
+def threads_per_worker(workers: int) -> int:
+    """Threads each of ``workers`` processes may use: the machine's cores shared out, >= 1."""
+    return max(1, (os.cpu_count() or 1) // max(1, workers))
+
+
 def _worker_main(
     conn: Connection,
     fn: Callable[..., Any],
     tasks_per_worker: int,
     initializer: Callable[..., None] | None,
-    initargs: tuple,
 ) -> None:
-    """Body of a worker process: run up to ``tasks_per_worker`` tasks sent through ``conn``."""
+    """Body of a worker process: run up to ``tasks_per_worker`` tasks sent through ``conn``.
+
+    The first message is the initializer's arguments.
+    """
+    try:
+        initargs = conn.recv()
+    except EOFError:  # the parent is gone
+        return
     if initializer is not None:
         initializer(*initargs)
     for _ in range(tasks_per_worker):
@@ -184,9 +204,8 @@ def run_tasks(
         ValueError: invalid arguments.
         Exception: whatever a task raised.
     """
-    for name, value in (("workers", workers), ("tasks_per_worker", tasks_per_worker)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-            raise ValueError(f"{name} = {value!r}: allowed an integer >= 1")
+    check_int("workers", workers, 1)
+    check_int("tasks_per_worker", tasks_per_worker, 1)
     watch = StallWatch(stall_factor, stall_floor_s)
     ctx: Any = mp.get_context(context)  # BaseContext's stub has no Process
     queued = deque(tasks)
@@ -196,7 +215,7 @@ def run_tasks(
         parent, child = ctx.Pipe()
         process = ctx.Process(
             target=_worker_main,
-            args=(child, fn, tasks_per_worker, initializer, initargs),
+            args=(child, fn, tasks_per_worker, initializer),
             daemon=True,
         )
         process.start()
@@ -205,8 +224,10 @@ def run_tasks(
 
     try:
         while queued or any(w.task is not None for w in pool):
-            while queued and len(pool) < workers:
-                pool.append(start())
+            started = [start() for _ in range(workers - len(pool))] if queued else []
+            pool += started
+            for w in started:  # after every start: the workers import at the same time
+                _send_initargs(w, initargs)
             for w in pool:
                 if w.task is None and queued and w.tasks_taken < tasks_per_worker:
                     w.task, w.started_s = queued.popleft(), time.monotonic()
@@ -219,6 +240,18 @@ def run_tasks(
             watch.check([w.task for w in pool if w.task is not None])
     finally:
         _shut_down(pool)
+
+
+def _send_initargs(w: _Worker, initargs: tuple) -> None:
+    """Send a new worker its initializer's arguments; :class:`WorkerDied` if it ended first."""
+    try:
+        w.conn.send(initargs)
+    except OSError:  # BrokenPipeError, ConnectionResetError: the worker is gone
+        w.process.join()
+        raise WorkerDied(
+            f"worker process {w.process.pid} ended (exit code {w.process.exitcode}) while starting",
+            [],
+        ) from None
 
 
 def _read_messages(

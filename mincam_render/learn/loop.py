@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -108,6 +109,7 @@ def train_model(
     stop_after_steps: int | None = None,
     progress: bool = False,
     desc: str = "train",
+    on_progress: Callable[[int], None] | None = None,
 ) -> TrainResult:
     """Train ``model`` in place with Adam and early stopping on ``val``; keep the best state.
 
@@ -124,6 +126,8 @@ def train_model(
             (simulates a killed run; the result is not final).
         progress: show a tqdm progress bar.
         desc: progress-bar label.
+        on_progress: called after every evaluation (and checkpoint) with the
+            steps taken since the previous call (a worker's sign of life).
 
     Returns:
         A :class:`TrainResult`; ``model`` holds the best validation state.
@@ -150,7 +154,7 @@ def train_model(
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
     try:
-        _train_steps(run, val, logs, bar, clock, stop_after_steps)
+        _train_steps(run, val, logs, bar, clock, stop_after_steps, on_progress)
     finally:
         torch.set_num_threads(threads)
         bar.close()
@@ -189,9 +193,11 @@ def _train_steps(
     bar: Any,
     clock: TrainingClock,
     stop_after_steps: int | None,
+    on_progress: Callable[[int], None] | None,
 ) -> None:
     """Steps until the run is done, or checkpoint and return after ``stop_after_steps``."""
     st, config = run.state, run.config
+    reported = st.step
     while not run.done():
         loss = train_step(
             run.model, run.source, run.opt, run.gen, config.gain_range, config.perturbation,
@@ -204,6 +210,9 @@ def _train_steps(
             _evaluate(run, val, loss, logs, clock)
             bar.set_postfix(val=f"{st.history[-1]['val_loss']:.4g}", best=f"{st.best_loss:.4g}")
             run.save()
+            if on_progress is not None:
+                on_progress(st.step - reported)
+                reported = st.step
         if stop_after_steps is not None and st.step >= stop_after_steps and not run.done():
             st.elapsed = clock.elapsed()
             run.save()

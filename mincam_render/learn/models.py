@@ -53,6 +53,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from mincam_render.core.checks import check_int
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn.train_config import CountLoss
 from mincam_render.optics.camera import FreeformCamera
@@ -176,9 +177,7 @@ class Head(nn.Module):
                     f"count_classes names {name!r}, which is not a COUNT label of this head "
                     f"(COUNT labels: {sorted(k for k, v in kinds.items() if v is LabelKind.COUNT)})"
                 )
-            if isinstance(n, bool) or int(n) != n or n < 2:
-                raise ValueError(f"count_classes[{name!r}] = {n!r}: allowed an integer >= 2")
-            self.count_classes[name] = int(n)
+            self.count_classes[name] = check_int(f"count_classes[{name!r}]", n, 2, numpy=True)
         # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
         # brightness or the scene's light level; it rescales, so SNR is untouched.
         self.input_norm = nn.BatchNorm1d(in_features, affine=False)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -45,6 +45,7 @@ def train_run(
     frozen_masks_from: str | os.PathLike | None = None,
     resume: bool = True,
     progress: bool = False,
+    on_progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Train one camera into ``out_dir`` (resumable) and write ``run.json`` + ``metrics.json``.
 
@@ -56,6 +57,8 @@ def train_run(
     ``frozen_masks_from``: a finished minimalist run whose masks (and detectors)
     this camera takes, frozen; only a fresh head is trained (supplement A: masks
     learned without the detector model, head retrained with it).
+    ``on_progress``: called after every evaluation with the steps since the last
+    call (:func:`~mincam_render.learn.loop.train_model`).
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
@@ -78,6 +81,7 @@ def train_run(
             resume=resume,
             progress=progress,
             desc=f"{run['model']['kind']} {model.num_pixels} px",
+            on_progress=on_progress,
         )
         metrics = _run_metrics(run, res, model, len(train), test, episodes)
         _write_json_atomic(out / "metrics.json", metrics)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass
 
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.optics.perturbation import PerturbationModel
 
 
@@ -109,15 +110,19 @@ class TrainConfig:
             ("max_eval_samples", 2),
             ("robust_validation_draws", 0),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ValueError(f"TrainConfig.{name} = {v!r}: allowed an integer >= {lo}")
-        if not 0 < self.lr_decay < 1:
-            raise ValueError(f"TrainConfig.lr_decay = {self.lr_decay!r}: allowed (0, 1)")
-        if self.lr is not None and not 0 < self.lr < 1:
-            raise ValueError(f"TrainConfig.lr = {self.lr!r}: allowed (0, 1) or None")
-        if not 0 <= self.mask_lr < 10:
-            raise ValueError(f"TrainConfig.mask_lr = {self.mask_lr!r}: allowed [0, 10)")
+            check_int(f"TrainConfig.{name}", getattr(self, name), lo)
+        for name in ("lr_decay", "lr"):  # lr None: learning_rate_for the input count
+            if getattr(self, name) is not None:
+                check_number(
+                    f"TrainConfig.{name}",
+                    getattr(self, name),
+                    0,
+                    1,
+                    lo_open=True,
+                    hi_open=True,
+                    numpy=True,
+                )
+        check_number("TrainConfig.mask_lr", self.mask_lr, 0, 10, hi_open=True, numpy=True)
         if self.count_loss is not None and not isinstance(self.count_loss, CountLoss):
             allowed = [c.value for c in CountLoss]
             try:
@@ -138,9 +143,7 @@ class TrainConfig:
                 f"TrainConfig.perturbation = {self.perturbation!r}: allowed a PerturbationModel "
                 "or None"
             )
-        w = self.privacy_weight
-        if isinstance(w, bool) or not isinstance(w, int | float) or not 0 <= w <= 1e3:
-            raise ValueError(f"TrainConfig.privacy_weight = {w!r}: allowed a number in [0, 1000]")
+        check_number("TrainConfig.privacy_weight", self.privacy_weight, 0, 1e3)
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")

@@ -20,6 +20,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mincam_render.core.checks import check_int, check_number
+
 MM = 1e-3  #: metres per millimetre
 
 #: Defaults of the paper's prototype (Klotz & Nayar, "Minimalist Vision with
@@ -47,39 +49,6 @@ DEFAULT_INTEGRATION_TIME_S = 1.0 / 30.0
 def _fail(owner: str, name: str, value: object, unit: str, allowed: str) -> ValueError:
     unit_txt = f" {unit}" if unit else ""
     return ValueError(f"{owner}.{name} = {value!r}{unit_txt} is invalid: allowed {allowed}")
-
-
-def _check_real(
-    owner: str,
-    name: str,
-    value: object,
-    unit: str,
-    lo: float,
-    hi: float,
-    *,
-    lo_open: bool = False,
-    hi_open: bool = False,
-) -> float:
-    """Return ``value`` as float if it is a finite number in the interval, else raise."""
-    left = "(" if lo_open else "["
-    right = ")" if hi_open else "]"
-    allowed = f"{left}{lo:g}, {hi:g}{right}" + (f" {unit}" if unit else "")
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise _fail(owner, name, value, unit, f"a number in {allowed}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise _fail(owner, name, value, unit, f"a finite number in {allowed}")
-    if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
-        raise _fail(owner, name, value, unit, allowed)
-    return v
-
-
-def _check_int(owner: str, name: str, value: object, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise _fail(owner, name, value, "", f"an integer in [{lo}, {hi}]")
-    if not lo <= int(value) <= hi:
-        raise _fail(owner, name, value, "", f"an integer in [{lo}, {hi}]")
-    return int(value)
 
 
 def _check_vec3(owner: str, name: str, value: object) -> tuple[float, float, float]:
@@ -113,10 +82,11 @@ class DirectionalResponse:
     def __post_init__(self) -> None:
         owner = "DirectionalResponse"
         angles = tuple(
-            _check_real(owner, "angles_deg", a, "deg", 0.0, 90.0) for a in self.angles_deg
+            check_number(f"{owner}.angles_deg", a, 0.0, 90.0, unit="deg", numpy=True)
+            for a in self.angles_deg
         )
         values = tuple(
-            _check_real(owner, "relative_sensitivity", s, "", 0.0, 10.0)
+            check_number(f"{owner}.relative_sensitivity", s, 0.0, 10.0, numpy=True)
             for s in self.relative_sensitivity
         )
         if len(angles) < 2 or len(angles) != len(values):
@@ -168,17 +138,19 @@ class DetectorElectronics:
     dark_current_a: float = 0.0
 
     def __post_init__(self) -> None:
-        o = "DetectorElectronics"
-        _check_real(
-            o, "responsivity_a_per_w", self.responsivity_a_per_w, "A/W", 0, 10, lo_open=True
-        )
-        _check_real(o, "gain_v_per_a", self.gain_v_per_a, "V/A", 1.0, 1e12)
-        _check_real(o, "read_noise_v", self.read_noise_v, "V", 0.0, 10.0)
-        _check_int(o, "adc_bits", self.adc_bits, 1, 32)
-        _check_real(o, "full_scale_v", self.full_scale_v, "V", 0.0, 1000.0, lo_open=True)
-        _check_real(o, "saturation_slope", self.saturation_slope, "", 0.0, 1.0, lo_open=True)
-        _check_real(o, "integration_time_s", self.integration_time_s, "s", 0, 3600, lo_open=True)
-        _check_real(o, "dark_current_a", self.dark_current_a, "A", 0.0, 1e-3)
+        for name, lo, hi, unit, lo_open in (
+            ("responsivity_a_per_w", 0, 10, "A/W", True),
+            ("gain_v_per_a", 1.0, 1e12, "V/A", False),
+            ("read_noise_v", 0.0, 10.0, "V", False),
+            ("full_scale_v", 0.0, 1000.0, "V", True),
+            ("saturation_slope", 0.0, 1.0, "", True),
+            ("integration_time_s", 0, 3600, "s", True),
+            ("dark_current_a", 0.0, 1e-3, "A", False),
+        ):
+            value = getattr(self, name)
+            owner = f"DetectorElectronics.{name}"
+            check_number(owner, value, lo, hi, unit=unit, lo_open=lo_open, numpy=True)
+        check_int("DetectorElectronics.adc_bits", self.adc_bits, 1, 32, numpy=True)
 
     @property
     def lsb_v(self) -> float:
@@ -216,9 +188,11 @@ class DetectorLayout:
     @classmethod
     def grid(cls, *, rows: int, cols: int, pitch_m: float) -> DetectorLayout:
         """A centred ``rows x cols`` grid, detector 0 at the top left, row-major."""
-        _check_int("DetectorLayout.grid", "rows", rows, 1, 64)
-        _check_int("DetectorLayout.grid", "cols", cols, 1, 64)
-        _check_real("DetectorLayout.grid", "pitch_m", pitch_m, "m", 0.0, 1.0, lo_open=True)
+        check_int("DetectorLayout.grid.rows", rows, 1, 64, numpy=True)
+        check_int("DetectorLayout.grid.cols", cols, 1, 64, numpy=True)
+        check_number(
+            "DetectorLayout.grid.pitch_m", pitch_m, 0.0, 1.0, unit="m", lo_open=True, numpy=True
+        )
         xs = (np.arange(cols) - (cols - 1) / 2.0) * pitch_m
         ys = ((rows - 1) / 2.0 - np.arange(rows)) * pitch_m
         return cls(positions_m=tuple((float(x), float(y)) for y in ys for x in xs))
@@ -276,14 +250,14 @@ class FreeformCamera:
     def __post_init__(self) -> None:
         o = "FreeformCamera"
         # > 0: a point detector receives no power; its limit is T / area as area -> 0
-        _check_real(o, "detector_size_m", self.detector_size_m, "m", 0.0, 0.1, lo_open=True)
-        _check_real(o, "mask_size_m", self.mask_size_m, "m", 0.0, 1.0, lo_open=True)
-        _check_real(o, "mask_distance_m", self.mask_distance_m, "m", 0.0, 1.0, lo_open=True)
+        for name, hi in (("detector_size_m", 0.1), ("mask_size_m", 1.0), ("mask_distance_m", 1.0)):
+            value = getattr(self, name)
+            check_number(f"{o}.{name}", value, 0.0, hi, unit="m", lo_open=True, numpy=True)
         res = self.mask_resolution
         if not isinstance(res, tuple | list) or len(res) != 2:
             raise _fail(o, "mask_resolution", res, "texels", "(rows, cols), each in [1, 4096]")
-        rows = _check_int(o, "mask_resolution", res[0], 1, 4096)
-        cols = _check_int(o, "mask_resolution", res[1], 1, 4096)
+        rows = check_int(f"{o}.mask_resolution", res[0], 1, 4096, numpy=True)
+        cols = check_int(f"{o}.mask_resolution", res[1], 1, 4096, numpy=True)
         object.__setattr__(self, "mask_resolution", (rows, cols))
         if not isinstance(self.layout, DetectorLayout):
             raise _fail(o, "layout", self.layout, "", "a DetectorLayout")
@@ -307,8 +281,8 @@ class FreeformCamera:
         tr = self.transmittance_range
         if not isinstance(tr, tuple | list) or len(tr) != 2:
             raise _fail(o, "transmittance_range", tr, "", "(min, max) with 0 <= min < max <= 1")
-        lo = _check_real(o, "transmittance_range", tr[0], "", 0.0, 1.0)
-        hi = _check_real(o, "transmittance_range", tr[1], "", 0.0, 1.0)
+        lo = check_number(f"{o}.transmittance_range", tr[0], 0.0, 1.0, numpy=True)
+        hi = check_number(f"{o}.transmittance_range", tr[1], 0.0, 1.0, numpy=True)
         if not lo < hi:
             raise _fail(o, "transmittance_range", tr, "", "(min, max) with 0 <= min < max <= 1")
         object.__setattr__(self, "transmittance_range", (lo, hi))

@@ -60,6 +60,8 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
+from mincam_render.core.checks import check_number
+
 
 class PerturbationTerm(enum.Enum):
     """One source of error, possibly of several fields (see :data:`TERM_FIELDS`)."""
@@ -113,18 +115,9 @@ def _check_magnitude(owner: str, name: str, value: object) -> float:
     """``value`` as a float in ``[0, bound]`` of :data:`_LIMITS`, else ValueError naming it."""
     unit, bound, open_ = _LIMITS[name]
     setting = name not in MAGNITUDES
-    allowed = f"{'(' if setting else '['}0, {bound:g}{')' if open_ else ']'}"
-    allowed += f" {unit}" if unit else ""
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed a number in {allowed}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(
-            f"{owner}.{name} = {value!r} is invalid: allowed a finite number in {allowed}"
-        )
-    if v < 0 or v > bound or (open_ and v == bound) or (setting and v == 0):
-        raise ValueError(f"{owner}.{name} = {value!r} is invalid: allowed {allowed}")
-    return v
+    return check_number(
+        f"{owner}.{name}", value, 0, bound, unit=unit, lo_open=setting, hi_open=open_, numpy=True
+    )
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -63,6 +63,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mincam_render.core.checks import check_int
+
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
@@ -287,16 +289,8 @@ class SunPatchPathIntegrator:
             raise ValueError(
                 f"sun_patch: max_depth = {max_depth!r}; allowed an integer in [1, 64] or -1"
             )
-        if isinstance(rr_depth, bool) or not isinstance(rr_depth, int) or rr_depth < 1:
-            raise ValueError(f"sun_patch: rr_depth = {rr_depth!r}; allowed an integer >= 1")
-        if (
-            isinstance(patch_vertices, bool)
-            or not isinstance(patch_vertices, int)
-            or patch_vertices < 0
-        ):
-            raise ValueError(
-                f"sun_patch: patch_vertices = {patch_vertices!r}; allowed an integer >= 0"
-            )
+        check_int("sun_patch: rr_depth", rr_depth, 1)
+        check_int("sun_patch: patch_vertices", patch_vertices, 0)
         self.corner_m = corner
         self.edge_u_m = eu
         self.edge_v_m = ev

@@ -49,6 +49,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.backend import use_variant
 from mincam_render.render.mitsuba_scene import SceneInput, load_scene
@@ -475,19 +476,10 @@ def _render(
 
 
 def _check_render_args(spp: int, seed: int, max_depth: int | None, camera: FreeformCamera) -> None:
-    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 24:
-        raise ValueError(
-            f"render_transport: spp = {spp!r} is invalid: allowed an integer in [1, 2^24]"
-        )
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
-        raise ValueError(
-            f"render_transport: seed = {seed!r} is invalid: allowed an integer in [0, 2^63)"
-        )
-    if max_depth is not None and (not isinstance(max_depth, int) or not 1 <= max_depth <= 64):
-        raise ValueError(
-            f"render_transport: max_depth = {max_depth!r} is invalid: allowed None or an "
-            "integer in [1, 64]"
-        )
+    check_int("render_transport: spp", spp, 1, 1 << 24)
+    check_int("render_transport: seed", seed, 0, 2**63, hi_open=True)
+    if max_depth is not None:
+        check_int("render_transport: max_depth", max_depth, 1, 64)
     if not isinstance(camera, FreeformCamera):
         raise ValueError(
             f"render_transport: camera = {camera!r} is invalid: allowed a FreeformCamera"

@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 import mitsuba as mi
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelSpec
 from mincam_render.optics.camera import FreeformCamera
@@ -85,10 +86,8 @@ class SceneFamily(abc.ABC):
     planning_error_scale: ClassVar[str] = "frame"
 
     def __init__(self, config: Any, *, seed: int, num_frames: int) -> None:
-        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise ValueError(f"seed = {seed!r}: allowed an integer >= 0")
-        if isinstance(num_frames, bool) or not isinstance(num_frames, int) or num_frames < 1:
-            raise ValueError(f"num_frames = {num_frames!r}: allowed an integer >= 1")
+        check_int("seed", seed, 0)
+        check_int("num_frames", num_frames, 1)
         self.config = config
         self.seed = seed
         self.num_frames = num_frames

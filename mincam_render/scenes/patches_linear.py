@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.transport import cosine_sampling_fraction
 from mincam_render.scenes.patches import PatchesFamily
@@ -77,11 +78,10 @@ class PlaneGeometry:
                     f"PlaneGeometry.{name} = {getattr(self, name)!r}: allowed 3 finite numbers"
                 )
             object.__setattr__(self, name, tuple(float(x) for x in v))
-        if not (isinstance(self.side_m, int | float) and 0 < self.side_m < 1e6):
-            raise ValueError(f"PlaneGeometry.side_m = {self.side_m!r} m: allowed (0, 1e6)")
-        res = self.resolution
-        if isinstance(res, bool) or not isinstance(res, int | np.integer) or not 1 <= res <= 8192:
-            raise ValueError(f"PlaneGeometry.resolution = {res!r}: allowed an integer in [1, 8192]")
+        check_number(
+            "PlaneGeometry.side_m", self.side_m, 0, 1e6, unit="m", lo_open=True, hi_open=True
+        )
+        check_int("PlaneGeometry.resolution", self.resolution, 1, 8192, numpy=True)
         z = np.subtract(self.facing_m, self.center_m)
         if np.linalg.norm(z) < 1e-12:
             raise ValueError(f"PlaneGeometry.facing_m = {self.facing_m}: must differ from center_m")
@@ -300,10 +300,8 @@ class _OperatorGeometry:
 
 def _check_operator_args(spp: int, seed: int) -> None:
     """Raise ``ValueError`` naming ``spp`` or ``seed`` of :func:`build_plane_transport`."""
-    if isinstance(spp, bool) or not isinstance(spp, int) or not 1 <= spp <= 1 << 20:
-        raise ValueError(f"build_plane_transport: spp = {spp!r}: allowed an integer in [1, 2^20]")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"build_plane_transport: seed = {seed!r}: allowed an integer >= 0")
+    check_int("build_plane_transport: spp", spp, 1, 1 << 20)
+    check_int("build_plane_transport: seed", seed, 0)
 
 
 def _sample_points(

@@ -138,6 +138,8 @@ def test_episodes_render_the_mask_resolution_the_finest_baseline_needs():
     assert {r.mask_res for r in episode_requests(ComparisonConfig()).values()} == {None}
     with pytest.raises(ValueError, match="64x64 baseline needs at least 64 texels"):
         ComparisonConfig(designs=designs, mask_res=32)
+    with pytest.raises(ValueError, match="mask_res = 0: allowed an integer"):
+        ComparisonConfig(mask_res=0)
 
 
 @pytest.mark.parametrize(

@@ -9,7 +9,7 @@ import pytest
 from support import linear_task
 
 from mincam_render.analysis.privacy import attacks, decoders
-from mincam_render.analysis.privacy.config import AttackConfig
+from mincam_render.analysis.privacy.config import ROSTER_OVERRIDES, AttackConfig, default_comparison
 from mincam_render.analysis.privacy.curve import corner_verdicts
 from mincam_render.analysis.privacy.metrics import (
     display,
@@ -388,3 +388,18 @@ def test_examples_round_trip_with_backgrounds_and_masks(rng, tmp_path):
         np.testing.assert_array_equal(saved["mask"], ep.mask[frames])
         assert saved["designs"].tolist() == ["mincam-2px", "baseline-2x2"]
         np.testing.assert_array_equal(saved["recon"][1], ep.background[frames])
+
+
+def test_audit_designs_follow_the_render_size():
+    default = default_comparison()
+    # the kept audit's episodes and designs: unchanged by the size options
+    assert default.overrides == ROSTER_OVERRIDES and default.mask_res is None
+    assert [d.name for d in default.designs] == [
+        "mincam-1px", "mincam-2px", "mincam-4px", "mincam-8px", "mincam-8px-private1",
+        "baseline-2x2", "baseline-4x4", "baseline-8x8", "baseline-16x16", "baseline-32x32",
+    ]  # fmt: skip
+    large = default_comparison(16, 64)
+    names = [d.name for d in large.designs]
+    assert {"mincam-16px", "baseline-64x64", "mincam-8px-private1"} <= set(names)
+    assert large.mask_res == 64 and large.overrides["camera"] == {"detectors": 16}
+    assert large.overrides["people"] == ROSTER_OVERRIDES["people"]

@@ -209,8 +209,8 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
-        (("pipeline",), [], ComparisonConfig, 11),
-        (("study",), ["--out", "o"], ComparisonConfig, 11),
+        (("pipeline",), [], ComparisonConfig, 12),
+        (("study",), ["--out", "o"], ComparisonConfig, 12),
     ],
 )
 def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(

@@ -406,7 +406,7 @@ def test_the_plan_reports_each_detectors_error_against_the_reference(variant):
 def test_ray_ships_the_package_root_to_its_workers():
     """Ray imports a shipped directory under its own name: it must be mincam_render/."""
     import mincam_render
-    from mincam_render.data.render_job.executors import ray_runtime_env
+    from mincam_render.data.ray_cluster import ray_runtime_env
 
     (shipped,) = ray_runtime_env()["py_modules"]
     assert Path(shipped) == Path(mincam_render.__file__).resolve().parent

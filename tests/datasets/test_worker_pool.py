@@ -103,3 +103,27 @@ def test_the_stall_bound_is_a_multiple_of_the_slowest_task_above_the_floor():
     assert info.value.tasks == ["a", "b"]
     watch.report()  # progress resets the clock
     watch.check(["a"])
+
+
+def test_a_worker_that_dies_while_starting_is_named_instead_of_blocking_on_its_arguments(
+    tmp_path, monkeypatch
+):
+    """Regression: spawn's start-up pipe blocked for ever on large arguments of a dead worker.
+
+    The worker's task function lives in a module that ends any process importing it
+    as a spawned child, so the worker dies before it reads its initializer's 8 MB.
+    """
+    (tmp_path / "dies_when_spawned.py").write_text(
+        "import multiprocessing, os\n"
+        "if multiprocessing.current_process().name != 'MainProcess':\n"
+        "    os._exit(5)\n"
+        "def task(t, *, on_progress):\n"
+        "    return t\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    from dies_when_spawned import task
+
+    t0 = time.monotonic()
+    with pytest.raises(WorkerDied, match=r"exit code 5\) while starting"):
+        _run(task, range(2), context="spawn", initializer=len, initargs=(b"x" * (8 << 20),))
+    assert time.monotonic() - t0 < 60

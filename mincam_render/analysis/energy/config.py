@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from mincam_render.core.checks import check_number
 from mincam_render.core.config import ConfigError, load_toml, spec
 
 #: The shipped description (``scenes/energy.toml`` at the repository root).
@@ -31,16 +32,13 @@ def check_ranges(obj: object) -> None:
         obj: a dataclass instance whose fields carry ``spec`` metadata.
 
     Raises:
-        ValueError: ``"<field> = <value> <unit>: allowed range [lo, hi]"``.
+        ValueError: ``"<field> = <value>: allowed a number in [lo, hi] <unit>"``.
     """
     for f in dataclasses.fields(obj):  # type: ignore[arg-type]
         rng, unit = f.metadata.get("range"), f.metadata.get("unit", "")
         value = getattr(obj, f.name)
-        if rng is None or isinstance(value, bool) or not isinstance(value, int | float):
-            continue
-        lo, hi = rng
-        if value != value or (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise ValueError(f"{f.name} = {value!r} {unit}: allowed range [{lo}, {hi}]".strip())
+        if rng is not None and isinstance(value, int | float) and not isinstance(value, bool):
+            check_number(f.name, value, *rng, unit=unit)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -321,8 +319,6 @@ class ScheduleConfig:
         check_ranges(self)
         if abs(24 * 60 / self.step_min - round(24 * 60 / self.step_min)) > 1e-9:
             raise ValueError(f"step_min = {self.step_min!r} min: must divide 24 h evenly")
-        if self.overcast is not None and not 0.0 <= self.overcast <= 1.0:
-            raise ValueError(f"overcast = {self.overcast!r}: allowed range [0, 1]")
 
     def hours_on(self, name: str) -> tuple[float, float]:
         """``(on_hour, off_hour)`` of light ``name``."""

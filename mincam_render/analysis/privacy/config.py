@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import TrainConfig
 
 #: The workspace with a roster of six people (max six present, so each has a look).
@@ -26,20 +27,26 @@ AUDIT_FIDELITY = {
 AUDIT_PRIVACY_WEIGHT = 1.0
 
 
-def default_designs() -> tuple[Design, ...]:
-    """Minimalist cameras of 1, 2, 4, 8 px, 8 px with the privacy term, baselines 2x2 .. 32x32.
+def default_designs(detectors: int = 8, texels: int = 32) -> tuple[Design, ...]:
+    """The audit's designs for a render of ``detectors`` at ``texels`` texels per side.
 
-    The workspace renders 8 detectors at 32 x 32 texels: no 16 px design and no
-    64 x 64 baseline without a larger render.
+    Minimalist cameras of 1, 2, 4, ... ``detectors`` px, 8 px (or the largest, if
+    fewer) also with the privacy term, and baselines 2x2, 4x4, ... ``texels`` x
+    ``texels``.
+
+    The default render (8 detectors at 32 x 32 texels) gives mincam 1-8 px and
+    baselines up to 32 x 32; 16 detectors at 64 texels add 16 px and 64 x 64.
     """
+    pixels = [2**i for i in range(detectors.bit_length()) if 2**i <= detectors]
+    grids = [2**i for i in range(1, texels.bit_length()) if 2**i <= texels]
     return (
-        *(Design(pixels=k) for k in (1, 2, 4, 8)),
-        Design(pixels=8, privacy_weight=AUDIT_PRIVACY_WEIGHT),
-        *(Design(grid=(g, g)) for g in (2, 4, 8, 16, 32)),
+        *(Design(pixels=k) for k in pixels),
+        Design(pixels=min(8, pixels[-1]), privacy_weight=AUDIT_PRIVACY_WEIGHT),
+        *(Design(grid=(g, g)) for g in grids),
     )
 
 
-def default_comparison() -> ComparisonConfig:
+def default_comparison(detectors: int = 8, texels: int = 32) -> ComparisonConfig:
     """The audit's episodes and task training: the workspace at 1 fps with a roster.
 
     Sized for a shared 2-core machine: 2 task seeds of at most 1,000 steps per
@@ -47,21 +54,28 @@ def default_comparison() -> ComparisonConfig:
 
     1 fps spreads 300 frames over 5 minutes of office activity (a few visits
     of each person per episode); the task is the workspace's (people count RMSE).
+    ``detectors`` and ``texels`` (mask texels per side) size the render and so
+    the designs (:func:`default_designs`); at 16 and 64 the render costs about
+    8 times the default's.
     """
+    overrides = dict(ROSTER_OVERRIDES)
+    if detectors != 8:
+        overrides["camera"] = {"detectors": detectors}
     return ComparisonConfig(
         family="workspace",
         seed=0,
         fps=1.0,
-        overrides=ROSTER_OVERRIDES,
+        overrides=overrides,
         train_episodes=3,
         train_frames=300,
         val_frames=200,
         test_frames=200,
         test_episodes=3,
         seeds=2,
-        designs=default_designs(),
+        designs=default_designs(detectors, texels),
         train=TrainConfig(max_steps=1000),
         fidelity=AUDIT_FIDELITY,
+        mask_res=None if texels == 32 else texels,
     )
 
 
@@ -106,11 +120,8 @@ class AttackConfig:
             ("eval_every", 1),
             ("examples", 0),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-                raise ValueError(f"AttackConfig.{name} = {v!r}: allowed an integer >= {lo}")
-        if not 0 < self.lr < 1:
-            raise ValueError(f"AttackConfig.lr = {self.lr!r}: allowed (0, 1)")
+            check_int(f"AttackConfig.{name}", getattr(self, name), lo)
+        check_number("AttackConfig.lr", self.lr, 0, 1, lo_open=True, hi_open=True, numpy=True)
 
 
 @dataclass(frozen=True, kw_only=True)

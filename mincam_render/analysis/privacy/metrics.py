@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mincam_render.core.checks import check_int, check_number
+
 #: Display gamma of the views the attacker reconstructs (sRGB-like).
 DISPLAY_GAMMA = 2.2
 #: Percentile of the training views' radiance mapped to white.
@@ -83,10 +85,8 @@ def foreground_mask(
     from skimage.morphology import remove_small_objects
 
     t, b = _frames(true, background, "background")
-    if not 0.0 <= threshold < 1.0:
-        raise ValueError(f"threshold = {threshold!r}: allowed [0, 1) (display units)")
-    if isinstance(speck_px, bool) or not isinstance(speck_px, int) or speck_px < 0:
-        raise ValueError(f"speck_px = {speck_px!r}: allowed an integer >= 0 (pixels)")
+    check_number("threshold", threshold, 0, 1, hi_open=True, unit="(display units)", numpy=True)
+    check_int("speck_px", speck_px, 0, unit="px")
     mask = np.abs(t - b) > threshold
     if speck_px:
         mask = np.stack([remove_small_objects(m, max_size=speck_px, connectivity=2) for m in mask])

@@ -341,9 +341,19 @@ def _prior_record(
 
 
 def analyze_privacy(
-    cfg: PrivacyConfig, out_dir: str | os.PathLike, *, workers: int = 2, progress: bool = False
+    cfg: PrivacyConfig,
+    out_dir: str | os.PathLike,
+    *,
+    workers: int = 2,
+    train_workers: int = 1,
+    ray_address: str | None = None,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Run the audit (module docstring) into ``out_dir``; ``privacy.json``'s contents.
+
+    ``workers``, ``train_workers`` and ``ray_address``: where episodes render and
+    the task's runs train (:func:`~mincam_render.analysis.comparison.run_comparison`);
+    the attacks train in this process.
 
     Writes ``out_dir/privacy.json`` and ``out_dir/examples.npz`` (true test views,
     their backgrounds and foreground masks, and each design's reconstructions of
@@ -354,7 +364,14 @@ def analyze_privacy(
     from mincam_render.analysis.comparison import render_episodes, run_comparison
 
     out = Path(out_dir)
-    result = run_comparison(cfg.comparison, out, workers=workers, progress=progress)
+    result = run_comparison(
+        cfg.comparison,
+        out,
+        workers=workers,
+        train_workers=train_workers,
+        ray_address=ray_address,
+        progress=progress,
+    )
     data = render_episodes(cfg.comparison, out / "episodes", workers=workers, progress=False)
     paths = {k: v["dataset"] for k, v in result["episodes"].items()}
     episodes = load_episodes(paths, out / "views", cfg, progress)

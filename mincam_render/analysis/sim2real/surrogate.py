@@ -29,6 +29,7 @@ from mincam_render.analysis.sim2real.recording import (
     write_recording,
 )
 from mincam_render.analysis.sim2real.simulation import simulate_volts
+from mincam_render.core.checks import check_number
 from mincam_render.core.seeds import stream_seed
 
 if TYPE_CHECKING:
@@ -80,13 +81,8 @@ class SurrogatePerturbations:
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, bool):
-                continue
-            if not isinstance(v, int | float) or not math.isfinite(v) or v < 0:
-                raise ValueError(
-                    f"SurrogatePerturbations.{f.name} = {v!r} is invalid: allowed a finite "
-                    "number >= 0"
-                )
+            if not isinstance(v, bool):  # the switches
+                check_number(f"SurrogatePerturbations.{f.name}", v, 0)
         if self.printer_gamma <= 0:
             raise ValueError("SurrogatePerturbations.printer_gamma must be > 0")
         if self.dot_gain >= 1:

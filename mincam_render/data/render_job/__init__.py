@@ -31,7 +31,6 @@ from mincam_render.data.render_job.backgrounds import background_keys, render_ba
 from mincam_render.data.render_job.executors import (
     POOL_BREAK_EVEN_S,
     RenderError,
-    _threads_per_worker,
 )
 from mincam_render.data.render_job.job import RenderSummary, render_dataset
 from mincam_render.data.render_job.planning import _describe_family, package_versions, plan_render
@@ -48,7 +47,6 @@ __all__ = [
     "_describe_family",
     "_load_family",
     "_render_camera",
-    "_threads_per_worker",
     "_worker_init",
     "background_keys",
     "package_versions",

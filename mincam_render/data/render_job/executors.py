@@ -13,9 +13,7 @@ import logging
 import os
 import time
 from collections.abc import Callable
-from pathlib import Path
-from types import ModuleType
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 from mincam_render.data.render_job.shards import _worker_init, render_shard
 
@@ -79,11 +77,6 @@ def _first_shard_then_choose(
     return workers, rest
 
 
-def _threads_per_worker(workers: int) -> int:
-    cores = os.cpu_count() or 1
-    return max(1, cores // max(1, workers))
-
-
 def _run_processes(
     job: dict,
     todo: list[int],
@@ -93,7 +86,7 @@ def _run_processes(
     bar: tqdm | None,
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
-    from mincam_render.data.worker_pool import PoolError, run_tasks
+    from mincam_render.data.worker_pool import PoolError, run_tasks, threads_per_worker
 
     workers = min(workers, len(todo))  # and the cores go to the workers that run
     try:
@@ -105,7 +98,7 @@ def _run_processes(
             workers=workers,
             tasks_per_worker=shards_per_worker,
             initializer=_worker_init,
-            initargs=(_threads_per_worker(workers), os.getpid()),
+            initargs=(threads_per_worker(workers), os.getpid()),
             on_progress=None if bar is None else lambda shard, n: bar.update(n),
         )
     except PoolError as err:
@@ -123,79 +116,19 @@ def _run_ray(
     shards_per_worker: int,
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
+    from mincam_render.data.ray_cluster import RayError, collect, ray_session
+
     try:
-        import ray
-    except ImportError:
-        raise RenderError(
-            "--ray needs the optional dependency ray: pip install 'mincam_render[ray]'"
-        ) from None
-    started = _ray_init(ray, address)
-    try:
-        cpus = int(ray.cluster_resources().get("CPU", 1))
-        # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
-        task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
-        job_ref = ray.put(job)
-        shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i)): i for i in todo}
-        log.info("Ray: %d shard tasks on %d CPUs", len(shard_of), cpus)
-        _collect_ray(ray, shard_of, finish)
-    finally:
-        if started:
-            ray.shutdown()
-
-
-def ray_runtime_env() -> dict[str, Any]:
-    """Ray's ``runtime_env`` that ships this package to the workers.
-
-    Other nodes may not have it installed. Ray makes a shipped directory
-    importable as the module named after it, so the directory is the package
-    root ``mincam_render/`` (it shipped ``mincam_render/data``, which made only a
-    module named ``data`` importable there).
-    """
-    return {"py_modules": [str(Path(__file__).resolve().parents[2])], "excludes": ["__pycache__"]}
-
-
-def _ray_init(ray: ModuleType, address: str) -> bool:
-    """Connect to (or, ``"local"``, start) the Ray cluster; whether Ray was started here."""
-    init_kwargs: dict[str, Any] = {
-        "ignore_reinit_error": True,
-        "log_to_driver": False,
-        "include_dashboard": False,
-        "runtime_env": ray_runtime_env(),
-    }
-    if address != "local":
-        init_kwargs["address"] = address
-    started = not ray.is_initialized()
-    try:
-        ray.init(**init_kwargs)
-    except Exception as err:  # ray raises ConnectionError, RuntimeError, ValueError ...
-        raise RenderError(f"could not connect to Ray at {address!r}: {err}") from None
-    return started
-
-
-def _collect_ray(ray: ModuleType, shard_of: dict, finish: Callable[[tuple, bool], None]) -> None:
-    """Hand each task's result to ``finish`` as it arrives; cancel all if one stalls."""
-    from mincam_render.data.worker_pool import POLL_S, StallWatch, WorkerStalled
-
-    pending = list(shard_of)
-    # tasks wait for a CPU, so the time between two results stands for a task's
-    watch, last_s = StallWatch(), time.monotonic()
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1, timeout=POLL_S)
-        if not done:
-            try:
-                watch.check(sorted(shard_of[r] for r in pending))
-            except WorkerStalled as err:
-                for ref in pending:
-                    ray.cancel(ref, force=True)
-                raise RenderError(f"Ray: {err}; run the same command again to resume") from None
-            continue
-        try:
-            result = ray.get(done[0])
-        except Exception as err:
-            raise RenderError(f"a Ray render task failed: {err}") from None
-        watch.report(time.monotonic() - last_s)
-        last_s = time.monotonic()
-        finish(result, False)
+        with ray_session(address) as ray:
+            cpus = int(ray.cluster_resources().get("CPU", 1))
+            # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
+            task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
+            job_ref = ray.put(job)
+            shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i)): i for i in todo}
+            log.info("Ray: %d shard tasks on %d CPUs", len(shard_of), cpus)
+            collect(ray, shard_of, lambda shard, result: finish(result, False), what="shard")
+    except RayError as err:
+        raise RenderError(str(err)) from None
 
 
 def _ray_render_shard(

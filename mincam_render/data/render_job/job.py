@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mincam_render.core.checks import check_int
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.backgrounds import _shard_backgrounds
 from mincam_render.data.render_job.executors import (
@@ -103,12 +104,9 @@ def render_dataset(
 
 def _check_executor_args(workers: int | None, shards_per_worker: int) -> None:
     """Raise ``ValueError`` for a ``workers`` or ``shards_per_worker`` out of range."""
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or not 0 <= workers <= 256
-    ):
-        raise ValueError(f"workers = {workers!r}: allowed None (auto) or an integer in [0, 256]")
-    if not isinstance(shards_per_worker, int) or shards_per_worker < 1:
-        raise ValueError(f"shards_per_worker = {shards_per_worker!r}: allowed an integer >= 1")
+    if workers is not None:  # None: auto
+        check_int("workers", workers, 0, 256)
+    check_int("shards_per_worker", shards_per_worker, 1)
 
 
 def _prepare(

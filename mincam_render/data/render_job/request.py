@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass
-from typing import Any
 
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.data import dataset as ds
 from mincam_render.render import precision
 from mincam_render.render.fidelity import Fidelity
@@ -71,32 +71,21 @@ class RenderRequest:
                 f"RenderRequest.{name} = {getattr(self, name)!r} is invalid: allowed {allowed}"
             )
 
-        def is_int(v: Any) -> bool:
-            return isinstance(v, int) and not isinstance(v, bool)
-
-        if not is_int(self.num_frames) or self.num_frames < 1:
-            raise bad("num_frames", "an integer >= 1")
-        if not is_int(self.seed) or not 0 <= self.seed < 2**63:
-            raise bad("seed", "an integer in [0, 2^63)")
-        if not is_int(self.shard_frames) or not 1 <= self.shard_frames <= 1 << 20:
-            raise bad("shard_frames", "an integer in [1, 2^20]")
+        check_int("RenderRequest.num_frames", self.num_frames, 1)
+        check_int("RenderRequest.seed", self.seed, 0, 2**63, hi_open=True)
+        check_int("RenderRequest.shard_frames", self.shard_frames, 1, 1 << 20)
         ds.split_ranges(self.num_frames, self.splits)
         object.__setattr__(self, "splits", tuple(float(f) for f in self.splits))
         object.__setattr__(self, "fidelity", Fidelity(self.fidelity))
-        if self.spp is not None and (not is_int(self.spp) or not 1 <= self.spp <= 1 << 20):
-            raise bad("spp", "None or an integer in [1, 2^20]")
-        if self.max_depth is not None and (
-            not is_int(self.max_depth) or not 0 <= self.max_depth <= 64
+        # None: decided later (mask_res: the family camera's); max_depth 0: the scene's integrator
+        for name, low, high in (
+            ("spp", 1, 1 << 20),
+            ("max_depth", 0, 64),
+            ("mask_res", 1, 4096),
+            ("background_spp", 1, 1 << 20),
         ):
-            raise bad("max_depth", "None, 0 (scene integrator) or an integer in [1, 64]")
-        if self.mask_res is not None and (
-            not is_int(self.mask_res) or not 1 <= self.mask_res <= 4096
-        ):
-            raise bad("mask_res", "None or an integer in [1, 4096]")
-        if self.background_spp is not None and (
-            not is_int(self.background_spp) or not 1 <= self.background_spp <= 1 << 20
-        ):
-            raise bad("background_spp", "None or an integer in [1, 2^20]")
+            if getattr(self, name) is not None:
+                check_int(f"RenderRequest.{name}", getattr(self, name), low, high)
         for name in ("differential", "shared_difference"):
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise bad(name, "None, True or False")
@@ -109,9 +98,7 @@ class RenderRequest:
             ("parallax_fraction", 0.0, 100.0),
             ("background_interval_s", 1e-3, 1e6),
         ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int | float) or not lo <= v <= hi:
-                raise bad(name, f"a number in [{lo:g}, {hi:g}]")
+            check_number(f"RenderRequest.{name}", getattr(self, name), lo, hi)
 
     def identity(self, description: dict) -> dict:
         """JSON-ready identity: the request with the *resolved* scene description.

@@ -57,6 +57,7 @@ import enum
 import logging
 from typing import TYPE_CHECKING, Any, Protocol
 
+from mincam_render.core.checks import check_int
 from mincam_render.render.fidelity.check import Draft, check_against_reference
 from mincam_render.render.fidelity.differential_choice import decide_differential
 from mincam_render.render.fidelity.knobs import (
@@ -122,9 +123,7 @@ class FidelityPlan:
 
     def __post_init__(self) -> None:
         for name, low in (("spp", 1), ("max_depth", 0), ("mask_resolution", 1)):
-            value = getattr(self, name)
-            if not isinstance(value, int) or isinstance(value, bool) or value < low:
-                raise ValueError(f"{name} = {value!r}: allowed an integer >= {low}")
+            check_int(name, getattr(self, name), low)
         if self.dtype not in DTYPES:
             raise ValueError(f"dtype = {self.dtype!r}: allowed one of {DTYPES}")
 
