@@ -20,18 +20,13 @@ composition (:func:`~mincam_render.optics.fabrication.fabricated_transmittance`)
 at a random draw. The perturbation model is the default one, camera pose error
 included.
 
-The ``terms`` block breaks the robust step's added time down (1 and 16 pixels,
-batch 64): the nominal step interleaved with a zero draw (the draw and its
-bookkeeping, every step skipped), each term alone at its default half-range,
-and all terms; ms per step over the nominal one (medians).
-
 Robust validation (``TrainConfig.robust_validation_draws``, default 8) costs
 per evaluation, not per step: the ``validation`` block times a nominal
 evaluation (:func:`~mincam_render.learn.evaluation.predict` of 2,048 samples,
 8 pixels) and the mean loss under the default draws, median of ``repeats``,
 and their cost per 100 steps (``TrainConfig.eval_every``) of robust training
 at batch 64. Writes ``benchmarks/results/robust_train.json`` (machine, git
-revision, rows, ratios, the worst ratio, terms, validation).
+revision, rows, ratios, the worst ratio, validation).
 
 Usage (from a clean tree):
     flock /tmp/mincam_bench.lock python benchmarks/bench_robust_train.py \
@@ -58,19 +53,13 @@ from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.evaluation import mean_loss_under  # noqa: E402
 from mincam_render.learn.step import validation_draws  # noqa: E402
 from mincam_render.optics.fabrication import fabricated_transmittance  # noqa: E402
-from mincam_render.optics.perturbation import (  # noqa: E402
-    PerturbationDraw,
-    PerturbationModel,
-    PerturbationTerm,
-)
+from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel  # noqa: E402
 
 OUT = Path(__file__).parent / "results" / "robust_train.json"
 #: Chunks per repeat, alternating nominal and robust.
 CHUNKS = 10
 #: The issue's budget: robust steps at most this many times slower.
 BUDGET = 2.0
-#: Pixel counts (batch 64) of the per-term breakdown.
-TERM_ROWS = (1, 16)
 
 
 def check_zero_draw_is_nominal(data: tr.TrainingData, pixels: int) -> None:
@@ -98,22 +87,14 @@ def check_fused_is_reference(data: tr.TrainingData, pixels: int) -> None:
         raise SystemExit("the fused mask plane differs from the reference: the benchmark would lie")
 
 
-def interleaved_rates(
-    data: tr.TrainingData,
-    pixels: int,
-    batch: int,
-    steps: int,
-    repeats: int,
-    perturbations: dict[str, PerturbationModel | None],
-) -> dict[str, list[float]]:
-    """Samples/s of training steps under each perturbation (None: nominal), per repeat.
-
-    Chunks of steps alternate between the perturbations, so that a burst of
-    load on the shared machine hits them all.
-    """
+def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repeats: int) -> dict:
+    """Samples/s of nominal and robust training steps (median of ``repeats``) and the ratio."""
+    check_zero_draw_is_nominal(data, pixels)
+    check_fused_is_reference(data, pixels)
     config = tr.TrainConfig(batch_size=batch)
+    perturbation = PerturbationModel()
     runs = {}
-    for name, pert in perturbations.items():
+    for name, pert in (("nominal", None), ("robust", perturbation)):
         model = tr.build_mincam(data, pixels)
         opt = tr.build_optimizer(model, config)
         src = tr.DatasetBatches(data, batch)
@@ -136,18 +117,6 @@ def interleaved_rates(
                 seconds[name] += time.perf_counter() - t0
         for name in runs:
             rates[name].append(CHUNKS * chunk * batch / seconds[name])
-    return rates
-
-
-def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repeats: int) -> dict:
-    """Samples/s of nominal and robust training steps (median of ``repeats``) and the ratio."""
-    check_zero_draw_is_nominal(data, pixels)
-    check_fused_is_reference(data, pixels)
-    perturbations: dict[str, PerturbationModel | None] = {
-        "nominal": None,
-        "robust": PerturbationModel(),
-    }
-    rates = interleaved_rates(data, pixels, batch, steps, repeats, perturbations)
     med = {name: statistics.median(v) for name, v in rates.items()}
     return {
         "pixels": pixels,
@@ -155,30 +124,8 @@ def measure_row(data: tr.TrainingData, pixels: int, batch: int, steps: int, repe
         "batch_size": batch,
         "nominal_samples_per_s": {"median": med["nominal"], "all": rates["nominal"]},
         "robust_samples_per_s": {"median": med["robust"], "all": rates["robust"]},
-        "ms_per_step": {n: 1e3 * batch / med[n] for n in rates},
+        "ms_per_step": {n: 1e3 * batch / med[n] for n in runs},
         "slowdown_robust_over_nominal": med["nominal"] / med["robust"],
-    }
-
-
-def measure_terms(data: tr.TrainingData, pixels: int, batch: int, steps: int, repeats: int) -> dict:
-    """Ms per step a robust step adds over the nominal one, one term at a time (medians).
-
-    ``draw``: the zero model (a draw, every step skipped); each term alone (the
-    default model's half-range); ``all``: the default model.
-    """
-    perturbations: dict[str, PerturbationModel | None] = {
-        "nominal": None,
-        "draw": PerturbationModel.zero(),
-        **{t.value: PerturbationModel().only(t) for t in PerturbationTerm},
-        "all": PerturbationModel(),
-    }
-    rates = interleaved_rates(data, pixels, batch, steps, repeats, perturbations)
-    ms = {name: 1e3 * batch / statistics.median(v) for name, v in rates.items()}
-    return {
-        "pixels": pixels,
-        "batch_size": batch,
-        "nominal_ms_per_step": ms["nominal"],
-        "added_ms_per_step": {n: v - ms["nominal"] for n, v in ms.items() if n != "nominal"},
     }
 
 
@@ -231,12 +178,6 @@ def main() -> None:
                 f"robust {r['ms_per_step']['robust']:.2f} ms per step, "
                 f"slowdown {r['slowdown_robust_over_nominal']:.2f}x"
             )
-    terms = []
-    for pixels in TERM_ROWS:
-        t = measure_terms(random_data(pixels, 32, 2048), pixels, 64, args.steps, args.repeats)
-        terms.append(t)
-        added = ", ".join(f"{n} {v:+.2f}" for n, v in t["added_ms_per_step"].items())
-        print(f"K={pixels:2d} batch= 64, ms added per step: {added}")
     val = measure_validation(random_data(8, 32, 2048), 8, args.repeats)
     print(
         f"validation, 8 px, {val['samples']} samples: nominal {val['nominal_evaluation_s']:.2f} s, "
@@ -254,7 +195,6 @@ def main() -> None:
         "worst_slowdown": worst,
         "budget": BUDGET,
         "within_budget": worst <= BUDGET,
-        "terms": terms,
         "validation": val,
     }
     print(
