@@ -427,19 +427,29 @@ def _run_comparison(
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
-        result["masks"] = {
-            d.name: _keep_masks(
-                runs[d.name],
-                designs[d.name],
-                result["episodes"],
-                Path(masks_dir) / task / d.name,
-                task,
-            )
-            for d in cfg.designs
-            if d.is_mincam
-        }
+        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / task)
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     return result
+
+
+def _keep_all_masks(
+    cfg: ComparisonConfig,
+    runs: Mapping[str, list[dict[str, Any]]],
+    result: Mapping[str, Any],
+    task_dir: Path,
+) -> dict[str, Any]:
+    """Every minimalist design's best masks into ``task_dir/<design>/``; their records."""
+    return {
+        d.name: _keep_masks(
+            runs[d.name],
+            result["designs"][d.name],
+            result["episodes"],
+            task_dir / d.name,
+            result["task"],
+        )
+        for d in cfg.designs
+        if d.is_mincam
+    }
 
 
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
