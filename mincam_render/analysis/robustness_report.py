@@ -139,8 +139,9 @@ def write_robustness_report(
         f"Each perturbation alone, and all at once, at {', '.join(f'{v:g}' for v in cfg['levels'])}"
         f" x its default range; {cfg['draws']} built cameras drawn per level (the same draws "
         "for every design), task error pooled over the test episodes; intervals resample "
-        "runs and draws. Camera pose error is not modelled (it needs transport rendered "
-        "under jittered poses)."
+        "runs and draws. Camera pose error is approximated in the mask plane "
+        "(mincam_render.optics.pose: exact for orientation, for position at the "
+        "model's pose depth; measured against re-renders by bench_pose_error.py)."
     )
     for note in notes:
         page.paragraph(note)
