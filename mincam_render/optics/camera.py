@@ -51,13 +51,19 @@ def _fail(owner: str, name: str, value: object, unit: str, allowed: str) -> Valu
     return ValueError(f"{owner}.{name} = {value!r}{unit_txt} is invalid: allowed {allowed}")
 
 
+#: Largest coordinate of a camera point or direction (m): scenes are rooms and
+#: streets; beyond this, lengths of the camera's vectors overflow float64 sums.
+MAX_COORD_M = 1e6
+
+
 def _check_vec3(owner: str, name: str, value: object) -> tuple[float, float, float]:
+    expected = f"3 finite numbers (x, y, z), each within ±{MAX_COORD_M:g}"
     try:
         arr = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise _fail(owner, name, value, "m", "3 finite numbers (x, y, z)") from None
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise _fail(owner, name, value, "m", "3 finite numbers (x, y, z)")
+        raise _fail(owner, name, value, "m", expected) from None
+    if arr.shape != (3,) or not np.all(np.abs(arr) <= MAX_COORD_M):
+        raise _fail(owner, name, value, "m", expected)
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 

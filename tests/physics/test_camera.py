@@ -59,6 +59,8 @@ BAD_FIELDS = [
     ("mask_resolution", (32.5, 32), "mask_resolution"),
     ("position", (0, 0), "position"),
     ("look_at", (0, 0, 0), "look_at"),
+    ("position", (1e300, 0, 0), "position"),  # its distance to look_at would overflow
+    ("look_at", (0, 0, -2e6), "look_at"),
     ("up", (0, 0, 1), "up"),
     ("transmittance_range", (0.7, 0.1), "transmittance_range"),
     ("transmittance_range", (0.0, 1.5), "transmittance_range"),
@@ -112,6 +114,11 @@ def test_directional_response_interpolates():
     np.testing.assert_allclose(resp(np.radians([0, 15, 60, 90])), [1.0, 0.9, 0.5, 0.2])
     table = resp.uniform_table(181)
     assert table[30 * 2] == pytest.approx(0.8) and table.dtype == np.float32
+
+
+def test_camera_at_the_coordinate_bound_keeps_a_unit_frame():
+    cam = FreeformCamera(position=(1e6, 0, 0), look_at=(-1e6, 0, 0), up=(0, 1e6, 0))
+    np.testing.assert_allclose(np.linalg.norm(cam.frame, axis=1), 1.0, rtol=1e-12)
 
 
 def test_camera_is_frozen_and_serialisable():
