@@ -62,7 +62,10 @@ KINDS = ("nominal", "robust")
 #: Scene family of each task (the main job's sizes otherwise). Lighting uses the
 #: toggling room of ``study_lighting`` so that each 5-minute test episode visits
 #: most of the 32 light states.
-TASKS = {"workspace": "workspace", "lighting": "lighting_toggling"}
+TASKS = {
+    "workspace": "workspace",
+    "lighting": str(Path(__file__).resolve().parents[1] / "scenes" / "lighting_toggling.toml"),
+}
 
 
 def in_memory(data: tr.TrainingData) -> tr.TrainingData:
