@@ -14,7 +14,10 @@ The figure of a level is the relative error increase over the design's nominal
 error, ``error / nominal - 1``, averaged over draws (and over training seeds
 when several runs are pooled with :func:`pool_curves`), with a 95 % bootstrap
 interval that resamples runs and draws
-(:func:`~mincam_render.analysis.statistics.bootstrap_interval`). A term's
+(:func:`~mincam_render.analysis.statistics.bootstrap_interval`). Beside it, each
+level holds the error itself (``mean_error``, ``ci95_error``: each run's nominal
+error times one plus its increase), so that a design that loses little because
+it learned little is not mistaken for a better built camera. A term's
 **tolerance** is the largest magnitude at which the mean increase stays within
 ``allowed_increase`` (10 %), interpolated linearly between levels; it is
 written as a fabrication spec (:func:`fabrication_spec`).
@@ -96,7 +99,15 @@ def pooled_error(model: MincamCamera, tests: Mapping[str, TrainingData], draw: A
     """The task error over every test episode (RMSE pooled over frames, rates averaged)."""
     from mincam_render.learn.evaluation import evaluate
 
-    res = [evaluate(model, d, draw=draw) for d in tests.values()]
+    return pool_episode_metrics([evaluate(model, d, draw=draw) for d in tests.values()])
+
+
+def pool_episode_metrics(res: Sequence[Mapping[str, Any]]) -> float:
+    """One error from per-episode metrics (``error``, ``samples``, ``error_name``).
+
+    RMSE is pooled over samples (the root of the sample-weighted mean square);
+    rates are sample-weighted means.
+    """
     n = np.array([r["samples"] for r in res], np.float64)
     e = np.array([r["error"] for r in res], np.float64)
     if res[0]["error_name"].endswith("RMSE"):
@@ -170,21 +181,22 @@ def design_record(
         config: the measurement's configuration.
 
     """
+    nominal = np.asarray(nominal_errors, np.float64)
     curves = {}
     for curve in CURVES:
         levels = []
         for i, level in enumerate(config.levels):
             per_run = np.array([run[i] for run in increases[curve]], np.float64)
-            ci = bootstrap_interval(
-                EpisodeErrors(error=per_run, frames=np.ones(per_run.shape[1]), pooling="mean"),
-                seed=config.seed,
-            )
+            ci = _draw_interval(per_run, config.seed)
+            absolute = _draw_interval(nominal[:, None] * (1.0 + per_run), config.seed)
             levels.append(
                 {
                     "level": level,
                     "draws": int(per_run.shape[1]),
                     "mean_increase": ci.mean,
                     "ci95_increase": [ci.low, ci.high],
+                    "mean_error": absolute.mean,
+                    "ci95_error": [absolute.low, absolute.high],
                     "increases": per_run.tolist(),
                 }
             )
@@ -209,6 +221,13 @@ def design_record(
         "config": asdict(config),
         "curves": curves,
     }
+
+
+def _draw_interval(per_run: np.ndarray, seed: int) -> Any:
+    """Mean and bootstrap interval of ``[run][draw]`` figures (runs and draws resampled)."""
+    return bootstrap_interval(
+        EpisodeErrors(error=per_run, frames=np.ones(per_run.shape[1]), pooling="mean"), seed=seed
+    )
 
 
 def pool_curves(records: Sequence[Mapping[str, Any]], name: str) -> dict[str, Any]:

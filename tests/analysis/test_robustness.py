@@ -16,6 +16,7 @@ from mincam_render.analysis.robustness import (
     RobustnessConfig,
     design_record,
     pool_curves,
+    pool_episode_metrics,
     robustness_curves,
     tolerance,
 )
@@ -47,6 +48,26 @@ def _synthetic_record(name: str, robust: bool, slope: float, seed: int) -> dict:
         for c in CURVES
     }
     return design_record(name, robust, [1.0], inc, SMALL)
+
+
+def test_levels_hold_the_error_itself_from_each_runs_nominal_error():
+    # run 0: nominal 2.0, increases 0.1 and 0.3; run 1: nominal 1.0, increase 0.5 and 0.5
+    inc = {c: [[[0.0], [0.1, 0.3]], [[0.0], [0.5, 0.5]]] for c in CURVES}
+    rec = design_record("d", True, [2.0, 1.0], inc, RobustnessConfig(levels=(0.0, 1.0), draws=2))
+    lv0, lv1 = rec["curves"][MIX]["levels"]
+    assert lv0["mean_error"] == pytest.approx(1.5)  # the mean nominal error
+    assert lv1["mean_error"] == pytest.approx((2.2 + 2.6 + 1.5 + 1.5) / 4)
+    assert lv1["ci95_error"][0] <= lv1["mean_error"] <= lv1["ci95_error"][1]
+
+
+def test_episode_metrics_pool_rmse_by_samples_and_rates_as_weighted_means():
+    rmse = [
+        {"error": 1.0, "samples": 100, "error_name": "count RMSE"},
+        {"error": 3.0, "samples": 300, "error_name": "count RMSE"},
+    ]
+    assert pool_episode_metrics(rmse) == pytest.approx(np.sqrt((100 * 1 + 300 * 9) / 400))
+    rate = [{**r, "error_name": "error rate"} for r in rmse]
+    assert pool_episode_metrics(rate) == pytest.approx((100 * 1 + 300 * 3) / 400)
 
 
 def test_pooled_runs_average_and_specs_name_the_physical_tolerance():
