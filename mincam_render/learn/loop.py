@@ -21,7 +21,11 @@ The paper's recipe (Sec. 5, supplement C) with these choices of ours, all in
   Robust training (``perturbation``) validates by default under a fixed set of
   built cameras (``robust_validation_draws``, drawn once from the seed): the
   validation loss is their mean, and the history also records the nominal
-  camera's (``val_loss_nominal``).
+  camera's (``val_loss_nominal``). The head's input norm then standardises by
+  its running statistics in training too
+  (:class:`~mincam_render.learn.models.InputNorm`): a batch is measured through
+  one built camera, and normalising it by its own statistics would remove that
+  camera's per-pixel gain and offset errors for free.
 * Checkpoints after every evaluation (atomic ``checkpoint.pt``,
   :mod:`~mincam_render.learn.checkpoint`): a killed run started again with the
   same arguments resumes from it and reaches the same state as an
@@ -183,6 +187,9 @@ def _start(
         state = TrainingState(best_state=_copy_state(model))
         if (first := mask_snapshot(model)) is not None:
             state.snapshots.append((0, first))
+    if config.perturbation is not None and isinstance(model, MincamCamera):
+        # one built camera per batch: its own statistics would calibrate it (InputNorm)
+        model.head.input_norm.running_in_training = True
     return _Run(model, source, opt, gen, config, ckpt_path, state, validation_draws(model, config))
 
 

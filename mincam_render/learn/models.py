@@ -134,6 +134,44 @@ def _label_scale(name: str, std: object) -> np.ndarray:
     return np.where(flat, np.float32(1.0), arr)
 
 
+class InputNorm(nn.BatchNorm1d):
+    """A head's non-affine input standardisation (a ``BatchNorm1d``).
+
+    In training it normalises by the batch's statistics, unless
+    ``running_in_training`` is set: then by the running statistics of the
+    batches before (the first batch sets them), which move towards every batch
+    after. Robust training sets it: a batch is measured through one built
+    camera, and its own statistics would remove that camera's per-pixel gain and
+    offset errors exactly, a calibration no deployed camera gets (evaluation
+    uses the running statistics).
+    """
+
+    def __init__(self, num_features: int) -> None:
+        super().__init__(num_features, affine=False)
+        self.running_in_training = False
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """Standardised ``x`` ``[batch, features]`` or ``[batch, features, steps]``."""
+        if not (self.training and self.running_in_training):
+            return super().forward(x)
+        mean, var, seen = self.running_mean, self.running_var, self.num_batches_tracked
+        if mean is None or var is None or seen is None:  # tracked by BatchNorm1d's default
+            raise RuntimeError("the input norm keeps no running statistics")
+        first = int(seen) == 0
+        if first:  # no statistics yet: the first batch sets them
+            self._update(x, 1.0)
+        out = F.batch_norm(x, mean.clone(), var.clone(), None, None, False, 0.0, self.eps)
+        if not first:
+            self._update(x, self.momentum or 0.1)
+        return out
+
+    @torch.no_grad()
+    def _update(self, x: torch.Tensor, momentum: float) -> None:
+        """Move the running statistics towards the batch's by ``momentum``."""
+        F.batch_norm(x.detach(), self.running_mean, self.running_var, None, None, True, momentum)
+        self.num_batches_tracked.add_(1)  # type: ignore[union-attr]
+
+
 class Head(nn.Module):
     """Inference network: input standardisation, 2 x 128 leaky-ReLU layers, one output per label.
 
@@ -180,7 +218,7 @@ class Head(nn.Module):
             self.count_classes[name] = check_int(f"count_classes[{name!r}]", n, 2, numpy=True)
         # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
         # brightness or the scene's light level; it rescales, so SNR is untouched.
-        self.input_norm = nn.BatchNorm1d(in_features, affine=False)
+        self.input_norm = InputNorm(in_features)
         self.body = nn.Sequential(
             nn.Linear(in_features, hidden),
             nn.LeakyReLU(LEAKY_SLOPE),

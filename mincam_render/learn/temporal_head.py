@@ -23,7 +23,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from mincam_render.core.labels import LabelSpec
-from mincam_render.learn.models import HIDDEN_UNITS, LEAKY_SLOPE, Head
+from mincam_render.learn.models import HIDDEN_UNITS, LEAKY_SLOPE, Head, InputNorm
 
 #: Channels of every convolution and its kernel length (time steps).
 TCN_CHANNELS = 32
@@ -101,7 +101,7 @@ class TemporalConvHead(Head):
         )
         self.pixels, self.steps = int(pixels), int(steps)
         # per pixel, shared over time: the differenced signals are stationary in time
-        self.input_norm = nn.BatchNorm1d(self.pixels, affine=False)
+        self.input_norm = InputNorm(self.pixels)
         layers: list[nn.Module] = []
         for i, d in enumerate(dilations):
             layers += [

@@ -133,7 +133,8 @@ def test_report_files_and_specs(tmp_path):
     paths = _report(tmp_path)
     text = paths["html"].read_text()
     assert text.count("data:image/png;base64,") == 1
-    assert "align each mask to ±" in text and "Camera pose error is approximated in the mask plane" in text
+    assert "align each mask to ±" in text
+    assert "Camera pose error is approximated in the mask plane" in text
     assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     back = json.loads(paths["json"].read_text())
     assert [d["name"] for d in back] == ["nominal", "robust"]

@@ -11,6 +11,7 @@ from support import linear_task
 
 from mincam_render.learn import train as tr
 from mincam_render.learn.evaluation import mean_loss_under
+from mincam_render.learn.models import InputNorm
 from mincam_render.learn.step import batch_draw, validation_draws
 from mincam_render.optics.perturbation import PerturbationModel
 
@@ -146,3 +147,40 @@ def test_the_loss_under_one_draw_is_predicts_loss_with_that_draw(variant):
     draw = validation_draws(model, VAL_CFG)[1]
     expected = tr.predict(model, data, draw=draw, batch_size=16, limit=40)[2]
     assert mean_loss_under(model, data, [draw], batch_size=16, limit=40) == expected
+
+
+def test_input_norm_in_running_mode_keeps_a_cameras_gain_error_that_batch_statistics_remove():
+    g = torch.Generator().manual_seed(0)
+    first = torch.rand(64, 4, generator=g) + 1.0
+    second = torch.rand(64, 4, generator=g) + 1.0
+    gain_error = torch.tensor([1.1, 1.0, 1.0, 1.0])  # one built camera's pixel 0 reads 10 % high
+    plain = InputNorm(4).train()
+    torch.testing.assert_close(plain(second * gain_error), plain(second), atol=1e-3, rtol=0)  # free
+    norm = InputNorm(4).train()
+    norm.running_in_training = True
+    out1 = norm(first)  # the first batch sets the statistics
+    m1, v1 = first.mean(0), first.var(0)
+    torch.testing.assert_close(out1, (first - m1) / torch.sqrt(v1 + norm.eps))
+    x = (second * gain_error).requires_grad_()
+    out2 = norm(x)  # normalised by the statistics before this batch, then they move
+    torch.testing.assert_close(out2, (x - m1) / torch.sqrt(v1 + norm.eps))
+    m2, v2 = x.detach().mean(0), x.detach().var(0)
+    torch.testing.assert_close(norm.running_mean, 0.9 * m1 + 0.1 * m2)
+    torch.testing.assert_close(norm.running_var, 0.9 * v1 + 0.1 * v2)
+    out2.sum().backward()  # the statistics are constants of the gradient
+    torch.testing.assert_close(x.grad, (1 / torch.sqrt(v1 + norm.eps)).expand(64, 4))
+    assert int(norm.num_batches_tracked) == 2
+    norm.eval()
+    torch.testing.assert_close(
+        norm(first), (first - norm.running_mean) / torch.sqrt(norm.running_var + norm.eps)
+    )
+
+
+def test_only_robust_training_normalises_by_running_statistics(variant):
+    train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
+    nominal = tr.build_mincam(train, 2, seed=3)
+    tr.train_model(nominal, train, val, dataclasses.replace(CFG, perturbation=None))
+    robust = tr.build_mincam(train, 2, seed=3)
+    tr.train_model(robust, train, val, CFG)
+    assert robust.head.input_norm.running_in_training
+    assert not nominal.head.input_norm.running_in_training
