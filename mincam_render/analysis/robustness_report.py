@@ -89,6 +89,9 @@ def _tables(page: Report, designs: Sequence[Mapping[str, Any]]) -> None:
                 cells.append(f"{100 * v['mean_increase']:+.1f} % [{lo:+.1f}, {hi:+.1f}]")
             rows.append(_lead(d) + cells)
         page.table(head, rows, caption="Error increase at the default ranges (95 % interval)")
+        if all("mean_error" in d["curves"][MIX]["levels"][level_one] for d in designs):
+            rows = [_lead(d) + _errors_at(d, level_one) for d in designs]
+            page.table(head, rows, caption="Error at the default ranges (95 % interval)")
     rows = []
     for d in designs:
         cells = []
@@ -98,6 +101,15 @@ def _tables(page: Report, designs: Sequence[Mapping[str, Any]]) -> None:
         rows.append(_lead(d) + cells)
     allowed = 100 * designs[0]["config"]["allowed_increase"]
     page.table(head, rows, caption=f"Tolerance: magnitude (x default) within +{allowed:g} % error")
+
+
+def _errors_at(d: Mapping[str, Any], level: int) -> list[str]:
+    """The error itself under each curve at level index ``level``, with its interval."""
+    cells = []
+    for c in CURVES:
+        v = d["curves"][c]["levels"][level]
+        cells.append(f"{v['mean_error']:.4g} [{v['ci95_error'][0]:.4g}, {v['ci95_error'][1]:.4g}]")
+    return cells
 
 
 def _lead(d: Mapping[str, Any]) -> list[Any]:

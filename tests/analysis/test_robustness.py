@@ -135,6 +135,9 @@ def test_report_files_and_specs(tmp_path):
     assert text.count("data:image/png;base64,") == 1
     assert "align each mask to ±" in text
     assert "Camera pose error is approximated in the mask plane" in text
+    assert "Error at the default ranges" in text
+    mix = json.loads(paths["json"].read_text())[0]["curves"][MIX]["levels"][1]
+    assert f"{mix['mean_error']:.4g} [" in text and mix["mean_error"] > 1.0  # nominal 1
     assert paths["png"].read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     back = json.loads(paths["json"].read_text())
     assert [d["name"] for d in back] == ["nominal", "robust"]
