@@ -74,8 +74,8 @@ def in_memory(data: tr.TrainingData) -> tr.TrainingData:
     return dataclasses.replace(data, transport=data.frames_np(0, len(data.transport)), scales=None)
 
 
-def train_runs(cfg: ComparisonConfig, episodes: dict, work: Path, seeds: int) -> dict:
-    """``{kind: [run directory]}``: nominal and robust runs, one per training seed."""
+def train_runs(cfg: ComparisonConfig, episodes: dict, runs_dir: Path, seeds: int) -> dict:
+    """``{kind: [run directory]}``: nominal and robust runs in ``runs_dir``, one per seed."""
     train = tr.TrainingData.concat([d for n, d in episodes.items() if n.startswith("train")])
     tests = {n: d for n, d in episodes.items() if n.startswith("test")}
     runs: dict[str, list[Path]] = {k: [] for k in KINDS}
@@ -83,7 +83,7 @@ def train_runs(cfg: ComparisonConfig, episodes: dict, work: Path, seeds: int) ->
         seed = stream_seed(cfg.seed, f"train/mincam-{PIXELS}px", i)
         for kind in KINDS:
             pert = PerturbationModel() if kind == "robust" else None
-            run_dir = work / "runs" / f"{kind}-seed{i}"
+            run_dir = runs_dir / f"{kind}-seed{i}"
             m = tr.train_run(
                 train,
                 episodes["val-0"],
@@ -231,17 +231,29 @@ def main() -> None:
     ap.add_argument(
         "--test-episodes", type=int, default=3, help="independent test episodes (default 3)"
     )
+    ap.add_argument(
+        "--max-steps", type=int, default=None, help="training budget (default: the main job's)"
+    )
+    ap.add_argument(
+        "--entry", default=None, help="name of the results entry (default: the task's name)"
+    )
     ap.add_argument("--out", type=Path, default=RESULTS / "robustness.json")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)
     cfg = ComparisonConfig(family=TASKS[args.task], test_episodes=args.test_episodes)
+    if args.max_steps is not None:
+        cfg = dataclasses.replace(
+            cfg, train=dataclasses.replace(cfg.train, max_steps=args.max_steps)
+        )
+    entry_name = args.entry or args.task
     episodes = render_episodes(cfg, args.work, workers=args.workers, progress=False)
-    runs = train_runs(cfg, episodes, args.work, args.seeds)
+    runs_dir = args.work / ("runs" if args.entry is None else f"runs-{args.entry}")
+    runs = train_runs(cfg, episodes, runs_dir, args.seeds)
     tests = {n: in_memory(d) for n, d in episodes.items() if n.startswith("test")}
     rcfg = RobustnessConfig(draws=args.draws)
     records = {k: [run_curves(r, tests, rcfg, k) for r in runs[k]] for k in KINDS}
-    designs = {k: pool_curves(records[k], f"{args.task}, mincam {PIXELS} px, {k}") for k in KINDS}
+    designs = {k: pool_curves(records[k], f"{entry_name}, mincam {PIXELS} px, {k}") for k in KINDS}
     trivial = trivial_error(episodes)
     text = verdict(designs, rcfg.allowed_increase, trivial)
     print(text)
@@ -251,8 +263,8 @@ def main() -> None:
             print(f"  {c['spec']}")
     paths = write_robustness_report(list(designs.values()), args.work / "report", notes=[text])
     entry = task_entry(cfg, args, designs, records, text, trivial)
-    write_result(args.out, merged_result(args.out, args.task, entry, rcfg))
-    png = args.out.with_name(f"{args.out.stem}_{args.task}.png")
+    write_result(args.out, merged_result(args.out, entry_name, entry, rcfg))
+    png = args.out.with_name(f"{args.out.stem}_{entry_name}.png")
     shutil.copyfile(paths["png"], png)
     print(f"wrote {png.name} and {paths['html']}")
 
