@@ -187,9 +187,6 @@ def _start(
         state = TrainingState(best_state=_copy_state(model))
         if (first := mask_snapshot(model)) is not None:
             state.snapshots.append((0, first))
-    if config.perturbation is not None and isinstance(model, MincamCamera):
-        # one built camera per batch: its own statistics would calibrate it (InputNorm)
-        model.head.input_norm.running_in_training = True
     return _Run(model, source, opt, gen, config, ckpt_path, state, validation_draws(model, config))
 
 

@@ -105,8 +105,9 @@ def train_step(
     """One optimisation step of :func:`train_model` (Adam); the task loss, detached.
 
     A batch, a random global gain per sample (augmentation), with ``perturbation``
-    a built camera drawn for the batch (robust training), the camera with
-    sensor noise, the loss, backward, the optimiser, and the projection of the
+    a built camera drawn for the batch (robust training; the head's input norm
+    then uses running statistics, :class:`~mincam_render.learn.models.InputNorm`),
+    the camera with sensor noise, the loss, backward, the optimiser, and the projection of the
     mask logits (a saturated mask must be able to move back). A camera with a
     privacy adversary (``model.adversary``) adds
     :func:`~mincam_render.learn.privacy_term.privacy_objective` with ``privacy_weight``.
@@ -114,6 +115,9 @@ def train_step(
     batch = source.next(generator)
     gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
     draw = batch_draw(model, perturbation, generator)
+    if isinstance(model, MincamCamera):
+        # one built camera per batch: its own statistics would calibrate it (InputNorm)
+        model.head.input_norm.running_in_training = draw is not None
     adversary = getattr(model, "adversary", None)
     if adversary is None:  # any model with a forward (sim2real's measured heads too)
         out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
