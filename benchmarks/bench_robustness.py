@@ -1,10 +1,10 @@
 r"""Designs that survive the workshop: nominal against robust training under perturbations.
 
-For one task (``--task``: workspace people count, or lighting per-light state on
-``scenes/lighting_toggling.toml``) and an 8-pixel minimalist camera, on
-independent episodes at the main job's default sizes (``ComparisonConfig()``: 2
-training episodes of 1,200 frames, 1 validation episode of 600, 3 test episodes
-of 600, 2 fps), trains ``--seeds`` nominal designs and as many robust-trained
+For one task (``--task``: workspace people count, lighting per-light state on
+``scenes/lighting_toggling.toml``, or traffic speed per direction) and an
+8-pixel minimalist camera, on independent episodes at the main job's default
+sizes (``ComparisonConfig()``: 2 training episodes of 1,200 frames, 1 validation
+episode of 600, 3 test episodes of 600, 2 fps; traffic: :data:`TASKS`), trains ``--seeds`` nominal designs and as many robust-trained
 ones (``TrainConfig.perturbation = PerturbationModel()``, one built camera per
 batch, early stopping on the loss under ``robust_validation_draws`` fixed built
 cameras), same recipe otherwise. Then, for every run, the error increase under
@@ -60,12 +60,24 @@ from mincam_render.optics.perturbation import PerturbationModel  # noqa: E402
 RESULTS = Path(__file__).parent / "results"
 PIXELS = 8
 KINDS = ("nominal", "robust")
-#: Scene family of each task (the main job's sizes otherwise). Lighting uses the
-#: toggling room of ``study_lighting`` so that each 5-minute test episode visits
-#: most of the 32 light states.
-TASKS = {
-    "workspace": "workspace",
-    "lighting": str(Path(__file__).resolve().parents[1] / "scenes" / "lighting_toggling.toml"),
+#: ``ComparisonConfig`` fields of each task (the main job's sizes otherwise).
+#: Lighting uses the toggling room of ``study_lighting`` so that each test episode
+#: visits most of the 32 light states. Traffic is temporal: 30 fps (a window of
+#: 30 frames is 1 s), one training episode of 4 minutes, validation and test
+#: episodes of 1 minute each.
+TASKS: dict[str, dict[str, Any]] = {
+    "workspace": {"family": "workspace"},
+    "lighting": {
+        "family": str(Path(__file__).resolve().parents[1] / "scenes" / "lighting_toggling.toml")
+    },
+    "traffic": {
+        "family": "traffic",
+        "fps": 30.0,
+        "train_episodes": 1,
+        "train_frames": 7200,
+        "val_frames": 1800,
+        "test_frames": 1800,
+    },
 }
 
 
@@ -241,7 +253,7 @@ def main() -> None:
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)
-    cfg = ComparisonConfig(family=TASKS[args.task], test_episodes=args.test_episodes)
+    cfg = ComparisonConfig(**TASKS[args.task], test_episodes=args.test_episodes)
     if args.max_steps is not None:
         cfg = dataclasses.replace(
             cfg, train=dataclasses.replace(cfg.train, max_steps=args.max_steps)
