@@ -51,9 +51,11 @@ def _fail(owner: str, name: str, value: object, unit: str, allowed: str) -> Valu
     return ValueError(f"{owner}.{name} = {value!r}{unit_txt} is invalid: allowed {allowed}")
 
 
-#: Largest coordinate of a camera point or direction (m): scenes are rooms and
-#: streets; beyond this, lengths of the camera's vectors overflow float64 sums.
-MAX_COORD_M = 1e6
+#: Largest coordinate of a camera point or direction (m). From about 1e77 m the
+#: squared length of a cross product of two such vectors overflows float64; a
+#: camera merely far from its scene is refused by the scene check, which names
+#: the ``--position`` option.
+MAX_COORD_M = 1e50
 
 
 def _check_vec3(owner: str, name: str, value: object) -> tuple[float, float, float]:
