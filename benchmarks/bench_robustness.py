@@ -86,9 +86,19 @@ def in_memory(data: tr.TrainingData) -> tr.TrainingData:
     return dataclasses.replace(data, transport=data.frames_np(0, len(data.transport)), scales=None)
 
 
+def training_split(episodes: dict) -> tr.TrainingData:
+    """The training episodes as one split."""
+    return tr.TrainingData.concat([d for n, d in episodes.items() if n.startswith("train")])
+
+
+def as_json(config: RobustnessConfig) -> Any:
+    """``config`` as it reads back from a JSON file (tuples become lists)."""
+    return json.loads(json.dumps(dataclasses.asdict(config)))
+
+
 def train_runs(cfg: ComparisonConfig, episodes: dict, runs_dir: Path, seeds: int) -> dict:
     """``{kind: [run directory]}``: nominal and robust runs in ``runs_dir``, one per seed."""
-    train = tr.TrainingData.concat([d for n, d in episodes.items() if n.startswith("train")])
+    train = training_split(episodes)
     tests = {n: d for n, d in episodes.items() if n.startswith("test")}
     runs: dict[str, list[Path]] = {k: [] for k in KINDS}
     for i in range(seeds):
@@ -115,7 +125,7 @@ def run_curves(run_dir: Path, tests: dict, config: RobustnessConfig, kind: str) 
     path = run_dir / "robustness.json"
     if path.is_file():
         record = json.loads(path.read_text())
-        if record["config"] == json.loads(json.dumps(dataclasses.asdict(config))):
+        if record["config"] == as_json(config):
             return record
     model = tr.load_mincam(run_dir, next(iter(tests.values())))
     record = robustness_curves(model, tests, config, name=run_dir.name, robust=kind == "robust")
@@ -178,7 +188,7 @@ def _abs(level: dict) -> str:
 
 def trivial_error(episodes: dict) -> float:
     """The trivial predictor's error (training-label mean, mode if binary) on the test episodes."""
-    train = tr.TrainingData.concat([d for n, d in episodes.items() if n.startswith("train")])
+    train = training_split(episodes)
     tests = [d for n, d in episodes.items() if n.startswith("test")]
     return pool_episode_metrics([trivial_metrics(train, d) for d in tests])
 
@@ -224,7 +234,7 @@ def merged_result(out: Path, task: str, entry: dict, rcfg: RobustnessConfig) -> 
     tasks: dict[str, Any] = {}
     if out.is_file():
         old = json.loads(out.read_text())
-        if old.get("robustness_config") == json.loads(json.dumps(dataclasses.asdict(rcfg))):
+        if old.get("robustness_config") == as_json(rcfg):
             tasks = old.get("tasks", {})
     return {
         "benchmark": "bench_robustness",
