@@ -17,14 +17,18 @@ tolerances for a <= 10 % increase are derived.
 Writes the task's entry of ``benchmarks/results/robustness.json`` (other tasks'
 entries are kept: machine, git revision, sizes, per-design curves with CIs,
 tolerances, specs, per-run nominal errors, the done-when verdict),
-``robustness_<task>.png``, and the HTML report into ``WORK/report``.
+``robustness_<task>.png``, and the HTML report into ``WORK/report``. With
+``--keep-masks DIR``, the best robust run's masks (lowest loss under the fixed
+built cameras of robust validation) go to ``DIR/<task>/robust-mincam-8px`` in
+the format of ``masks/``, their sidecar holding the robust design's error as
+designed and under the default mix, its specs and the verdict.
 
 Everything resumes: episodes, runs and per-run curves (``robustness.json`` in
 each run directory) found on disk are kept.
 
 Usage (from a clean tree; the episodes are those `mincam-render pipeline` renders):
     python benchmarks/bench_robustness.py --task workspace --work /work/robust/workspace \
-        [--seeds 3] [--draws 20] [--test-episodes 3] [--workers 2]
+        [--seeds 3] [--draws 20] [--test-episodes 3] [--workers 2] [--keep-masks masks]
 """
 
 from __future__ import annotations
@@ -43,7 +47,12 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from provenance import machine, write_result  # noqa: E402
 
-from mincam_render.analysis.comparison import render_episodes, trivial_metrics  # noqa: E402
+from mincam_render.analysis.comparison import (  # noqa: E402
+    episode_record,
+    keep_run_masks,
+    render_episodes,
+    trivial_metrics,
+)
 from mincam_render.analysis.comparison_config import ComparisonConfig  # noqa: E402
 from mincam_render.analysis.robustness import (  # noqa: E402
     MIX,
@@ -229,6 +238,34 @@ def task_entry(
     }
 
 
+def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, out: Path) -> dict:
+    """The best robust run's masks (lowest robust-validation loss) into ``out``.
+
+    The sidecar holds the robust design's error as designed and under the
+    default mix (pooled over its seeds), its per-perturbation tolerances and
+    the verdict, with the episodes' manifest hashes.
+    """
+    best = min(runs, key=lambda r: json.loads((r / "metrics.json").read_text())["best_val_loss"])
+    design = entry["designs"]["robust"]
+    levels = design["config"]["levels"]
+    as_designed, mix = (design["curves"][MIX]["levels"][levels.index(x)] for x in (0.0, 1.0))
+    figures = {
+        "chosen_by": "lowest validation loss under fixed built cameras of the robust seeds",
+        "test_error_over_seeds": {
+            "mean": as_designed["mean_error"],
+            "ci95": as_designed["ci95_error"],
+            "resampled": "training seeds (the test episodes pooled per run)",
+        },
+        "robustness": {
+            "under_default_mix": mix,
+            "specs": {name: c["spec"] for name, c in design["curves"].items()},
+            "verdict": entry["verdict"],
+        },
+        "episodes": {n: episode_record(d) for n, d in episodes.items()},
+    }
+    return keep_run_masks(best, out, task, figures)
+
+
 def merged_result(out: Path, task: str, entry: dict, rcfg: RobustnessConfig) -> dict[str, Any]:
     """``out``'s results with ``task``'s entry replaced (other tasks kept if measured alike)."""
     tasks: dict[str, Any] = {}
@@ -260,6 +297,12 @@ def main() -> None:
         "--entry", default=None, help="name of the results entry (default: the task's name)"
     )
     ap.add_argument("--out", type=Path, default=RESULTS / "robustness.json")
+    ap.add_argument(
+        "--keep-masks",
+        type=Path,
+        default=None,
+        help="also keep the best robust design's masks in KEEP_MASKS/<task>/robust-mincam-8px",
+    )
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)
@@ -285,6 +328,9 @@ def main() -> None:
             print(f"  {c['spec']}")
     paths = write_robustness_report(list(designs.values()), args.work / "report", notes=[text])
     entry = task_entry(cfg, args, designs, records, text, trivial)
+    if args.keep_masks is not None:
+        out = args.keep_masks / args.task / f"robust-mincam-{PIXELS}px"
+        entry["masks"] = keep_robust_masks(runs["robust"], episodes, entry, args.task, out)
     write_result(args.out, merged_result(args.out, entry_name, entry, rcfg))
     png = args.out.with_name(f"{args.out.stem}_{entry_name}.png")
     shutil.copyfile(paths["png"], png)

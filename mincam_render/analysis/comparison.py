@@ -130,7 +130,7 @@ def comparison_splits(data: Mapping[str, TrainingData]) -> dict[str, Any]:
     }
 
 
-def _episode_record(data: TrainingData) -> dict[str, Any]:
+def episode_record(data: TrainingData) -> dict[str, Any]:
     """Samples, provenance and the sha256 of the episode dataset's manifest."""
     path = Path(data.source["dataset"]) / MANIFEST_NAME
     return {"samples": len(data), **data.source, "manifest_sha256": sha256_file(path)}
@@ -285,6 +285,27 @@ def _design_summary(
     }
 
 
+def keep_run_masks(
+    run_dir: str | os.PathLike, out_dir: Path, task: str, figures: Mapping[str, Any]
+) -> dict[str, str]:
+    """Export ``run_dir``'s masks into ``out_dir``; the sidecar holds ``figures`` too.
+
+    The sidecar's provenance: the run, its data, recipe and detectors, the
+    package versions, then ``figures`` (how the run was chosen, its errors).
+    """
+    m, camera, run = run_masks(run_dir)
+    provenance = {
+        "run": str(run_dir),
+        "data": run["data"],
+        "config": run["config"],
+        "detectors": run["model"]["detectors"],
+        "versions": package_versions(),
+        **figures,
+    }
+    exported = export_masks(m, camera, out_dir, task=task, provenance=provenance)
+    return {k: str(v) for k, v in exported.items()}
+
+
 def _keep_masks(
     runs: list[dict[str, Any]],
     summary: Mapping[str, Any],
@@ -294,25 +315,13 @@ def _keep_masks(
 ) -> dict[str, str]:
     """Export into ``out_dir`` the masks of the run with the lowest validation loss."""
     best = min(runs, key=lambda r: r["best_val_loss"])
-    m, camera, run = run_masks(best["run_dir"])
-    exported = export_masks(
-        m,
-        camera,
-        out_dir,
-        task=task,
-        provenance={
-            "run": best["run_dir"],
-            "chosen_by": "lowest validation loss of the training seeds",
-            "data": run["data"],
-            "config": run["config"],
-            "test_error_over_seeds": summary["error"],
-            "test_episodes": best["episodes"],
-            "detectors": run["model"]["detectors"],
-            "episodes": episodes,
-            "versions": package_versions(),
-        },
-    )
-    return {k: str(v) for k, v in exported.items()}
+    figures = {
+        "chosen_by": "lowest validation loss of the training seeds",
+        "test_error_over_seeds": summary["error"],
+        "test_episodes": best["episodes"],
+        "episodes": episodes,
+    }
+    return keep_run_masks(best["run_dir"], out_dir, task, figures)
 
 
 def run_comparison(
@@ -398,7 +407,7 @@ def _run_comparison(
         "task": task,
         "error_name": next(iter(trivial.values()))["error_name"],
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
-        "episodes": {k: _episode_record(d) for k, d in data.items()},
+        "episodes": {k: episode_record(d) for k, d in data.items()},
         "designs": designs,
         "trivial": {
             "error": trivial_iv.as_dict(),

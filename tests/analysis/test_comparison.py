@@ -11,6 +11,7 @@ from mincam_render.analysis.comparison import (
     ComparisonConfig,
     Design,
     episode_requests,
+    keep_run_masks,
     label_intervals,
     label_table,
     reduction_factor,
@@ -21,6 +22,7 @@ from mincam_render.analysis.comparison import (
 )
 from mincam_render.analysis.plots import plot_comparison
 from mincam_render.cli.main import main
+from mincam_render.learn import train as tr
 from mincam_render.learn.train import run_masks
 from mincam_render.learn.train_config import HeadKind
 
@@ -190,6 +192,25 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
         assert tested["model"]["sensor_model"] and tested["frozen_masks_from"] == str(masks)
         assert not json.loads((masks / "run.json").read_text())["model"]["sensor_model"]
         np.testing.assert_array_equal(run_masks(run)[0], run_masks(masks)[0])
+
+
+def test_kept_run_masks_equal_the_runs_and_carry_their_figures(variant, tmp_path):
+    from PIL import Image
+    from support import linear_task
+
+    train, val = linear_task(80).split((0.7, 0.3))
+    cfg = tr.TrainConfig(max_steps=5, batch_size=16, eval_every=5)
+    tr.train_run(train, val, None, tmp_path / "run", pixels=2, config=cfg)
+    figures = {"chosen_by": "the only run", "test_error_over_seeds": {"mean": 1.5}}
+    files = keep_run_masks(tmp_path / "run", tmp_path / "kept", "linear", figures)
+    side = json.loads(Path(files["json"]).read_text())
+    prov = side["provenance"]
+    assert prov["chosen_by"] == "the only run" and prov["test_error_over_seeds"]["mean"] == 1.5
+    assert prov["run"] == str(tmp_path / "run") and prov["versions"]["torch"]
+    assert side["task"] == "linear" and side["masks"] == 2
+    m = run_masks(tmp_path / "run")[0]
+    png = np.asarray(Image.open(tmp_path / "kept" / side["files"]["png"][1]), np.float64)
+    np.testing.assert_allclose(png / 65535.0, m[1], atol=1 / 65535)
 
 
 def test_reference_verdicts_and_training_states():
