@@ -238,7 +238,7 @@ def task_entry(
     }
 
 
-def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, out: Path) -> dict:
+def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, out: Path) -> None:
     """The best robust run's masks (lowest robust-validation loss) into ``out``.
 
     The sidecar holds the robust design's error as designed and under the
@@ -263,7 +263,7 @@ def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, 
         },
         "episodes": {n: episode_record(d) for n, d in episodes.items()},
     }
-    return keep_run_masks(best, out, task, figures)
+    keep_run_masks(best, out, task, figures)
 
 
 def merged_result(out: Path, task: str, entry: dict, rcfg: RobustnessConfig) -> dict[str, Any]:
@@ -330,7 +330,8 @@ def main() -> None:
     entry = task_entry(cfg, args, designs, records, text, trivial)
     if args.keep_masks is not None:
         out = args.keep_masks / args.task / f"robust-mincam-{PIXELS}px"
-        entry["masks"] = keep_robust_masks(runs["robust"], episodes, entry, args.task, out)
+        keep_robust_masks(runs["robust"], episodes, entry, args.task, out)
+        entry["masks"] = str(out)
     write_result(args.out, merged_result(args.out, entry_name, entry, rcfg))
     png = args.out.with_name(f"{args.out.stem}_{entry_name}.png")
     shutil.copyfile(paths["png"], png)

@@ -287,8 +287,10 @@ def _design_summary(
 
 def keep_run_masks(
     run_dir: str | os.PathLike, out_dir: Path, task: str, figures: Mapping[str, Any]
-) -> dict[str, str]:
+) -> dict[str, Any]:
     """Export ``run_dir``'s masks into ``out_dir``; the sidecar holds ``figures`` too.
+
+    Returns the written files' paths as strings (``"png"``: a list).
 
     The sidecar's provenance: the run, its data, recipe and detectors, the
     package versions, then ``figures`` (how the run was chosen, its errors).
@@ -303,7 +305,7 @@ def keep_run_masks(
         **figures,
     }
     exported = export_masks(m, camera, out_dir, task=task, provenance=provenance)
-    return {k: str(v) for k, v in exported.items()}
+    return {k: [str(p) for p in v] if isinstance(v, list) else str(v) for k, v in exported.items()}
 
 
 def _keep_masks(
@@ -312,7 +314,7 @@ def _keep_masks(
     episodes: Mapping[str, Any],
     out_dir: Path,
     task: str,
-) -> dict[str, str]:
+) -> dict[str, Any]:
     """Export into ``out_dir`` the masks of the run with the lowest validation loss."""
     best = min(runs, key=lambda r: r["best_val_loss"])
     figures = {

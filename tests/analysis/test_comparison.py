@@ -203,6 +203,7 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(variant, tmp_path
     tr.train_run(train, val, None, tmp_path / "run", pixels=2, config=cfg)
     figures = {"chosen_by": "the only run", "test_error_over_seeds": {"mean": 1.5}}
     files = keep_run_masks(tmp_path / "run", tmp_path / "kept", "linear", figures)
+    assert files["png"] == [str(tmp_path / "kept" / f"mask_0{k}.png") for k in range(2)]
     side = json.loads(Path(files["json"]).read_text())
     prov = side["provenance"]
     assert prov["chosen_by"] == "the only run" and prov["test_error_over_seeds"]["mean"] == 1.5
