@@ -19,7 +19,8 @@ entries are kept: machine, git revision, sizes, per-design curves with CIs,
 tolerances, specs, per-run nominal errors, the done-when verdict),
 ``robustness_<task>.png``, and the HTML report into ``WORK/report``. With
 ``--keep-masks DIR``, the best robust run's masks (lowest loss under the fixed
-built cameras of robust validation) go to ``DIR/<task>/robust-mincam-8px`` in
+built cameras of robust validation, each run its own) go to
+``DIR/<task>/robust-mincam-8px`` (default entry only) in
 the format of ``masks/``, their sidecar holding the robust design's error as
 designed and under the default mix, its specs and the verdict.
 
@@ -241,16 +242,18 @@ def task_entry(
 def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, out: Path) -> None:
     """The best robust run's masks (lowest robust-validation loss) into ``out``.
 
-    The sidecar holds the robust design's error as designed and under the
-    default mix (pooled over its seeds), its per-perturbation tolerances and
-    the verdict, with the episodes' manifest hashes.
+    The sidecar holds the run's own test error as designed, the robust design's
+    error as designed and under the default mix (pooled over its seeds), its
+    specs and the verdict, with the episodes' manifest hashes.
     """
     best = min(runs, key=lambda r: json.loads((r / "metrics.json").read_text())["best_val_loss"])
     design = entry["designs"]["robust"]
+    own = next(r["nominal_error"] for r in entry["runs"]["robust"] if r["run"] == best.name)
     levels = design["config"]["levels"]
     as_designed, mix = (design["curves"][MIX]["levels"][levels.index(x)] for x in (0.0, 1.0))
     figures = {
-        "chosen_by": "lowest validation loss under fixed built cameras of the robust seeds",
+        "chosen_by": "lowest validation loss of the robust seeds (each under its own built cameras)",
+        "test_error": own,
         "test_error_over_seeds": {
             "mean": as_designed["mean_error"],
             "ci95": as_designed["ci95_error"],
@@ -267,12 +270,19 @@ def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, 
 
 
 def merged_result(out: Path, task: str, entry: dict, rcfg: RobustnessConfig) -> dict[str, Any]:
-    """``out``'s results with ``task``'s entry replaced (other tasks kept if measured alike)."""
+    """``out``'s results with ``task``'s entry replaced (other tasks kept if measured alike).
+
+    An entry whose figures equal the old one's (re-read from the same runs, e.g.
+    to keep masks) keeps the old machine block: the machine that measured them.
+    """
     tasks: dict[str, Any] = {}
     if out.is_file():
         old = json.loads(out.read_text())
         if old.get("robustness_config") == as_json(rcfg):
             tasks = old.get("tasks", {})
+    before = tasks.get(task, {})
+    if before.get("designs") == json.loads(json.dumps(entry["designs"], default=str)):
+        entry = entry | {"machine": before["machine"]}
     return {
         "benchmark": "bench_robustness",
         "robustness_config": dataclasses.asdict(rcfg),
@@ -304,6 +314,8 @@ def main() -> None:
         help="also keep the best robust design's masks in KEEP_MASKS/<task>/robust-mincam-8px",
     )
     args = ap.parse_args()
+    if args.keep_masks is not None and args.entry is not None:
+        ap.error("--keep-masks keeps the default entry's design; drop --entry")
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)
     cfg = ComparisonConfig(**TASKS[args.task], test_episodes=args.test_episodes)

@@ -194,7 +194,7 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
         np.testing.assert_array_equal(run_masks(run)[0], run_masks(masks)[0])
 
 
-def test_kept_run_masks_equal_the_runs_and_carry_their_figures(variant, tmp_path):
+def test_kept_run_masks_equal_the_runs_and_carry_their_figures(tmp_path):
     from PIL import Image
     from support import linear_task
 
@@ -208,6 +208,8 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(variant, tmp_path
     prov = side["provenance"]
     assert prov["chosen_by"] == "the only run" and prov["test_error_over_seeds"]["mean"] == 1.5
     assert prov["run"] == str(tmp_path / "run") and prov["versions"]["torch"]
+    run = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert prov["detectors"] == run["model"]["detectors"] and prov["config"] == run["config"]
     assert side["task"] == "linear" and side["masks"] == 2
     m = run_masks(tmp_path / "run")[0]
     png = np.asarray(Image.open(tmp_path / "kept" / side["files"]["png"][1]), np.float64)
