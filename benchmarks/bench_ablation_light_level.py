@@ -231,6 +231,7 @@ def main(argv: list[str] | None = None) -> None:
         val_frames=a.val_frames,
         test_frames=a.test_frames,
         test_episodes=a.test_episodes,
+        val_episodes=1,  # as measured (ablation_light_level.json)
         seeds=a.seeds,
         designs=(Design(pixels=4), Design(pixels=4, sensor_model=False)),
         train=TrainConfig(max_steps=a.steps),

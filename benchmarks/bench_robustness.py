@@ -54,7 +54,7 @@ from mincam_render.analysis.comparison import (  # noqa: E402
     render_episodes,
     trivial_metrics,
 )
-from mincam_render.analysis.comparison_config import ComparisonConfig  # noqa: E402
+from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol  # noqa: E402
 from mincam_render.analysis.robustness import (  # noqa: E402
     MIX,
     RobustnessConfig,
@@ -75,6 +75,9 @@ KINDS = ("nominal", "robust")
 #: visits most of the 32 light states. Traffic is temporal: 30 fps (a window of
 #: 30 frames is 1 s), one training episode of 4 minutes, validation and test
 #: episodes of 1 minute each.
+#: Every task as measured: one camera for every label, one validation episode
+#: (``protocol`` and ``val_episodes`` pinned; the comparison's defaults changed since).
+AS_MEASURED: dict[str, Any] = {"protocol": Protocol.JOINT, "val_episodes": 1}
 TASKS: dict[str, dict[str, Any]] = {
     "workspace": {"family": "workspace"},
     "lighting": {
@@ -318,7 +321,7 @@ def main() -> None:
         ap.error("--keep-masks keeps the default entry's design; drop --entry")
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(1)
-    cfg = ComparisonConfig(**TASKS[args.task], test_episodes=args.test_episodes)
+    cfg = ComparisonConfig(**TASKS[args.task], **AS_MEASURED, test_episodes=args.test_episodes)
     if args.max_steps is not None:
         cfg = dataclasses.replace(
             cfg, train=dataclasses.replace(cfg.train, max_steps=args.max_steps)

@@ -48,6 +48,7 @@ def _config(seeds: int, steps: int) -> ComparisonConfig:
         val_frames=100,
         test_frames=100,
         test_episodes=2,
+        val_episodes=1,
         seeds=seeds,
         designs=(Design(pixels=4), Design(grid=(4, 4))),
         train=TrainConfig(max_steps=steps, eval_every=50),
@@ -55,8 +56,10 @@ def _config(seeds: int, steps: int) -> ComparisonConfig:
     )
 
 
-def _figures(runs: dict[str, list[dict[str, Any]]]) -> dict[str, list[dict[str, Any]]]:
-    return {n: [{k: r[k] for k in SAME} for r in rs] for n, rs in runs.items()}
+def _figures(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dict[str, list[dict[str, Any]]]:
+    """Each design's figures per seed (patches has one task)."""
+    (by_design,) = runs.values()
+    return {n: [{k: r[k] for k in SAME} for r in rs] for n, rs in by_design.items()}
 
 
 def _time(cfg: ComparisonConfig, splits: dict, out: Path, workers: int) -> tuple[float, dict]:

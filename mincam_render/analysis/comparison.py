@@ -45,7 +45,7 @@ import numpy as np
 from mincam_render.analysis.comparison_config import ComparisonConfig
 from mincam_render.analysis.comparison_config import Design as Design
 from mincam_render.analysis.coverage import coverage_table, study_coverage
-from mincam_render.analysis.run_dispatch import check_executor, train_runs
+from mincam_render.analysis.run_dispatch import check_executor, task_splits, train_runs
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
@@ -55,7 +55,7 @@ from mincam_render.analysis.statistics import (
     paired_statement,
     verdict,
 )
-from mincam_render.core.labels import LabelKind
+from mincam_render.core.labels import LabelKind, label_tasks
 from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
 from mincam_render.data.ray_cluster import ray_session
@@ -70,7 +70,7 @@ ROLE_SPLITS = {"train": (1.0, 0.0, 0.0), "val": (0.0, 1.0, 0.0), "test": (0.0, 0
 
 
 def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
-    """``{"train-i" | "val-0" | "test-i": RenderRequest}``: one dataset per episode.
+    """``{"train-i" | "val-i" | "test-i": RenderRequest}``: one dataset per episode.
 
     Each episode's seed is ``stream_seed(cfg.seed, "episode/<role>", i)``, its
     description the family's with ``cfg.overrides`` and ``cfg.fps``; every
@@ -79,7 +79,7 @@ def episode_requests(cfg: ComparisonConfig) -> dict[str, RenderRequest]:
     """
     counts = {
         "train": (cfg.train_episodes, cfg.train_frames),
-        "val": (1, cfg.val_frames),
+        "val": (cfg.val_episodes, cfg.val_frames),
         "test": (cfg.test_episodes, cfg.test_frames),
     }
     requests = {}
@@ -122,10 +122,10 @@ def render_episodes(
 
 
 def comparison_splits(data: Mapping[str, TrainingData]) -> dict[str, Any]:
-    """``{"train": the training episodes joined, "val", "tests": {name: episode}}``."""
+    """``{"train": the training episodes joined, "val": (episodes,), "tests": {name: episode}}``."""
     return {
         "train": TrainingData.concat([v for k, v in data.items() if k.startswith("train-")]),
-        "val": data["val-0"],
+        "val": tuple(v for k, v in data.items() if k.startswith("val-")),
         "tests": {k: v for k, v in data.items() if k.startswith("test-")},
     }
 
@@ -267,6 +267,12 @@ def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     return "budget-limited"
 
 
+def kept_val_error(run: Mapping[str, Any]) -> float | None:
+    """A run's pooled validation error at its kept (best) step; None if not recorded."""
+    best = [h for h in run["history"] if h["step"] == run["best_step"]]
+    return best[0].get("val_error") if best else None
+
+
 def _design_summary(
     runs: list[dict[str, Any]], interval: Interval, errors: EpisodeErrors
 ) -> dict[str, Any]:
@@ -276,6 +282,7 @@ def _design_summary(
         "error": interval.as_dict(),
         "episode_errors": errors.as_dict(),
         "error_per_seed": [episode_errors([r["episodes"]]).point() for r in runs],
+        "val_error_per_seed": [kept_val_error(r) for r in runs],
         "converged": all(c["converged"] for c in conv),
         "state": training_state(conv),
         "convergence": conv,
@@ -389,47 +396,30 @@ def _run_comparison(
         cfg, episodes, workers=workers, ray_address=ray_address, progress=progress
     )
     splits = comparison_splits(data)
-    train, tests = splits["train"], splits["tests"]
-    task = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
+    train = splits["train"]
+    family = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
     # before training: a split that misses part of the label space is logged at once
-    coverage = study_coverage({"train": train, "val": data["val-0"], **tests})
+    coverage = study_coverage(
+        {"train": train, **{k: v for k, v in data.items() if not k.startswith("train-")}}
+    )
     runs = train_runs(
         cfg, splits, out, train_workers=train_workers, ray_address=ray_address, progress=progress
     )
-    trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
-    errors = {name: episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
-    errors["trivial"] = episode_errors([trivial])
-    intervals = {name: bootstrap_interval(e, seed=cfg.seed) for name, e in errors.items()}
-    trivial_iv = intervals.pop("trivial")
-    designs = {
-        name: _design_summary(rs, intervals[name], errors[name]) for name, rs in runs.items()
+    task_labels = cfg.task_labels(label_tasks(train.label_specs))
+    blocks = {
+        task: task_comparison(cfg, by_design, task_splits(splits, task_labels[task]))
+        for task, by_design in runs.items()
     }
-    first, second = (d.name for d in cfg.designs[:2])
+    headline = blocks[next(iter(blocks))]
     result: dict[str, Any] = {
-        "task": task,
-        "error_name": next(iter(trivial.values()))["error_name"],
+        "task": family,
+        "protocol": cfg.protocol.value,
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         "episodes": {k: episode_record(d) for k, d in data.items()},
-        "designs": designs,
-        "trivial": {
-            "error": trivial_iv.as_dict(),
-            "episode_errors": errors["trivial"].as_dict(),
-            "episodes": trivial,
-        },
-        "verdict": (
-            verdict(first, intervals[first], second, intervals[second])
-            if len(cfg.designs) == 2
-            else None
-        ),
-        "versus_trivial": {
-            name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
-        },
-        "paired": paired_differences(errors, [d.name for d in cfg.designs[:2]], cfg.seed),
-        "labels": label_intervals(
-            {name: [r["episodes"] for r in rs] for name, rs in runs.items()}
-            | {"trivial": [trivial]},
-            seed=cfg.seed,
-        ),
+        **headline,
+        "labels": {label: lab for b in blocks.values() for label, lab in b["labels"].items()},
+        "tasks": blocks,
+        "combined": combined_cameras(cfg, blocks),
         "element_names": {s.name: list(s.element_names) for s in train.label_specs},
         "coverage": coverage,
         "figure": str(out / "comparison.png"),
@@ -438,29 +428,102 @@ def _run_comparison(
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
-        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / task)
+        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family)
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     return result
 
 
+def task_comparison(
+    cfg: ComparisonConfig, runs: Mapping[str, list[dict[str, Any]]], splits: Mapping[str, Any]
+) -> dict[str, Any]:
+    """One task's figures: every design, the trivial predictor, verdicts, every label.
+
+    Args:
+        cfg: the comparison (its first two designs are compared; its seed seeds
+            the bootstrap).
+        runs: ``{design: [run metrics per seed]}`` of cameras trained for the task.
+        splits: the task's splits (its labels only, :func:`task_splits`).
+
+    Returns:
+        ``{"error_name", "designs", "trivial", "verdict", "versus_trivial",
+        "paired", "labels"}``.
+    """
+    train, tests = splits["train"], splits["tests"]
+    trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
+    errors = {name: episode_errors([r["episodes"] for r in rs]) for name, rs in runs.items()}
+    errors["trivial"] = episode_errors([trivial])
+    intervals = {name: bootstrap_interval(e, seed=cfg.seed) for name, e in errors.items()}
+    trivial_iv = intervals.pop("trivial")
+    names = [d.name for d in cfg.designs]
+    return {
+        "error_name": next(iter(trivial.values()))["error_name"],
+        "designs": {
+            name: _design_summary(rs, intervals[name], errors[name]) for name, rs in runs.items()
+        },
+        "trivial": {
+            "error": trivial_iv.as_dict(),
+            "episode_errors": errors["trivial"].as_dict(),
+            "episodes": trivial,
+        },
+        "verdict": (
+            verdict(names[0], intervals[names[0]], names[1], intervals[names[1]])
+            if len(names) == 2
+            else None
+        ),
+        "versus_trivial": {
+            name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
+        },
+        "paired": paired_differences(errors, names[:2], cfg.seed),
+        "labels": label_intervals(
+            {name: [r["episodes"] for r in rs] for name, rs in runs.items()}
+            | {"trivial": [trivial]},
+            seed=cfg.seed,
+        ),
+    }
+
+
+def combined_cameras(
+    cfg: ComparisonConfig, blocks: Mapping[str, Mapping[str, Any]]
+) -> dict[str, dict[str, Any]]:
+    """Each design as one camera for every task trained: its pixels and each task's figure.
+
+    A minimalist camera for several tasks is the union of its tasks' freeform
+    pixels (paper Sec. 7: two for each task), so its pixels add up; a
+    conventional camera is one sensor whatever the number of heads reading it.
+    """
+    out = {}
+    for d in cfg.designs:
+        first = blocks[next(iter(blocks))]["designs"][d.name]["model"]["pixels"]
+        out[d.name] = {
+            "pixels": first * len(blocks) if d.is_mincam else first,
+            "tasks": {t: b["designs"][d.name]["error"] for t, b in blocks.items()},
+        }
+    return out
+
+
 def _keep_all_masks(
     cfg: ComparisonConfig,
-    runs: Mapping[str, list[dict[str, Any]]],
+    runs: Mapping[str, Mapping[str, list[dict[str, Any]]]],
     result: Mapping[str, Any],
-    task_dir: Path,
+    family_dir: Path,
 ) -> dict[str, Any]:
-    """Every minimalist design's best masks into ``task_dir/<design>/``; their records."""
-    return {
-        d.name: _keep_masks(
-            runs[d.name],
-            result["designs"][d.name],
-            result["episodes"],
-            task_dir / d.name,
-            result["task"],
-        )
-        for d in cfg.designs
-        if d.is_mincam
-    }
+    """Every minimalist design's best masks per task; their records.
+
+    Into ``family_dir/<design>/`` for a single task (or a joint camera), into
+    ``family_dir/<design>/<task>/`` for each of several tasks.
+    """
+    kept: dict[str, Any] = {}
+    for task, by_design in runs.items():
+        block = result["tasks"][task]
+        for d in (d for d in cfg.designs if d.is_mincam):
+            several = len(runs) > 1
+            where = family_dir / d.name / task if several else family_dir / d.name
+            title = f"{result['task']} {task}" if several else result["task"]
+            record = _keep_masks(
+                by_design[d.name], block["designs"][d.name], result["episodes"], where, title
+            )
+            kept[f"{d.name}/{task}" if len(runs) > 1 else d.name] = record
+    return kept
 
 
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
@@ -563,15 +626,36 @@ def label_table(result: Mapping[str, Any], element_names: Mapping[str, Sequence[
 
 
 def study_table(result: Mapping[str, Any]) -> str:
-    """Markdown table of a comparison: every design, the trivial predictor, verdicts."""
+    """Markdown tables of a comparison: per task, every design, the trivial predictor, verdicts.
+
+    The headline task's table also has the reference's verdicts and reduction
+    factor; every label's table and the label coverage follow.
+    """
+    tasks = result.get("tasks") or {result["task"]: result}
+    sections = []
+    for i, (task, block) in enumerate(tasks.items()):
+        title = result["task"] if len(tasks) == 1 else f"{result['task']}, task {task}"
+        sections.append(_design_table(block, title, result if i == 0 else {}))
+    lines = ["\n\n".join(sections)]
+    if len(tasks) > 1:
+        lines += ["", _combined_table(result)]
+    if "labels" in result:
+        lines += ["", label_table(result, result.get("element_names", {}))]
+    if "coverage" in result:
+        lines += ["", coverage_table(result["coverage"])]
+    return "\n".join(lines)
+
+
+def _design_table(block: Mapping[str, Any], title: str, headline: Mapping[str, Any]) -> str:
+    """One task's table; ``headline``: the result whose reference verdicts follow (or ``{}``)."""
     lines = [
-        f"## {result['task']}: test {result['error_name']} (mean over seeds, 95 % CI over "
+        f"## {title}: test {block['error_name']} (mean over seeds, 95 % CI over "
         "seeds and test episodes)",
         "",
         "| design | pixels | error [95 % CI] | per seed | converged | steps | training (s) |",
         "|---|---:|---|---|---|---|---:|",
     ]
-    for name, d in result["designs"].items():
+    for name, d in block["designs"].items():
         e = d["error"]
         lines.append(
             f"| {name} | {d['model']['pixels']} | {e['mean']:.3f} [{e['ci95'][0]:.3f}, "
@@ -579,17 +663,17 @@ def study_table(result: Mapping[str, Any]) -> str:
             f"{d['state']} | "
             f"{', '.join(map(str, d['steps']))} | {sum(d['train_wall_time_s']):.0f} |"
         )
-    t = result["trivial"]["error"]
+    t = block["trivial"]["error"]
     lines += [
         f"| trivial predictor | 0 | {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}] "
         "| | | | |",
         "",
     ]
-    if result.get("verdict"):
-        lines.append(f"Verdict: {result['verdict']}.")
-    for line in result.get("reference_verdicts", []):
+    if block.get("verdict"):
+        lines.append(f"Verdict: {block['verdict']}.")
+    for line in headline.get("reference_verdicts", []):
         lines.append(f"- {line}")
-    rf = result.get("reduction_factor")
+    rf = headline.get("reduction_factor")
     if rf is not None:
         lines.append(
             f"Reduction factor of {rf['reference']}: "
@@ -599,10 +683,25 @@ def study_table(result: Mapping[str, Any]) -> str:
                 else f"above {rf['largest_tried_factor']:g}x (no baseline tried matches it)"
             )
         )
-    if "labels" in result:
-        lines += ["", label_table(result, result.get("element_names", {}))]
-    if "coverage" in result:
-        lines += ["", coverage_table(result["coverage"])]
+    return "\n".join(lines)
+
+
+def _combined_table(result: Mapping[str, Any]) -> str:
+    """Each design as one camera for every task: its pixels and each task's figure."""
+    tasks = list(result["tasks"])
+    lines = [
+        "## One camera for every task (a minimalist camera's pixels add up per task)",
+        "",
+        "| design | pixels | " + " | ".join(tasks) + " |",
+        "|---|---:|" + "---|" * len(tasks),
+    ]
+    for name, c in result["combined"].items():
+        cells = [
+            f"{c['tasks'][t]['mean']:.3f} [{c['tasks'][t]['ci95'][0]:.3f}, "
+            f"{c['tasks'][t]['ci95'][1]:.3f}]"
+            for t in tasks
+        ]
+        lines.append(f"| {name} | {c['pixels']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -5,12 +5,28 @@ No PyTorch or Mitsuba import, so the command line shows these defaults at once.
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from mincam_render.core.checks import check_int, check_number
-from mincam_render.learn.train_config import HeadKind, TrainConfig
+from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
+
+
+class Protocol(enum.Enum):
+    """Which labels one set of masks is trained for.
+
+    * ``PER_TASK``: the paper's (Sec. 7, "two for each task"): every design is
+      trained once per task of the family (:func:`~mincam_render.core.labels.label_tasks`;
+      workspace: the people count, the zones, the door), each camera with the
+      design's pixel budget and early stopping on its own task's loss; a camera
+      for every task is the union of their pixels.
+    * ``JOINT``: one camera for every label (the losses summed).
+    """
+
+    PER_TASK = "per-task"
+    JOINT = "joint"
 
 
 @dataclass(frozen=True)
@@ -28,6 +44,12 @@ class Design:
         privacy_weight: masks trained with the adversarial privacy term of this
             weight (replaces the recipe's ``TrainConfig.privacy_weight``); 0: the
             task alone. A minimalist camera's option only.
+        reference: the masks are this reference's, fitted on the training split
+            (:class:`~mincam_render.learn.reference_masks.MaskReference`: principal
+            components, partial least squares, a distilled full-resolution
+            network), made printable and frozen; only the head trains. None:
+            masks learned end to end. A minimalist camera's option only.
+        tuned: with ``reference``, the masks start from it and train end to end.
     """
 
     pixels: int | None = None
@@ -35,6 +57,8 @@ class Design:
     sensor_model: bool = True
     head: HeadKind = HeadKind.MLP
     privacy_weight: float = 0.0
+    reference: MaskReference | None = None
+    tuned: bool = False
 
     def __post_init__(self) -> None:
         if (self.pixels is None) == (self.grid is None):
@@ -47,19 +71,28 @@ class Design:
         check_number("Design.privacy_weight", self.privacy_weight, 0, 1e3, numpy=True)
         if self.privacy_weight and self.grid is not None:
             raise ValueError(f"{self}: a privacy weight trains masks; a baseline has none")
+        if self.reference is not None:
+            object.__setattr__(self, "reference", MaskReference(self.reference))
+            if self.grid is not None:
+                raise ValueError(f"{self}: reference masks are a minimalist camera's")
+        elif self.tuned:
+            raise ValueError(f"{self}: tuned starts from reference masks; give a reference")
 
     @property
     def name(self) -> str:
         """``mincam-8px``, ``mincam-8px-nosensor``, ``baseline-8x8``; ``-tcn`` for that head.
 
-        A privacy weight of 1 adds ``-private1`` (before the head's suffix).
+        A privacy weight of 1 adds ``-private1`` (before the head's suffix), a
+        reference ``-pca`` (``-pca-tuned`` when trained from it).
         """
         suffix = "" if self.head is HeadKind.MLP else f"-{self.head.value}"
         if self.grid is not None:
             return f"baseline-{self.grid[0]}x{self.grid[1]}{suffix}"
         private = f"-private{self.privacy_weight:g}" if self.privacy_weight else ""
         sensor = "" if self.sensor_model else "-nosensor"
-        return f"mincam-{self.pixels}px{sensor}{private}{suffix}"
+        ref = "" if self.reference is None else f"-{self.reference.value}"
+        ref += "-tuned" if self.tuned else ""
+        return f"mincam-{self.pixels}px{sensor}{ref}{private}{suffix}"
 
     @property
     def is_mincam(self) -> bool:
@@ -70,7 +103,10 @@ class Design:
         """Keyword arguments of :func:`mincam_render.learn.train.train_run`."""
         if self.grid is not None:
             return {"baseline_grid": self.grid}
-        return {"pixels": self.pixels, "sensor_model": self.sensor_model}
+        kwargs: dict[str, Any] = {"pixels": self.pixels, "sensor_model": self.sensor_model}
+        if self.reference is not None:
+            kwargs |= {"reference": self.reference, "tune_reference": self.tuned}
+        return kwargs
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,16 +125,23 @@ class ComparisonConfig:
             share one render.
         train_episodes: training episodes (static tasks; a temporal task trains on one).
         train_frames: frames of each training episode.
-        val_frames: frames of the validation episode.
+        val_episodes: validation episodes (other scene seeds), pooled for early
+            stopping and for choosing the kept run: one episode is a poor guide
+            (its people, schedule and daylight are one draw).
+        val_frames: frames of each validation episode.
         test_frames: frames of each test episode.
         test_episodes: number of test episodes (>= 2 for an interval over episodes).
         seeds: training seeds per design (>= 2 for an interval over seeds).
-        designs: the camera designs; with two, the verdict compares them.
+        designs: the camera designs (each once); with two, the verdict compares them.
         train: the training recipe (its ``seed`` is replaced per training seed, its
             ``head`` by each design's).
         fidelity: :class:`RenderRequest` fidelity fields (``{}`` = measured, auto).
         mask_res: mask texels per side rendered (None: the family camera's); a
             baseline grid can be at most this fine (64 x 64 needs 64).
+        protocol: per-task cameras (the paper's) or one joint camera (:class:`Protocol`).
+        tasks: under ``PER_TASK``, the tasks trained (names of
+            :func:`~mincam_render.core.labels.label_tasks`, e.g. ``("people_count",)``);
+            empty: every task of the family.
     """
 
     family: str = "workspace"
@@ -108,6 +151,7 @@ class ComparisonConfig:
     light_scale: float = 1.0
     train_episodes: int = 2
     train_frames: int = 1200
+    val_episodes: int = 3
     val_frames: int = 600
     test_frames: int = 600
     test_episodes: int = 3
@@ -116,19 +160,29 @@ class ComparisonConfig:
     train: TrainConfig = TrainConfig()
     fidelity: Mapping[str, Any] = field(default_factory=dict)
     mask_res: int | None = None
+    protocol: Protocol = Protocol.PER_TASK
+    tasks: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "protocol", Protocol(self.protocol))
+        except ValueError:
+            allowed = [p.value for p in Protocol]
+            raise ValueError(f"protocol = {self.protocol!r}: allowed {allowed}") from None
+        object.__setattr__(self, "tasks", tuple(self.tasks))
+        if self.tasks and self.protocol is Protocol.JOINT:
+            raise ValueError(f"tasks {list(self.tasks)}: a joint camera trains every label")
         for name in ("train_frames", "val_frames", "test_frames"):
             check_int(name, getattr(self, name), 30, unit="frames")
-        for name in ("train_episodes", "test_episodes", "seeds"):
+        for name in ("train_episodes", "val_episodes", "test_episodes", "seeds"):
             check_int(name, getattr(self, name), 1)
         check_number("light_scale", self.light_scale, 0, lo_open=True, numpy=True)
         if "fps" in self.overrides:
             raise ValueError("overrides: give the frame rate as fps, not as an override")
         self._check_grids()
         names = [d.name for d in self.designs]
-        if len(names) < 2 or len(set(names)) != len(names):
-            raise ValueError(f"designs {names}: need at least two, each once")
+        if not names or len(set(names)) != len(names):
+            raise ValueError(f"designs {names}: need at least one, each once")
 
     def _check_grids(self) -> None:
         """Refuse, before any render, a baseline grid finer than the rendered ``mask_res``."""
@@ -141,3 +195,19 @@ class ComparisonConfig:
                     f"{d.name}: a {d.grid[0]}x{d.grid[1]} baseline needs at least "
                     f"{max(d.grid)} texels per side; mask_res = {self.mask_res}"
                 )
+
+    def task_labels(self, tasks: Mapping[str, tuple[str, ...]]) -> dict[str, tuple[str, ...]]:
+        """``{task: labels}`` trained, from the family's ``tasks`` (:func:`label_tasks`).
+
+        ``JOINT``: one task, ``"joint"``, of every label. ``PER_TASK``: the
+        family's tasks (or those of :attr:`tasks`).
+
+        Raises:
+            ValueError: :attr:`tasks` names a task the family does not have.
+        """
+        if self.protocol is Protocol.JOINT:
+            return {"joint": tuple(label for names in tasks.values() for label in names)}
+        unknown = [t for t in self.tasks if t not in tasks]
+        if unknown:
+            raise ValueError(f"tasks {unknown}: the family's tasks are {list(tasks)}")
+        return {t: names for t, names in tasks.items() if not self.tasks or t in self.tasks}

@@ -38,6 +38,7 @@ from typing import Any
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
 from mincam_render.core.checks import check_int
+from mincam_render.core.labels import label_tasks
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train import train_run
 from mincam_render.learn.train_config import TrainConfig
@@ -58,34 +59,63 @@ class TrainingError(RuntimeError):
 
 @dataclasses.dataclass(frozen=True)
 class RunTask:
-    """One training run of a comparison: a design, a seed index and its recipe."""
+    """One training run of a comparison: a design, a seed index, its recipe and task.
+
+    Args:
+        design: the camera design.
+        seed_index: which of the comparison's training seeds.
+        config: the recipe (its seed is the run's).
+        task: the task the camera is trained for (``"joint"``: every label).
+        labels: the task's labels; empty when they are every label of the
+            data (a joint camera, or the one task of a single-task family).
+    """
 
     design: Design
     seed_index: int
     config: TrainConfig
+    task: str = "joint"
+    labels: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
-        """The run directory's name, ``<design>-seed<i>``."""
-        return f"{self.design.name}-seed{self.seed_index}"
+        """The run directory's name: ``<design>-seed<i>`` (``<task>/`` before it for a task)."""
+        run = f"{self.design.name}-seed{self.seed_index}"
+        return f"{self.task}/{run}" if self.labels else run
 
 
-def comparison_tasks(cfg: ComparisonConfig) -> list[RunTask]:
-    """Every run of ``cfg``, design by design, seed by seed: each seed from ``cfg.seed``."""
-    return [
-        RunTask(
-            design=d,
-            seed_index=i,
-            config=dataclasses.replace(
-                cfg.train,
-                seed=stream_seed(cfg.seed, f"train/{d.name}", i),
-                head=d.head,
-                privacy_weight=d.privacy_weight,
-            ),
-        )
-        for d in cfg.designs
-        for i in range(cfg.seeds)
-    ]
+def comparison_tasks(
+    cfg: ComparisonConfig, family_tasks: Mapping[str, tuple[str, ...]] | None = None
+) -> list[RunTask]:
+    """Every run of ``cfg``, task by task, design by design, seed by seed.
+
+    ``family_tasks``: the data's tasks (:func:`~mincam_render.core.labels.label_tasks`),
+    of which ``cfg`` trains :meth:`ComparisonConfig.task_labels`; None: one joint
+    camera per design. Each seed derives from ``cfg.seed``, the design and, for
+    a camera of only some of the labels, the task.
+    """
+    family_tasks = dict(family_tasks or {"joint": ()})
+    every = {label for names in family_tasks.values() for label in names}
+    runs = []
+    for task, names in cfg.task_labels(family_tasks).items():
+        own = tuple(names) if set(names) != every else ()
+        stream = f"train/{task}/" if own else "train/"
+        runs += [
+            RunTask(
+                design=d,
+                seed_index=i,
+                config=dataclasses.replace(
+                    cfg.train,
+                    seed=stream_seed(cfg.seed, f"{stream}{d.name}", i),
+                    head=d.head,
+                    privacy_weight=d.privacy_weight,
+                ),
+                task=task,
+                labels=own,
+            )
+            for d in cfg.designs
+            for i in range(cfg.seeds)
+        ]
+    return runs
 
 
 def train_design_run(
@@ -98,13 +128,15 @@ def train_design_run(
 ) -> dict[str, Any]:
     """Train (or resume) one run into ``runs_dir/<task.name>``; its metrics (with episodes).
 
-    ``splits``: ``{"train": TrainingData, "val": TrainingData, "tests": {name: TrainingData}}``.
+    ``splits``: ``{"train": TrainingData, "val": (TrainingData, ...), "tests": {name:
+    TrainingData}}``; a task's run sees only its labels (:func:`task_splits`).
     A design without the detector model is supplement A's ablation: its masks
     are trained without the model, then frozen while a fresh head is trained
     with it (``<run>/head-with-sensor``); that camera is the one tested (with
     the model), and the masks' own training is kept as ``mask_run``.
     """
     design, run_dir = task.design, runs_dir / task.name
+    splits = task_splits(splits, task.labels)
     common = {
         "config": task.config,
         "episodes": splits["tests"],
@@ -120,6 +152,17 @@ def train_design_run(
                         frozen_masks_from=masks["run_dir"])  # fmt: skip
         run["mask_run"] = masks
     return dict(run, run_dir=str(run_dir), seed_index=task.seed_index)
+
+
+def task_splits(splits: Mapping[str, Any], labels: tuple[str, ...]) -> dict[str, Any]:
+    """``splits`` with only ``labels`` (every split, every episode); all labels when empty."""
+    if not labels:
+        return dict(splits)
+    return {
+        "train": splits["train"].with_labels(labels),
+        "val": tuple(v.with_labels(labels) for v in splits["val"]),
+        "tests": {k: v.with_labels(labels) for k, v in splits["tests"].items()},
+    }
 
 
 def check_executor(train_workers: int, ray_address: str | None) -> None:
@@ -142,8 +185,11 @@ def train_runs(
     train_workers: int = 1,
     ray_address: str | None = None,
     progress: bool = True,
-) -> dict[str, list[dict[str, Any]]]:
-    """Every run of ``cfg`` trained (module docstring): ``{design: [run metrics per seed]}``.
+) -> dict[str, dict[str, list[dict[str, Any]]]]:
+    """Every run of ``cfg`` trained (module docstring): ``{task: {design: [metrics per seed]}}``.
+
+    The tasks are :meth:`ComparisonConfig.task_labels` of the training split's
+    labels (``"joint"`` for a joint camera).
 
     Raises:
         ValueError: invalid ``train_workers`` or ``ray_address`` (:func:`check_executor`).
@@ -153,7 +199,7 @@ def train_runs(
     from tqdm import tqdm
 
     check_executor(train_workers, ray_address)
-    tasks, runs_dir = comparison_tasks(cfg), out / "runs"
+    tasks, runs_dir = comparison_tasks(cfg, label_tasks(splits["train"].label_specs)), out / "runs"
     results: dict[str, dict[str, Any]] = {}
     bar = tqdm(total=len(tasks), desc="training runs", unit="run", disable=not progress)
 
@@ -173,7 +219,10 @@ def train_runs(
             _on_pool(train_workers, rest, splits, runs_dir, done)
     finally:
         bar.close()
-    return {d.name: [results[t.name] for t in tasks if t.design == d] for d in cfg.designs}
+    by_task: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for t in tasks:
+        by_task.setdefault(t.task, {}).setdefault(t.design.name, []).append(results[t.name])
+    return by_task
 
 
 def _finished(task: RunTask, runs_dir: Path) -> bool:

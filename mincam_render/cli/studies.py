@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from mincam_render.analysis.comparison_config import ComparisonConfig as C
+from mincam_render.analysis.comparison_config import Protocol
 from mincam_render.learn.train_config import HeadKind
 
 from .errors import user_error
@@ -61,9 +62,23 @@ episode_options = apply_options([
     click.option("--train-frames", type=click.IntRange(30), default=C.train_frames,
                  show_default=True,
                  help="Frames of each training episode (at --fps)."),
+    click.option("--val-episodes", type=click.IntRange(1, 100), default=C.val_episodes,
+                 show_default=True,
+                 help="Validation episodes (other scene seeds), pooled for early stopping "
+                 "and for choosing the kept masks."),
     click.option("--val-frames", type=click.IntRange(30), default=C.val_frames,
                  show_default=True,
-                 help="Frames of the validation episode."),
+                 help="Frames of each validation episode."),
+    click.option("--protocol", type=click.Choice([p.value for p in Protocol]),
+                 default=C.protocol.value, show_default=True,
+                 callback=lambda ctx, param, value: Protocol(value),
+                 help="per-task: a camera per task of the family, each with the design's "
+                 "pixels (the paper's; workspace: people count, zones, door); joint: one "
+                 "camera for every label."),
+    click.option("--tasks", default="", callback=lambda ctx, param, value: _task_list(value),
+                 metavar="TASK,...",
+                 help="With --protocol per-task, train only these tasks (e.g. people_count); "
+                 "default: every task of the family."),
     click.option("--test-frames", type=click.IntRange(30), default=C.test_frames,
                  show_default=True,
                  help="Frames of each test episode."),
@@ -88,6 +103,14 @@ episode_options = apply_options([
                  show_default=True, help="Frame rate of the episodes (overrides the "
                  "family's): at 2 fps, 1,200 frames cover 10 minutes of activity."),
 ])  # fmt: skip
+
+
+def _task_list(value: str) -> tuple[str, ...]:
+    """``"people_count,zones"`` -> ``("people_count", "zones")`` (each once, in order)."""
+    tasks = tuple(v.strip() for v in value.split(",") if v.strip())
+    if len(set(tasks)) != len(tasks):
+        raise click.BadParameter(f"{value!r}: give each task once")
+    return tasks
 
 
 def _head_list(value: str) -> list[HeadKind]:
@@ -152,7 +175,7 @@ def _compare(
         )
         click.echo(
             f"[1/2] episodes of {cfg.family}: train {cfg.train_episodes} x {cfg.train_frames}, "
-            f"val {cfg.val_frames}, "
+            f"val {cfg.val_episodes} x {cfg.val_frames}, "
             f"test {cfg.test_episodes} x {cfg.test_frames} frames; {len(designs)} designs x "
             f"{cfg.seeds} seeds"
         )
@@ -177,8 +200,24 @@ def _compare(
 
 
 def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
-    """Each design's test error [95 % CI], the trivial predictor's, and the verdict."""
-    click.echo(f"[2/2] test {result['error_name']}, mean over {seeds} seeds [95 % CI]")
+    """Per task: each design's test error [95 % CI], the trivial predictor's, verdicts."""
+    tasks = result["tasks"]
+    click.echo(f"[2/2] test error, mean over {seeds} seeds [95 % CI] ({result['protocol']})")
+    for task, block in tasks.items():
+        if len(tasks) > 1:
+            click.echo(f"  task {task}:")
+        _echo_task(block)
+    if len(tasks) > 1:
+        for name, c in result["combined"].items():
+            click.echo(f"  {name} for every task: {c['pixels']} pixels")
+    if n := len(result["coverage"]["warnings"]):
+        # each was logged before training; the summary only points at them
+        click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")
+
+
+def _echo_task(result: dict[str, Any]) -> None:
+    """One task's designs, trivial predictor, verdict and paired differences."""
+    click.echo(f"  {result['error_name']}:")
     for name, d in result["designs"].items():
         e = d["error"]
         state = d["state"]
@@ -194,9 +233,6 @@ def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
         click.echo(f"  {name} against the trivial predictor: {against}")
     for paired in result["paired"].values():
         click.echo(f"  {paired['statement']}")
-    if n := len(result["coverage"]["warnings"]):
-        # each was logged before training; the summary only points at them
-        click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")
 
 
 @click.command("pipeline")

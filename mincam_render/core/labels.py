@@ -71,3 +71,17 @@ class LabelSpec:
                 f"LabelSpec {self.name!r}: zero_below_true = {self.zero_below_true!r} "
                 f"{self.unit}: allowed a finite value on a REGRESSION label, or None"
             )
+
+
+def label_tasks(specs: tuple[LabelSpec, ...] | list[LabelSpec]) -> dict[str, tuple[str, ...]]:
+    """The tasks of a family: ``{task: label names}``, in the labels' order.
+
+    A task is what one set of masks is designed for (paper Sec. 7: "two [pixels]
+    for each task"): the labels pooled into one headline figure form one task
+    (traffic's left and right speeds), every other label is a task of its own
+    (workspace: the people count, the zones, the door).
+    """
+    tasks: dict[str, list[str]] = {}
+    for s in specs:
+        tasks.setdefault(s.headline or s.name, []).append(s.name)
+    return {task: tuple(names) for task, names in tasks.items()}

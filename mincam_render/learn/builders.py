@@ -107,6 +107,7 @@ def build_mincam(
     count_loss: CountLoss | None = None,
     seed: int = 0,
     head: HeadKind = HeadKind.MLP,
+    mask_block: int = 1,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
 
@@ -115,7 +116,8 @@ def build_mincam(
     error: reusing a detector's transport for a second mask must be asked for
     with an explicit ``detectors`` list.
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
-    ``head`` chooses the inference network.
+    ``head`` chooses the inference network; ``mask_block`` the masks' block size
+    in texels (:class:`MincamCamera`).
     """
     k_data = data.transport.shape[1]
     if detectors is None:
@@ -146,6 +148,7 @@ def build_mincam(
         sensor_model=sensor_model,
         history=data.history,
         init_seed=seed,
+        mask_block=mask_block,
     )
 
 
@@ -180,9 +183,10 @@ def build_baseline(
 def describe_model(model: Model) -> dict[str, Any]:
     """A JSON-ready description of a model (kind, pixels, options).
 
-    ``count_classes`` appears only for classified counts and ``head`` only for a
-    head other than the paper's MLP, so descriptions (and the resume check
-    against checkpoints) of the paper's models are unchanged.
+    ``count_classes`` appears only for classified counts, ``head`` only for a
+    head other than the paper's MLP and ``mask_block`` only above 1, so
+    descriptions (and the resume check against checkpoints) of the paper's
+    models are unchanged.
     """
     if isinstance(model, MincamCamera):
         desc = {
@@ -192,6 +196,8 @@ def describe_model(model: Model) -> dict[str, Any]:
             "sensor_model": model.sensor_model,
             "history": model.history,
         }
+        if model.mask_block != 1:
+            desc["mask_block"] = model.mask_block
     else:
         desc = {
             "kind": "baseline",

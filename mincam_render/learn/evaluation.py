@@ -139,6 +139,61 @@ def mean_loss_under(
     return float(np.mean(loss_sums / max(1, len(idx))))
 
 
+def episode_limits(episodes: Sequence[TrainingData], limit: int | None) -> list[int | None]:
+    """Samples evaluated per episode: ``limit`` in all, shared in proportion to their lengths.
+
+    None (or a limit above the total) evaluates every sample of every episode.
+    """
+    total = sum(len(e) for e in episodes)
+    if limit is None or total <= limit:
+        return [None] * len(episodes)
+    return [max(2, round(limit * len(e) / total)) for e in episodes]
+
+
+def pooled_validation(
+    model: Model,
+    episodes: Sequence[TrainingData],
+    *,
+    limit: int | None = None,
+    draws: Sequence[PerturbationDraw] = (),
+) -> dict[str, float]:
+    """Validation on several episodes (other scene seeds), pooled over their samples.
+
+    Each episode is evaluated as :func:`predict` does (time order, the fixed noise
+    seed) on its share of ``limit`` samples (:func:`episode_limits`); the loss is
+    the sample-weighted mean, the error the headline pooled like the test error
+    (RMSE as the root of the mean square over frames, error rates as a mean).
+
+    Args:
+        model: the camera.
+        episodes: validation episodes.
+        limit: samples evaluated in all (None: every sample).
+        draws: built cameras; when given, ``loss`` is the mean of the loss under
+            them (:func:`mean_loss_under`) and ``loss_nominal`` the design's own.
+
+    Returns:
+        ``{"loss", "error"[, "loss_nominal"]}``.
+    """
+    if not episodes:
+        raise ValueError("pooled_validation needs at least one validation episode")
+    losses, errors, weights, under = [], [], [], []
+    for ep, lim in zip(episodes, episode_limits(episodes, limit), strict=True):
+        pred, lab, loss = predict(model, ep, limit=lim)
+        m = metrics(pred, lab, loss, ep)
+        losses.append(loss)
+        errors.append(m["error"])
+        weights.append(m["samples"])
+        if draws:
+            under.append(mean_loss_under(model, ep, draws, limit=lim))
+    w = np.asarray(weights, np.float64) / sum(weights)
+    rms = m["error_name"].endswith("RMSE")
+    error = np.sqrt(w @ np.square(errors)) if rms else w @ np.asarray(errors)
+    out = {"loss": float(w @ np.asarray(losses)), "error": float(error)}
+    if draws:  # the built cameras' mean decides; the design's own loss is kept beside
+        out["loss_nominal"], out["loss"] = out["loss"], float(w @ np.asarray(under))
+    return out
+
+
 def evaluate(
     model: Model,
     data: TrainingData,

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -52,7 +52,7 @@ import torch
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.checkpoint import TrainingState, restore_checkpoint, save_checkpoint
-from mincam_render.learn.evaluation import mean_loss_under, predict
+from mincam_render.learn.evaluation import pooled_validation
 from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.run_log import RunLog, TrainingClock
 from mincam_render.learn.snapshots import mask_snapshot, plot_mask_evolution
@@ -105,7 +105,7 @@ class _Run:
 def train_model(
     model: Model,
     train: TrainingData | DatasetBatches | RenderedBatches,
-    val: TrainingData,
+    val: TrainingData | Sequence[TrainingData],
     config: TrainConfig = TrainConfig(),
     *,
     out_dir: str | os.PathLike | None = None,
@@ -121,7 +121,8 @@ def train_model(
         model: a :class:`MincamCamera` or :class:`BaselineCamera`.
         train: a training split, or a batch source (:class:`RenderedBatches` for
             on-the-fly training).
-        val: validation split (loss with sensor noise at a fixed seed).
+        val: validation episode, or several pooled (:func:`pooled_validation`; loss
+            with sensor noise at a fixed seed).
         config: the recipe.
         out_dir: where checkpoints, event files, ``history.jsonl`` and
             ``mask_evolution.png`` go; None keeps everything in memory.
@@ -158,7 +159,8 @@ def train_model(
     if config.torch_threads is not None:
         torch.set_num_threads(config.torch_threads)
     try:
-        _train_steps(run, val, logs, bar, clock, stop_after_steps, on_progress)
+        episodes = (val,) if isinstance(val, TrainingData) else tuple(val)
+        _train_steps(run, episodes, logs, bar, clock, stop_after_steps, on_progress)
     finally:
         torch.set_num_threads(threads)
         bar.close()
@@ -192,7 +194,7 @@ def _start(
 
 def _train_steps(
     run: _Run,
-    val: TrainingData,
+    val: Sequence[TrainingData],
     logs: RunLog,
     bar: Any,
     clock: TrainingClock,
@@ -205,7 +207,8 @@ def _train_steps(
     while not run.done():
         loss = train_step(
             run.model, run.source, run.opt, run.gen, config.gain_range, config.perturbation,
-            config.privacy_weight,
+            config.privacy_weight, transport_noise=config.transport_noise,
+            mask_tv_weight=config.mask_tv_weight, mask_logit_decay=config.mask_logit_decay,
         )  # fmt: skip
         st.step += 1
         bar.update(1)
@@ -224,22 +227,32 @@ def _train_steps(
 
 
 def _evaluate(
-    run: _Run, val: TrainingData, loss: torch.Tensor, logs: RunLog, clock: TrainingClock
+    run: _Run,
+    val: Sequence[TrainingData],
+    loss: torch.Tensor,
+    logs: RunLog,
+    clock: TrainingClock,
 ) -> None:
-    """Validation loss after a step: history, mask snapshot, logs, best state, early stopping."""
-    st, limit = run.state, run.config.max_eval_samples
-    pred, lab, val_loss = predict(run.model, val, limit=limit)
-    rec = {"step": st.step, "train_loss": loss.item(), "val_loss": val_loss}
-    if run.val_draws:  # robust validation: the mean over the fixed built cameras decides
-        rec["val_loss"] = mean_loss_under(run.model, val, run.val_draws, limit=limit)
-        rec["val_loss_nominal"] = val_loss
-        val_loss = rec["val_loss"]
+    """Validation after a step: history, mask snapshot, logs, best state, early stopping.
+
+    The validation loss pools every validation episode (:func:`pooled_validation`);
+    under robust validation it is the mean over the fixed built cameras.
+    """
+    st = run.state
+    pooled = pooled_validation(
+        run.model, val, limit=run.config.max_eval_samples, draws=run.val_draws
+    )
+    rec = {"step": st.step, "train_loss": loss.item(), "val_loss": pooled["loss"]}
+    if "loss_nominal" in pooled:
+        rec["val_loss_nominal"] = pooled["loss_nominal"]
+    rec["val_error"] = pooled["error"]
+    val_loss = rec["val_loss"]
     st.elapsed = rec["wall_time_s"] = clock.elapsed()
     st.history.append(rec)
     snap = mask_snapshot(run.model)
     if snap is not None:
         st.snapshots.append((st.step, snap))
-    logs.evaluation(rec, pred, lab, val, clock.wall_start + st.elapsed)
+    logs.evaluation(rec, clock.wall_start + st.elapsed)
     if val_loss < st.best_loss:
         st.best_loss, st.best_step, st.bad = val_loss, st.step, 0
         st.best_state = _copy_state(run.model)

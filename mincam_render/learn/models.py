@@ -63,6 +63,7 @@ from mincam_render.optics.maskplane import (
     logits_for_transmittance,
     mask_power,
     power_through,
+    total_variation_per_texel,
     transmittance,
 )
 from mincam_render.optics.perturbation import PerturbationDraw
@@ -444,6 +445,15 @@ class MincamCamera(CameraModel):
         history: frames per sample (1 = static task; 30 for traffic).
         init_seed: seed of the U(0.08, 0.12) mask initialisation.
         mask_plane: plain torch (default; for torch transport) or the Dr.Jit op.
+        mask_block: masks parameterised in blocks of ``mask_block`` x ``mask_block``
+            texels: the initialisation is drawn per block and every gradient is
+            averaged over its block, so (Adam being per-element and the logits'
+            projection a clamp) the texels of a block stay equal through training;
+            1: every texel free.
+
+    Raises:
+        ValueError: no pixels, a head of the wrong width, or a ``mask_block`` that
+            does not divide the mask resolution.
 
     """
 
@@ -459,6 +469,7 @@ class MincamCamera(CameraModel):
         history: int = 1,
         init_seed: int = 0,
         mask_plane: MaskPlaneBackend = MaskPlaneBackend.TORCH,
+        mask_block: int = 1,
     ) -> None:
         super().__init__()
         self.camera = camera
@@ -472,10 +483,18 @@ class MincamCamera(CameraModel):
         self.sensor_model = bool(sensor_model)
         self.history = int(history)
         rows, cols = camera.mask_resolution
+        b = self.mask_block = check_int("mask_block", mask_block, 1, numpy=True)
+        if rows % b or cols % b:
+            raise ValueError(
+                f"mask_block = {b} texels: must divide the mask resolution {rows}x{cols}"
+            )
         g = torch.Generator().manual_seed(int(init_seed))
         lo, hi = INIT_TRANSMITTANCE
-        m0 = lo + (hi - lo) * torch.rand((len(dets), rows, cols), generator=g)
+        m0 = lo + (hi - lo) * torch.rand((len(dets), rows // b, cols // b), generator=g)
+        m0 = m0.repeat_interleave(b, dim=1).repeat_interleave(b, dim=2)
         self.logits = nn.Parameter(logits_for_transmittance(m0, camera.transmittance_range))
+        if b > 1:
+            self.logits.register_hook(functools.partial(block_mean, block=b))
         expected = len(dets) * max(self.history - 1, 1)
         if head.in_features != expected:
             raise ValueError(
@@ -498,6 +517,20 @@ class MincamCamera(CameraModel):
         # in place on a detached view: no grad-mode switch (a no_grad block costs
         # about as much as the clamp itself at every step)
         self.logits.detach().clamp_(-MAX_LOGIT, MAX_LOGIT)
+
+    def mask_penalty(self, tv_weight: float, logit_decay: float) -> torch.Tensor:
+        """Priors on the masks (torch scalar, differentiable): smoothness and logit decay.
+
+        ``tv_weight`` times the total variation per texel of the transmittance
+        (:func:`~mincam_render.optics.maskplane.total_variation_per_texel`) plus
+        ``logit_decay`` times the mean squared logit.
+        """
+        penalty = self.logits.new_zeros(())
+        if tv_weight:
+            penalty = penalty + tv_weight * total_variation_per_texel(self.transmittance())
+        if logit_decay:
+            penalty = penalty + logit_decay * self.logits.square().mean()
+        return penalty
 
     def fabricated_transmittance(self, draw: PerturbationDraw) -> torch.Tensor:
         """``M[pixel, row, col]`` of the masks as built by ``draw`` (torch, differentiable once).
@@ -562,6 +595,14 @@ class MincamCamera(CameraModel):
             v = power * (e.responsivity_a_per_w * e.gain_v_per_a)
             return v if offset is None else v + offset
         return detector_voltage(power, e, noise=noise, generator=generator, offset_v=offset)
+
+
+def block_mean(grad: torch.Tensor, *, block: int) -> torch.Tensor:
+    """``grad[..., row, col]`` averaged over ``block`` x ``block`` tiles, tiled back (torch)."""
+    *lead, rows, cols = grad.shape
+    tiles = grad.reshape(*lead, rows // block, block, cols // block, block)
+    mean = tiles.mean(dim=(-3, -1), keepdim=True).expand_as(tiles)
+    return mean.reshape(grad.shape)
 
 
 @functools.lru_cache(maxsize=64)

@@ -13,11 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
-
-from mincam_render.learn.evaluation import metrics
-from mincam_render.learn.training_data import TrainingData
 
 #: Steps between training-loss events (their mean): a TensorBoard event per step
 #: would cost more than a tenth of a step of a small camera.
@@ -94,32 +90,21 @@ class RunLog:
             self.loss_sum.zero_()
             self.loss_n = 0
 
-    def evaluation(
-        self,
-        record: Mapping[str, float],
-        pred: Mapping[str, np.ndarray],
-        lab: Mapping[str, np.ndarray],
-        val: TrainingData,
-        wall: float,
-    ) -> None:
+    def evaluation(self, record: Mapping[str, float], wall: float) -> None:
         """Log an evaluation: validation loss and error events, a ``history.jsonl`` line.
 
         Args:
-            record: the history record (``step``, ``train_loss``, ``val_loss``, ``wall_time_s``;
-                under robust validation also ``val_loss_nominal``).
-            pred: predictions ``{name: [n, size]}`` on ``val`` (time order) of the
-                camera as designed (``error/val`` is its error).
-            lab: labels ``{name: [n, size]}`` of those samples.
-            val: the validation split.
+            record: the history record (``step``, ``train_loss``, ``val_loss``,
+                ``val_error``, ``wall_time_s``; under robust validation also
+                ``val_loss_nominal``).
             wall: the events' wall time (s since the epoch).
 
         """
         if self.writer is None or self.out is None:
             return
-        step, val_loss = int(record["step"]), record["val_loss"]
-        val_metrics = metrics(pred, lab, val_loss, val)
-        self.writer.add_scalar("loss/val", val_loss, step, walltime=wall)
-        self.writer.add_scalar("error/val", val_metrics["error"], step, walltime=wall)
+        step = int(record["step"])
+        self.writer.add_scalar("loss/val", record["val_loss"], step, walltime=wall)
+        self.writer.add_scalar("error/val", record["val_error"], step, walltime=wall)
         if "val_loss_nominal" in record:  # robust validation: the design's own loss beside
             self.writer.add_scalar(
                 "loss/val_nominal", record["val_loss_nominal"], step, walltime=wall

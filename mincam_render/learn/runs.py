@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -25,14 +25,15 @@ from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import MincamCamera, Model
-from mincam_render.learn.train_config import HeadKind, TrainConfig
+from mincam_render.learn.reference_masks import set_reference_masks
+from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
 
 
 def train_run(
     train: TrainingData,
-    val: TrainingData,
+    val: TrainingData | Sequence[TrainingData],
     test: TrainingData | None,
     out_dir: str | os.PathLike,
     *,
@@ -43,6 +44,8 @@ def train_run(
     on_the_fly: RenderedBatches | None = None,
     episodes: Mapping[str, TrainingData] | None = None,
     frozen_masks_from: str | os.PathLike | None = None,
+    reference: MaskReference | None = None,
+    tune_reference: bool = False,
     resume: bool = True,
     progress: bool = False,
     on_progress: Callable[[int], None] | None = None,
@@ -50,6 +53,7 @@ def train_run(
     """Train one camera into ``out_dir`` (resumable) and write ``run.json`` + ``metrics.json``.
 
     A minimalist camera of ``pixels`` pixels unless ``baseline_grid`` is given.
+    ``val``: the validation episode, or several pooled for early stopping.
     ``on_the_fly`` replaces ``train`` as the source of training batches (``train``
     still provides target statistics and the baseline exposure). ``episodes``:
     test episodes evaluated one by one (``metrics["episodes"][name]``), beside
@@ -57,6 +61,9 @@ def train_run(
     ``frozen_masks_from``: a finished minimalist run whose masks (and detectors)
     this camera takes, frozen; only a fresh head is trained (supplement A: masks
     learned without the detector model, head retrained with it).
+    ``reference``: the minimalist camera's masks are that reference's, fitted
+    on ``train`` (:mod:`~mincam_render.learn.reference_masks`), frozen; with
+    ``tune_reference`` training starts from them instead (end to end).
     ``on_progress``: called after every evaluation with the steps since the last
     call (:func:`~mincam_render.learn.loop.train_model`).
     """
@@ -67,9 +74,16 @@ def train_run(
             model: Model = _frozen_mask_camera(train, frozen_masks_from, sensor_model, config)
         else:
             model = _build_model(train, pixels, baseline_grid, sensor_model, config)
+        if reference is not None:
+            if not isinstance(model, MincamCamera):
+                raise ValueError(f"reference masks ({reference}) are a minimalist camera's")
+            set_reference_masks(model, reference, train, val, config, out / "teacher",
+                                frozen=not tune_reference)  # fmt: skip
         run = describe_run(model, train, val, test, config, on_the_fly is not None)
         if frozen_masks_from is not None:
             run["frozen_masks_from"] = str(frozen_masks_from)
+        if reference is not None:
+            run["reference"] = {"masks": MaskReference(reference).value, "tuned": tune_reference}
         _refuse_other_data(out, run, resume)
         _write_json_atomic(out / "run.json", run)
         res = train_model(
@@ -116,6 +130,7 @@ def _build_model(
         count_loss=config.count_loss,
         seed=config.seed,
         head=config.head,
+        mask_block=config.mask_block,
     )
     if config.privacy_weight > 0:
         attach_adversary(model, seed=config.seed)
@@ -162,18 +177,22 @@ def _frozen_mask_camera(
 def describe_run(
     model: Model,
     train: TrainingData,
-    val: TrainingData,
+    val: TrainingData | Sequence[TrainingData],
     test: TrainingData | None,
     config: TrainConfig,
     on_the_fly: bool,
 ) -> dict[str, Any]:
-    """``run.json``: the model, camera, data provenance, recipe and labels of a run."""
+    """``run.json``: the model, camera, data provenance, recipe and labels of a run.
+
+    ``data.val`` is the validation episode's provenance, or a list of them.
+    """
+    vals = [val] if isinstance(val, TrainingData) else list(val)
     return {
         "model": describe_model(model),
         "camera": _camera_dict(train.camera),
         "data": {
             "train": train.source,
-            "val": val.source,
+            "val": vals[0].source if len(vals) == 1 else [v.source for v in vals],
             "test": test.source if test is not None else None,
             "train_samples": len(train),
             "on_the_fly": on_the_fly,
@@ -213,10 +232,16 @@ def config_record(config: TrainConfig) -> dict[str, Any]:
 
     ``head`` appears only when not the paper's MLP, ``perturbation`` and
     ``robust_validation_draws`` only when training is robust, ``privacy_weight``
-    only when not 0. Runs written before any was a choice then resume (their
-    recipe compares equal).
+    and the masks' priors and the transport noise only when not 0, ``mask_block``
+    only above 1. Runs written before any was a choice then resume (their recipe
+    compares equal).
     """
     record = asdict(config)
+    for name in ("mask_tv_weight", "mask_logit_decay", "transport_noise"):
+        if not record[name]:
+            del record[name]
+    if config.mask_block == 1:
+        del record["mask_block"]
     if config.perturbation is None:
         del record["perturbation"], record["robust_validation_draws"]
     if not config.privacy_weight:
@@ -321,6 +346,7 @@ def load_mincam(run_dir: str | os.PathLike, data: TrainingData) -> MincamCamera:
         detectors=desc["detectors"],
         sensor_model=desc["sensor_model"],
         history=desc["history"],
+        mask_block=desc.get("mask_block", 1),
     )
     # a privacy-trained run's adversary is not part of the camera that is measured
     model.load_state_dict({k: v for k, v in state.items() if not k.startswith("adversary.")})

@@ -7,6 +7,7 @@ batched matrix product, the electronics as a handful of fused ops, fused Adam.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -18,6 +19,7 @@ from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.builders import learning_rate_for
 from mincam_render.learn.models import MincamCamera, Model, task_loss, temporal_features
 from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.training_data import Batch
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel
 
 
@@ -101,6 +103,10 @@ def train_step(
     gain_range: tuple[float, float],
     perturbation: PerturbationModel | None = None,
     privacy_weight: float = 0.0,
+    *,
+    transport_noise: float = 0.0,
+    mask_tv_weight: float = 0.0,
+    mask_logit_decay: float = 0.0,
 ) -> torch.Tensor:
     """One optimisation step of :func:`train_model` (Adam); the task loss, detached.
 
@@ -111,8 +117,15 @@ def train_step(
     mask logits (a saturated mask must be able to move back). A camera with a
     privacy adversary (``model.adversary``) adds
     :func:`~mincam_render.learn.privacy_term.privacy_objective` with ``privacy_weight``.
+    ``transport_noise``: relative Gaussian noise on every texel of the batch's
+    transport (augmentation, :class:`TrainConfig`); ``mask_tv_weight`` and
+    ``mask_logit_decay``: priors on a minimalist camera's masks
+    (:meth:`~mincam_render.learn.models.MincamCamera.mask_penalty`), added to
+    the optimised objective, not to the returned task loss.
     """
     batch = source.next(generator)
+    if transport_noise:
+        batch = noisy_transport(batch, transport_noise, generator)
     gain = torch.empty(len(batch)).uniform_(*gain_range, generator=generator)
     draw = batch_draw(model, perturbation, generator)
     if isinstance(model, MincamCamera):
@@ -130,6 +143,8 @@ def train_step(
         loss, _ = task_loss(model.head, model.head(temporal_features(v)), batch.labels)
         frames = batch.transport if batch.windows is None else batch.transport[batch.windows[:, -1]]
         total = loss + privacy_objective(adversary, v[:, -1], frames, privacy_weight)
+    if isinstance(model, MincamCamera) and (mask_tv_weight or mask_logit_decay):
+        total = total + model.mask_penalty(mask_tv_weight, mask_logit_decay)
     for group in opt.param_groups:  # zero_grad(set_to_none=True) without its overhead
         for p in group["params"]:
             p.grad = None
@@ -138,6 +153,16 @@ def train_step(
     if isinstance(model, MincamCamera):
         model.project_logits_()
     return loss.detach()
+
+
+def noisy_transport(batch: Batch, relative_std: float, generator: torch.Generator) -> Batch:
+    """``batch`` with every texel's transport times ``1 + relative_std * N(0, 1)`` (torch).
+
+    A new tensor (the batch's own may be a view of the stored frames).
+    """
+    t = batch.transport
+    noise = torch.randn(t.shape, generator=generator, dtype=t.dtype, device=t.device)
+    return dataclasses.replace(batch, transport=t * (1.0 + relative_std * noise))
 
 
 def batch_draw(

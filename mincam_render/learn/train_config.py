@@ -36,6 +36,19 @@ class HeadKind(enum.Enum):
     TCN = "tcn"
 
 
+class MaskReference(enum.Enum):
+    """Reference masks a learned design must beat (:mod:`mincam_render.learn.reference_masks`).
+
+    * ``PCA``: the first principal components of the training views.
+    * ``PLS``: partial least squares of the views on the task's labels.
+    * ``DISTILLED``: a full-resolution network's first layer distilled into masks.
+    """
+
+    PCA = "pca"
+    PLS = "pls"
+    DISTILLED = "distilled"
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """Training recipe (the paper's, with the choices documented in the module).
@@ -53,7 +66,8 @@ class TrainConfig:
             constant rate Adam's steps keep the parameters jittering about the
             optimum, so the validation loss stalls above what a smaller rate reaches.
         lr_decay: factor applied to every learning rate at each decay, in (0, 1).
-        gain_range: random global gain per sample (augmentation), (lo, hi).
+        gain_range: random global gain per sample (augmentation), (lo, hi); (1, 1)
+            turns it off.
         max_eval_samples: validation samples used per evaluation (evenly spaced).
         count_loss: how COUNT labels are learned; None = the paper's choice for the
             data's scene family (:data:`PAPER_COUNT_LOSS`). Used where this module
@@ -79,6 +93,18 @@ class TrainConfig:
             loss minus ``w`` times the loss of a decoder trained alongside to
             reconstruct the scene from the pixels; 0 trains for the task alone.
             A static minimalist camera's option only.
+        mask_tv_weight: weight of the masks' total variation per texel
+            (:func:`~mincam_render.optics.maskplane.total_variation_per_texel`,
+            transmittance units) added to the loss; 0: no smoothness prior.
+        mask_logit_decay: weight of the mean squared mask logit added to the loss
+            (weight decay on the logits: pulls texels away from the printable
+            limits); 0: none.
+        mask_block: the masks are parameterised in blocks of ``mask_block`` x
+            ``mask_block`` texels (a coarser mask, printed at the full texel grid);
+            1: every texel free. Must divide the mask resolution.
+        transport_noise: relative standard deviation of Gaussian noise multiplying
+            every texel of every training sample's transport, ``T (1 + s e)``
+            (like render noise, new at every step; both camera kinds); 0: none.
 
     """
 
@@ -99,6 +125,10 @@ class TrainConfig:
     perturbation: PerturbationModel | None = None
     robust_validation_draws: int = 8
     privacy_weight: float = 0.0
+    mask_tv_weight: float = 0.0
+    mask_logit_decay: float = 0.0
+    mask_block: int = 1
+    transport_noise: float = 0.0
 
     def __post_init__(self) -> None:
         for name, lo in (
@@ -109,6 +139,7 @@ class TrainConfig:
             ("lr_decays", 0),
             ("max_eval_samples", 2),
             ("robust_validation_draws", 0),
+            ("mask_block", 1),
         ):
             check_int(f"TrainConfig.{name}", getattr(self, name), lo)
         for name in ("lr_decay", "lr"):  # lr None: learning_rate_for the input count
@@ -144,6 +175,9 @@ class TrainConfig:
                 "or None"
             )
         check_number("TrainConfig.privacy_weight", self.privacy_weight, 0, 1e3)
+        for name in ("mask_tv_weight", "mask_logit_decay"):
+            check_number(f"TrainConfig.{name}", getattr(self, name), 0, 1e3, numpy=True)
+        check_number("TrainConfig.transport_noise", self.transport_noise, 0, 1, numpy=True)
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")

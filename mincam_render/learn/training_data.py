@@ -231,6 +231,23 @@ class TrainingData:
             source={"episodes": [p.source for p in parts]},
         )
 
+    def with_labels(self, names: Sequence[str]) -> TrainingData:
+        """The same frames with only the labels ``names`` (a task's; no copy of the frames).
+
+        Raises:
+            ValueError: a name that is not a label of this split, or no names.
+        """
+        known = [s.name for s in self.label_specs]
+        unknown = [n for n in names if n not in known]
+        if unknown or not names:
+            raise ValueError(f"labels {list(names)}: need one or more of {known}")
+        specs = tuple(s for s in self.label_specs if s.name in names)
+        data = replace(self, labels={s.name: self.labels[s.name] for s in specs}, label_specs=specs)
+        if "_torch" in self.__dict__:  # keep the frames' tensors, drop the other labels'
+            frames, scales, labels = self.__dict__["_torch"]
+            data.__dict__["_torch"] = (frames, scales, {s.name: labels[s.name] for s in specs})
+        return data
+
     def subset(self, start: int, stop: int, name: str = "") -> TrainingData:
         """Frames ``[start, stop)`` as a new split (contiguous in time)."""
         src = dict(self.source, split=name or self.source.get("split", ""), range=[start, stop])

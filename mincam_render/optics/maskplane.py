@@ -184,3 +184,20 @@ def mask_power(
     transport = transport.contiguous().view(transport.shape)
     # dr.wrap is typed Callable[[T], T]: its stub cannot say that torch goes in and out
     return _power_drjit(transport, logits.contiguous().view(logits.shape), lo, hi)  # type: ignore[arg-type,return-value]
+
+
+def total_variation_per_texel(mask: torch.Tensor) -> torch.Tensor:
+    r"""Total variation of masks ``M[pixel, row, col]`` per texel, mean over pixels (torch).
+
+    .. math:: \mathrm{TV} = \frac{1}{K R C} \sum_k \Big(\sum |M_{k,i+1,j} - M_{k,i,j}|
+              + \sum |M_{k,i,j+1} - M_{k,i,j}|\Big)
+
+    In transmittance units per texel: 0 for a uniform mask; a checkerboard of
+    the printable limits ``lo``/``hi`` gives about ``2 (hi - lo)``. Differentiable
+    (a prior on the masks) and a measure of their spatial structure.
+    """
+    if mask.ndim != 3:
+        raise ValueError(f"mask has shape {tuple(mask.shape)}: expected (pixel, row, col)")
+    rows = (mask[:, 1:, :] - mask[:, :-1, :]).abs().sum(dim=(1, 2))
+    cols = (mask[:, :, 1:] - mask[:, :, :-1]).abs().sum(dim=(1, 2))
+    return ((rows + cols) / (mask.shape[1] * mask.shape[2])).mean()

@@ -109,14 +109,20 @@ def test_designs_are_named_and_validated():
         Design(pixels=8, head="lstm")
     with pytest.raises(ValueError, match="exactly one"):
         Design(pixels=4, grid=(2, 2))
-    with pytest.raises(ValueError, match="at least two"):
+    with pytest.raises(ValueError, match="each once"):
         ComparisonConfig(designs=(Design(pixels=2), Design(pixels=2)))
+    with pytest.raises(ValueError, match="at least one"):
+        ComparisonConfig(designs=())
 
 
 def test_episodes_have_their_own_seeds_splits_and_balanced_shards():
     reqs = episode_requests(ComparisonConfig(test_episodes=3))
-    assert sorted(reqs) == ["test-0", "test-1", "test-2", "train-0", "train-1", "val-0"]
-    assert len({r.seed for r in reqs.values()}) == 6
+    assert sorted(reqs) == [
+        "test-0", "test-1", "test-2", "train-0", "train-1", "val-0", "val-1", "val-2"
+    ]  # fmt: skip
+    assert len({r.seed for r in reqs.values()}) == 8
+    # a validation episode is the same whatever the number of them
+    assert episode_requests(ComparisonConfig(val_episodes=1))["val-0"] == reqs["val-0"]
     assert reqs["train-0"].splits == (1.0, 0.0, 0.0) and reqs["test-2"].splits == (0.0, 0.0, 1.0)
     assert reqs["train-1"].num_frames == 1200 and reqs["train-1"].shard_frames == 300
     # another root seed: other episodes

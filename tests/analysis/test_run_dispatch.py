@@ -60,7 +60,13 @@ def splits(tmp_path_factory, variant):
 def sequential(splits, tmp_path_factory):
     """``(out, runs)``: every run trained in this process, as comparisons always did."""
     out = tmp_path_factory.mktemp("sequential")
-    return out, train_runs(CFG, splits, out, progress=False)
+    return out, _one_task(train_runs(CFG, splits, out, progress=False))
+
+
+def _one_task(runs: dict) -> dict:
+    """``{design: [runs]}`` of a comparison of a single-task family (patches)."""
+    (by_design,) = runs.values()
+    return by_design
 
 
 def _figures(runs: dict) -> dict:
@@ -94,7 +100,7 @@ def _layout(out: Path) -> dict[str, bytes | None]:
 def test_local_workers_train_every_run_like_this_process(splits, sequential, tmp_path):
     """Worker processes train on their own copy of the splits, 1 torch thread each here."""
     out, runs = sequential
-    pooled = train_runs(CFG, splits, tmp_path, train_workers=2, progress=False)
+    pooled = _one_task(train_runs(CFG, splits, tmp_path, train_workers=2, progress=False))
     assert _figures(pooled) == _figures(runs)  # bit for bit
     assert _layout(tmp_path) == _layout(out)
     head = pooled["mincam-2px-nosensor"][0]
@@ -142,7 +148,7 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
             ))  # fmt: skip
 
     monkeypatch.setattr(run_dispatch, "_on_pool", pool)
-    again = train_runs(CFG, splits, tmp_path, train_workers=2, progress=False)
+    again = _one_task(train_runs(CFG, splits, tmp_path, train_workers=2, progress=False))
     assert dispatched == ["baseline-2x2-seed1"]
     assert _figures(again) == _figures(runs)
     # resumed at its end, not trained again: training would have saved new checkpoints
@@ -155,7 +161,7 @@ def test_ray_tasks_train_every_run_like_this_process(splits, sequential, tmp_pat
     """16 s on 2 loaded cores (a local Ray cluster started, the package shipped to it)."""
     pytest.importorskip("ray")
     out, runs = sequential
-    on_ray = train_runs(CFG, splits, tmp_path, ray_address="local", progress=False)
+    on_ray = _one_task(train_runs(CFG, splits, tmp_path, ray_address="local", progress=False))
     assert _figures(on_ray) == _figures(runs)
     assert _layout(tmp_path) == _layout(out)
 
@@ -187,7 +193,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
         CFG, train=TrainConfig(max_steps=STEPS, eval_every=10, patience=1000)
     )
     first = dataclasses.replace(long, seeds=1)
-    train_runs(first, splits, tmp_path, progress=False)
+    _one_task(train_runs(first, splits, tmp_path, progress=False))
     # a finished run read back rewrites its run.json and metrics.json (same contents);
     # its checkpoint is written only by training
     kept = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("checkpoint.pt")}
@@ -195,7 +201,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
 
     def run() -> None:
         try:
-            train_runs(long, splits, tmp_path, train_workers=2, progress=False)
+            _one_task(train_runs(long, splits, tmp_path, train_workers=2, progress=False))
         except BaseException as err:  # the main thread checks it
             failure.append(err)
 
@@ -212,7 +218,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
     assert "exit code -9) while running task" in str(err) and "-seed1" in str(err)
     assert "finished runs are kept" in str(err) and "\n" not in str(err)
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # seed 0 not trained again
-    again = train_runs(long, splits, tmp_path, train_workers=2, progress=False)
+    again = _one_task(train_runs(long, splits, tmp_path, train_workers=2, progress=False))
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # read back, not trained again
     assert all(r["steps"] == STEPS for rs in again.values() for r in rs)
 

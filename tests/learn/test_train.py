@@ -448,10 +448,10 @@ def test_plateaus_decay_the_learning_rates_then_stop(monkeypatch, tmp_path, deca
     """Flat validation loss: ``lr_decays`` decays, each after ``patience`` evaluations; stop."""
     from mincam_render.learn import loop
 
-    def flat(model, val, limit=None):
-        return {}, {}, 1.0  # never improves on the first evaluation
+    def flat(model, val, limit=None, draws=()):
+        return {"loss": 1.0, "error": 1.0}  # never improves on the first evaluation
 
-    monkeypatch.setattr(loop, "predict", flat)
+    monkeypatch.setattr(loop, "pooled_validation", flat)
     monkeypatch.setattr(loop.RunLog, "evaluation", lambda *a, **k: None)
     train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
     cfg = tr.TrainConfig(
@@ -470,7 +470,9 @@ def test_a_decayed_run_resumes_with_its_decayed_rates(monkeypatch, tmp_path):
     """Killed between two decays, a run resumes with the rates and count it had."""
     from mincam_render.learn import loop
 
-    monkeypatch.setattr(loop, "predict", lambda model, val, limit=None: ({}, {}, 1.0))
+    monkeypatch.setattr(
+        loop, "pooled_validation", lambda *a, **k: {"loss": 1.0, "error": 1.0}
+    )
     monkeypatch.setattr(loop.RunLog, "evaluation", lambda *a, **k: None)
     train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
     cfg = tr.TrainConfig(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.analysis.comparison_config import ComparisonConfig, Design, Protocol
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import TrainConfig
 
@@ -76,6 +76,10 @@ def default_comparison(detectors: int = 8, texels: int = 32) -> ComparisonConfig
         train=TrainConfig(max_steps=1000),
         fidelity=AUDIT_FIDELITY,
         mask_res=None if texels == 32 else texels,
+        # as audited (privacy.json, privacy_16det.json): one camera for every label,
+        # early stopping on one validation episode
+        protocol=Protocol.JOINT,
+        val_episodes=1,
     )
 
 

@@ -1,0 +1,138 @@
+"""What the design-protocol study runs, as data (no PyTorch or Mitsuba import)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from mincam_render.analysis.comparison_config import ComparisonConfig, Design
+from mincam_render.core.checks import check_int
+from mincam_render.learn.train_config import MaskReference, TrainConfig
+
+#: The learning curves' designs: the paper's 2-pixel camera, 8 freeform pixels,
+#: and the box cameras they are measured against.
+LADDER_DESIGNS = (
+    Design(pixels=2),
+    Design(pixels=8),
+    Design(grid=(2, 2)),
+    Design(grid=(8, 8)),
+    Design(grid=(32, 32)),
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class RecipeVariant:
+    """One recipe tried on the validation episodes: changes to the base recipe.
+
+    Args:
+        name: short name in tables (``gain-20``).
+        changes: :class:`~mincam_render.learn.train_config.TrainConfig` fields
+            replaced (JSON-ready values; tuples as lists are accepted).
+        minimalist_only: the change acts on masks only (priors, block masks):
+            tried on the minimalist designs alone.
+    """
+
+    name: str
+    changes: Mapping[str, Any] = field(default_factory=dict)
+    minimalist_only: bool = False
+
+    def __post_init__(self) -> None:
+        known = {f.name for f in fields(TrainConfig)}
+        unknown = sorted(set(self.changes) - known)
+        if unknown or not self.name:
+            raise ValueError(f"recipe {self.name!r}: unknown TrainConfig fields {unknown}")
+        self.apply(TrainConfig())  # validated now, not after hours of training
+
+    def apply(self, base: TrainConfig) -> TrainConfig:
+        """``base`` with this variant's changes (lists as tuples)."""
+        from dataclasses import replace
+
+        changes: dict[str, Any] = {
+            k: tuple(v) if isinstance(v, list) else v for k, v in self.changes.items()
+        }
+        return replace(base, **changes)
+
+
+def default_recipes() -> tuple[RecipeVariant, ...]:
+    """The variants of the issue's step 3: gain augmentation and priors against overfitting."""
+    return (
+        RecipeVariant(name="base"),
+        RecipeVariant(name="gain-5", changes={"gain_range": (0.95, 1.05)}),
+        RecipeVariant(name="gain-20", changes={"gain_range": (0.8, 1.2)}),
+        RecipeVariant(name="tv-0.03", changes={"mask_tv_weight": 0.03}, minimalist_only=True),
+        RecipeVariant(name="tv-0.3", changes={"mask_tv_weight": 0.3}, minimalist_only=True),
+        RecipeVariant(name="block-4", changes={"mask_block": 4}, minimalist_only=True),
+        RecipeVariant(name="block-8", changes={"mask_block": 8}, minimalist_only=True),
+        RecipeVariant(name="noise-0.03", changes={"transport_noise": 0.03}),
+        RecipeVariant(name="noise-0.1", changes={"transport_noise": 0.1}),
+        RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
+        RecipeVariant(name="steps-10k", changes={"max_steps": 10000}),
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DesignProtocolConfig:
+    """The design protocol's sections (``docs/design_protocol.md``).
+
+    Args:
+        episodes: the shared episodes and base recipe: family, frame rate,
+            frames per episode, validation and test episodes, training seeds,
+            ``train`` (the base recipe) and fidelity. Its ``train_episodes`` and
+            ``designs`` are replaced per section.
+        task: the task of the learning curves, recipes and references (one of
+            the family's :func:`~mincam_render.core.labels.label_tasks`).
+        ladder: training-episode counts of the learning curves.
+        ladder_designs: the designs of the learning curves.
+        recipe_episodes: training episodes the recipes are compared on.
+        recipes: the variants (the first is the base, the others are compared with it).
+        reference_episodes: training episodes the references are compared on.
+        reference_pixels: pixel counts at which end-to-end masks meet the references.
+        references: the reference masks (each also tuned end to end from it).
+        protocol_episodes: training episodes of the per-task against joint table.
+        protocol_pixels: per-task pixel budgets of that table; each meets a joint
+            camera of the same pixels and one of the per-task cameras' total.
+    """
+
+    episodes: ComparisonConfig = field(
+        default_factory=lambda: ComparisonConfig(val_episodes=4, test_episodes=6)
+    )
+    task: str = "people_count"
+    ladder: tuple[int, ...] = (1, 2, 4, 8, 16, 32)
+    ladder_designs: tuple[Design, ...] = LADDER_DESIGNS
+    recipe_episodes: int = 8
+    recipes: tuple[RecipeVariant, ...] = field(default_factory=default_recipes)
+    reference_episodes: int = 8
+    reference_pixels: tuple[int, ...] = (2, 8)
+    references: tuple[MaskReference, ...] = tuple(MaskReference)
+    protocol_episodes: int = 8
+    protocol_pixels: tuple[int, ...] = (2,)
+
+    def __post_init__(self) -> None:
+        if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
+            raise ValueError(f"ladder {self.ladder}: need increasing episode counts")
+        for n in (*self.ladder, self.recipe_episodes, self.reference_episodes,
+                  self.protocol_episodes):  # fmt: skip
+            check_int("training episodes", n, 1, 1000)
+        for k in (*self.reference_pixels, *self.protocol_pixels):
+            check_int("pixels", k, 1)
+        if not self.recipes or self.recipes[0].changes:
+            raise ValueError("recipes: the first variant is the base recipe (no changes)")
+        names = [r.name for r in self.recipes]
+        if len(set(names)) != len(names):
+            raise ValueError(f"recipes {names}: give each name once")
+        object.__setattr__(self, "references", tuple(MaskReference(r) for r in self.references))
+
+    def comparison(
+        self, train_episodes: int, designs: tuple[Design, ...], **changes: Any
+    ) -> ComparisonConfig:
+        """The shared episodes with ``train_episodes``, ``designs`` and other ``changes``.
+
+        Per task, only :attr:`task`, unless ``changes`` give the protocol.
+        """
+        from dataclasses import replace
+
+        fields_: dict[str, Any] = {"train_episodes": train_episodes, "designs": designs}
+        if "protocol" not in changes:
+            fields_["tasks"] = (self.task,)
+        return replace(self.episodes, **fields_, **changes)

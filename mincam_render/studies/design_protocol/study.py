@@ -1,0 +1,380 @@
+"""The design protocol: how to train masks that generalise, and what they must beat.
+
+Every section is a set of comparisons
+(:func:`~mincam_render.analysis.comparison.run_comparison`) on one shared set
+of episodes: validation and test episodes are the same everywhere, training
+sets are the first ``n`` training episodes, so every figure of a section is
+measured on the same test episodes and pairs with the others.
+
+1. **Per task against joint** (:func:`protocol_table`): each label's figure of
+   a camera per task (the paper's) beside one joint camera of the same pixels
+   and one of the per-task cameras' total.
+2. **Recipes** (:func:`recipe_table`): variants of the recipe, each design's
+   pooled validation error and test error, the paired test difference from the
+   base recipe, and which variant validation would choose.
+3. **Learning curves** (:func:`learning_curves`): error against training
+   episodes (and render and training seconds), and where another doubling
+   stops paying.
+4. **References** (:func:`reference_table`): end-to-end masks against PCA, PLS
+   and distilled masks of the same pixels, each also tuned end to end.
+5. **Selection** (:func:`selection_agreement`): how well the pooled validation
+   error ranks runs and designs against their test error.
+
+Everything resumes: comparisons keep their finished runs on disk.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mincam_render.analysis.comparison import Design, run_comparison
+from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol
+from mincam_render.studies.design_protocol.config import DesignProtocolConfig
+from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
+
+#: A comparison run for the study: ``(config, out_dir) -> its result``.
+Compare = Callable[[ComparisonConfig, Path], dict[str, Any]]
+
+
+@dataclass(frozen=True)
+class ProtocolRow:
+    """One label's figure under each camera of the per-task against joint table.
+
+    Args:
+        label: the label.
+        metric: ``rmse`` or ``accuracy``.
+        figures: ``{camera: (mean, (lo, hi))}``; cameras are ``per-task <design>``
+            and ``joint <design>``.
+    """
+
+    label: str
+    metric: str
+    figures: Mapping[str, tuple[float, tuple[float, float]]]
+
+
+@dataclass(frozen=True)
+class RecipeRow:
+    """One recipe variant: every design's figures and its paired difference from the base."""
+
+    variant: str
+    changes: Mapping[str, Any]
+    designs: Mapping[str, DesignFigure]
+    versus_base: Mapping[str, Paired]
+
+
+@dataclass(frozen=True)
+class LadderPoint:
+    """The designs trained on the first ``episodes`` training episodes."""
+
+    episodes: int
+    frames: int
+    render_s: float
+    designs: Mapping[str, DesignFigure]
+    trivial: float
+
+
+@dataclass(frozen=True)
+class Doubling:
+    """What doubling the training episodes bought a design: paired on the same test episodes."""
+
+    design: str
+    episodes: tuple[int, int]
+    change: Paired
+    relative: float
+
+    @property
+    def pays(self) -> bool:
+        """The larger training set is lower on the same test episodes (interval below 0)."""
+        return self.change.a_lower
+
+
+@dataclass(frozen=True)
+class ReferenceRow:
+    """End-to-end masks of ``pixels`` against the reference masks of as many pixels."""
+
+    pixels: int
+    designs: Mapping[str, DesignFigure]
+    versus_end_to_end: Mapping[str, Paired]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Spearman rank correlation of pooled validation error with test error."""
+
+    runs: int
+    runs_spearman: float
+    designs: int
+    designs_spearman: float
+
+
+@dataclass(frozen=True)
+class DesignProtocolResult:
+    """Every section's figures (:mod:`~mincam_render.studies.design_protocol.study`)."""
+
+    config: Mapping[str, Any]
+    task: str
+    error_name: str
+    protocol: Sequence[ProtocolRow] = ()
+    recipes: Sequence[RecipeRow] = ()
+    chosen_recipe: Mapping[str, str] = field(default_factory=dict)
+    ladder: Sequence[LadderPoint] = ()
+    doublings: Sequence[Doubling] = ()
+    references: Sequence[ReferenceRow] = ()
+    selection: Selection | None = None
+    versions: Mapping[str, str] = field(default_factory=dict)
+
+    def as_json(self) -> dict[str, Any]:
+        """JSON-ready dict (every record as its fields)."""
+        return json.loads(json.dumps(dataclasses.asdict(self), default=str))
+
+
+def headline(result: Mapping[str, Any], task: str) -> Mapping[str, Any]:
+    """The block of ``task`` in a comparison's result (the joint block if it was joint)."""
+    tasks = result["tasks"]
+    return tasks[task] if task in tasks else next(iter(tasks.values()))
+
+
+def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ProtocolRow]:
+    """Each label under per-task cameras and joint cameras (module docstring, section 1).
+
+    For every per-task budget ``k``: per-task cameras of ``k`` pixels (every
+    task), joint cameras of ``k`` and of ``k`` times the number of tasks.
+    """
+    n = cfg.protocol_episodes
+    per_task = compare(
+        cfg.comparison(n, _minimalist(cfg.protocol_pixels), protocol=Protocol.PER_TASK),
+        out / "protocol" / "per-task",
+    )
+    tasks = len(per_task["tasks"])
+    joint_px = sorted({p for k in cfg.protocol_pixels for p in (k, k * tasks)})
+    joint = compare(
+        cfg.comparison(n, _minimalist(joint_px), protocol=Protocol.JOINT),
+        out / "protocol" / "joint",
+    )
+    rows = []
+    for label, lab in per_task["labels"].items():
+        figures = {f"per-task {d}": _mean_ci(c) for d, c in lab["configs"].items()}
+        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint["labels"][label]["configs"].items()}
+        rows.append(ProtocolRow(label=label, metric=lab["metric"], figures=figures))
+    return rows
+
+
+def _minimalist(pixels: Sequence[int]) -> tuple[Design, ...]:
+    """Minimalist designs of ``pixels``."""
+    return tuple(Design(pixels=k) for k in pixels)
+
+
+def _mean_ci(c: Mapping[str, Any]) -> tuple[float, tuple[float, float]]:
+    return float(c["mean"]), (float(c["ci95"][0]), float(c["ci95"][1]))
+
+
+def recipe_table(
+    cfg: DesignProtocolConfig, compare: Compare, out: Path
+) -> tuple[list[RecipeRow], dict[str, str]]:
+    """Every recipe variant on the validation and test episodes (section 2).
+
+    Returns:
+        ``(rows, chosen)``: ``chosen[design]`` is the variant with the lowest
+        pooled validation error (the recipe validation would pick).
+    """
+    base_cfg = cfg.episodes.train
+    rows: list[RecipeRow] = []
+    for variant in cfg.recipes:
+        designs = tuple(d for d in cfg.ladder_designs if d.is_mincam or not variant.minimalist_only)
+        result = compare(
+            cfg.comparison(cfg.recipe_episodes, designs, train=variant.apply(base_cfg)),
+            out / "recipes" / variant.name,
+        )
+        block = headline(result, cfg.task)
+        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        base = rows[0].designs if rows else figures
+        rows.append(
+            RecipeRow(
+                variant=variant.name,
+                changes=dict(variant.changes),
+                designs=figures,
+                versus_base={n: Paired.of(f, base[n]) for n, f in figures.items()},
+            )
+        )
+    chosen = {}
+    for d in cfg.ladder_designs:
+        tried = [r for r in rows if d.name in r.designs]
+        chosen[d.name] = min(tried, key=lambda r: r.designs[d.name].val_error or np.inf).variant
+    return rows, chosen
+
+
+def learning_curves(
+    cfg: DesignProtocolConfig,
+    compare: Compare,
+    out: Path,
+    render_seconds: Callable[[int], float],
+) -> tuple[list[LadderPoint], list[Doubling]]:
+    """Error against training episodes, and what each doubling bought (section 3).
+
+    Args:
+        cfg: the study.
+        compare: runs a comparison.
+        out: the study's directory.
+        render_seconds: render wall time (s) of the first ``n`` training episodes.
+    """
+    points = []
+    for n in cfg.ladder:
+        result = compare(cfg.comparison(n, cfg.ladder_designs), out / "ladder" / f"episodes-{n}")
+        block = headline(result, cfg.task)
+        points.append(
+            LadderPoint(
+                episodes=n,
+                frames=n * cfg.episodes.train_frames,
+                render_s=render_seconds(n),
+                designs={
+                    d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs
+                },
+                trivial=float(block["trivial"]["error"]["mean"]),
+            )
+        )
+    doublings = [
+        Doubling(
+            design=name,
+            episodes=(a.episodes, b.episodes),
+            change=Paired.of(b.designs[name], a.designs[name]),
+            relative=b.designs[name].error / a.designs[name].error - 1.0,
+        )
+        for a, b in zip(points, points[1:], strict=False)
+        for name in a.designs
+    ]
+    return points, doublings
+
+
+def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ReferenceRow]:
+    """End-to-end masks against reference masks of the same pixels (section 4)."""
+    rows = []
+    for k in cfg.reference_pixels:
+        designs = [Design(pixels=k)]
+        for ref in cfg.references:
+            designs += [
+                Design(pixels=k, reference=ref),
+                Design(pixels=k, reference=ref, tuned=True),
+            ]
+        result = compare(
+            cfg.comparison(cfg.reference_episodes, tuple(designs)), out / "references" / f"{k}px"
+        )
+        block = headline(result, cfg.task)
+        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        e2e = figures[designs[0].name]
+        rows.append(
+            ReferenceRow(
+                pixels=k,
+                designs=figures,
+                versus_end_to_end={
+                    n: Paired.of(e2e, f) for n, f in figures.items() if f is not e2e
+                },
+            )
+        )
+    return rows
+
+
+def selection_agreement(figures: Sequence[DesignFigure]) -> Selection:
+    """How the pooled validation error ranks runs, and designs, against their test error.
+
+    Runs and designs without a recorded validation error are left out.
+    """
+    from scipy.stats import spearmanr
+
+    runs_val, runs_test, means_val, means_test = [], [], [], []
+    for f in figures:
+        if f.val_error is None:
+            continue
+        runs_val += list(f.val_per_seed)
+        runs_test += list(f.per_seed)
+        means_val.append(f.val_error)
+        means_test.append(f.error)
+    return Selection(
+        runs=len(runs_val),
+        runs_spearman=float(spearmanr(runs_val, runs_test).statistic),
+        designs=len(means_val),
+        designs_spearman=float(spearmanr(means_val, means_test).statistic),
+    )
+
+
+def run(
+    cfg: DesignProtocolConfig,
+    out: str | Path,
+    *,
+    episodes_dir: str | Path | None = None,
+    sections: Sequence[str] = ("protocol", "recipes", "ladder", "references"),
+    train_workers: int = 1,
+    render_seconds: Callable[[int], float] | None = None,
+    progress: bool = False,
+) -> DesignProtocolResult:
+    """Run the study's ``sections`` into ``out`` (resumable); its figures.
+
+    Args:
+        cfg: the study.
+        out: directory of every comparison (``out/<section>/<name>/``).
+        episodes_dir: the shared episodes (default ``out/episodes``).
+        sections: which sections to run, of ``protocol``, ``recipes``,
+            ``ladder``, ``references``.
+        train_workers: local worker processes per comparison's training.
+        render_seconds: render wall time of the first ``n`` training episodes
+            (default: read from their render logs).
+        progress: progress bars.
+    """
+    from mincam_render.data.render_job import package_versions
+
+    out = Path(out)
+    episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
+
+    error_names: dict[str, str] = {}
+
+    def compare(comparison: ComparisonConfig, where: Path) -> dict[str, Any]:
+        result = run_comparison(comparison, where, episodes_dir=episodes, masks_dir=None,
+                                train_workers=train_workers, progress=progress)  # fmt: skip
+        error_names.setdefault("task", headline(result, cfg.task)["error_name"])
+        return result
+
+    seconds = render_seconds or (lambda n: training_render_seconds(episodes, n))
+    parts: dict[str, Any] = {}
+    if "protocol" in sections:
+        parts["protocol"] = protocol_table(cfg, compare, out)
+    if "recipes" in sections:
+        parts["recipes"], parts["chosen_recipe"] = recipe_table(cfg, compare, out)
+    if "ladder" in sections:
+        parts["ladder"], parts["doublings"] = learning_curves(cfg, compare, out, seconds)
+    if "references" in sections:
+        parts["references"] = reference_table(cfg, compare, out)
+    figures = [f for r in parts.get("recipes", []) for f in r.designs.values()]
+    figures += [f for p in parts.get("ladder", []) for f in p.designs.values()]
+    return DesignProtocolResult(
+        config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
+        task=cfg.task,
+        error_name=error_names.get("task", ""),
+        selection=selection_agreement(figures) if figures else None,
+        versions=package_versions(),
+        **parts,
+    )
+
+
+def training_render_seconds(episodes: Path, n: int) -> float:
+    """Render wall time (s) of training episodes ``train-0 .. train-(n-1)`` from their logs.
+
+    The sum of the planning, background and shard-rendering times each
+    episode's ``render_log.jsonl`` records (resumed attempts included).
+    """
+    from mincam_render.data.dataset import LOG_NAME
+
+    total = 0.0
+    for i in range(n):
+        for line in (episodes / f"train-{i}" / LOG_NAME).read_text().splitlines():
+            event = json.loads(line)
+            if event["event"] in ("planned", "backgrounds") or (
+                event["event"] == "end" and event.get("rendered")
+            ):
+                total += float(event["seconds"])
+    return total
