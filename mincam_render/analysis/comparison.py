@@ -45,6 +45,12 @@ import numpy as np
 from mincam_render.analysis.comparison_config import ComparisonConfig
 from mincam_render.analysis.comparison_config import Design as Design
 from mincam_render.analysis.coverage import coverage_table, study_coverage
+from mincam_render.analysis.mask_structure import (
+    MaskStructure,
+    plot_mask_views,
+    run_structure,
+    view_and_label_map,
+)
 from mincam_render.analysis.run_dispatch import check_executor, task_splits, train_runs
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
@@ -108,24 +114,33 @@ def render_episodes(
 ) -> dict[str, TrainingData]:
     """Render (or resume) every episode into ``episodes_dir/<name>``; their training views.
 
-    The views are at ``cfg.light_scale`` times the rendered light. ``ray_address``:
+    The views are at ``cfg.light_scale`` times the rendered light; for
+    ``cfg.oracle_background`` every frame's converged background is replaced by
+    one fixed background (the first episode's mean). ``ray_address``:
     render the shards as Ray tasks there (``workers`` is then ignored).
     """
+    from mincam_render.data.render_job.backgrounds import converged_backgrounds
+
     data = {}
+    fixed: np.ndarray | None = None
     for name, request in episode_requests(cfg).items():
         path = episodes_dir / name
         render_dataset(request, path, workers=workers, ray_address=ray_address, progress=progress)
         role = name.split("-")[0]
         view = TrainingData.from_dataset(open_dataset(path), role)
+        if cfg.oracle_background:  # one fixed background: the first episode's mean
+            static = converged_backgrounds(path)[slice(*view.source["range"])]
+            fixed = static.mean(axis=0) if fixed is None else fixed
+            view = view.with_static_part(static, fixed)
         data[name] = view if cfg.light_scale == 1.0 else view.with_light_scaled(cfg.light_scale)
     return data
 
 
 def comparison_splits(data: Mapping[str, TrainingData]) -> dict[str, Any]:
-    """``{"train": the training episodes joined, "val": (episodes,), "tests": {name: episode}}``."""
+    """``{"train": the training episodes joined, "val" and "tests": {name: episode}}``."""
     return {
         "train": TrainingData.concat([v for k, v in data.items() if k.startswith("train-")]),
-        "val": tuple(v for k, v in data.items() if k.startswith("val-")),
+        "val": {k: v for k, v in data.items() if k.startswith("val-")},
         "tests": {k: v for k, v in data.items() if k.startswith("test-")},
     }
 
@@ -267,6 +282,18 @@ def training_state(convergence: Sequence[Mapping[str, Any]]) -> str:
     return "budget-limited"
 
 
+def _validation_figures(runs: Sequence[Mapping[str, Any]]) -> dict[str, Any] | None:
+    """The kept states' error on each validation episode, pooled like the test error.
+
+    ``{"error": {"mean", "ci95"}, "episode_errors"}`` (the interval over seeds
+    and validation episodes); None for runs without named validation episodes.
+    """
+    if not all(r.get("validation_episodes") for r in runs):
+        return None
+    errors = episode_errors([r["validation_episodes"] for r in runs])
+    return {"error": bootstrap_interval(errors).as_dict(), "episode_errors": errors.as_dict()}
+
+
 def kept_val_error(run: Mapping[str, Any]) -> float | None:
     """A run's pooled validation error at its kept (best) step; None if not recorded."""
     best = [h for h in run["history"] if h["step"] == run["best_step"]]
@@ -274,21 +301,36 @@ def kept_val_error(run: Mapping[str, Any]) -> float | None:
 
 
 def _design_summary(
-    runs: list[dict[str, Any]], interval: Interval, errors: EpisodeErrors
+    runs: list[dict[str, Any]],
+    interval: Interval,
+    errors: EpisodeErrors,
+    view_map: tuple[np.ndarray, np.ndarray],
 ) -> dict[str, Any]:
+    """A design's figures over its runs; a minimalist design's masks' structure too.
+
+    ``structure`` (:mod:`~mincam_render.analysis.mask_structure`) is that of
+    the run with the lowest validation loss, whose masks a comparison keeps.
+    """
     conv = [dict(converged(r["history"]), stopped_early=r["stopped_early"]) for r in runs]
+    structure = None
+    if runs[0]["model"]["kind"] == "mincam":
+        best = min(runs, key=lambda r: r["best_val_loss"])
+        labels = tuple(next(iter(best["episodes"].values()))["labels"])
+        structure = dataclasses.asdict(run_structure(best["run_dir"], view_map, labels))
     return {
         "model": runs[0]["model"],
         "error": interval.as_dict(),
         "episode_errors": errors.as_dict(),
         "error_per_seed": [episode_errors([r["episodes"]]).point() for r in runs],
         "val_error_per_seed": [kept_val_error(r) for r in runs],
+        "validation": _validation_figures(runs),
         "converged": all(c["converged"] for c in conv),
         "state": training_state(conv),
         "convergence": conv,
         "train_wall_time_s": [r["train_wall_time_s"] for r in runs],
         "steps": [r["steps"] for r in runs],
         "runs": [r["run_dir"] for r in runs],
+        "structure": structure,
     }
 
 
@@ -321,16 +363,26 @@ def _keep_masks(
     episodes: Mapping[str, Any],
     out_dir: Path,
     task: str,
+    view_map: tuple[np.ndarray, np.ndarray],
 ) -> dict[str, Any]:
-    """Export into ``out_dir`` the masks of the run with the lowest validation loss."""
+    """Export into ``out_dir`` the masks of the run with the lowest validation loss.
+
+    Beside them, ``looks_at.png``: the masks over the camera's view and the
+    task's label map, with their structure figures (also in the sidecar).
+    """
     best = min(runs, key=lambda r: r["best_val_loss"])
     figures = {
         "chosen_by": "lowest validation loss of the training seeds",
         "test_error_over_seeds": summary["error"],
         "test_episodes": best["episodes"],
         "episodes": episodes,
+        "structure": summary["structure"],
     }
-    return keep_run_masks(best["run_dir"], out_dir, task, figures)
+    kept = keep_run_masks(best["run_dir"], out_dir, task, figures)
+    masks, _, _ = run_masks(best["run_dir"])
+    structure = MaskStructure(**summary["structure"])
+    png = plot_mask_views(masks, *view_map, structure, out_dir / "looks_at.png", title=task)
+    return kept | {"looks_at": str(png)}
 
 
 def run_comparison(
@@ -406,8 +458,10 @@ def _run_comparison(
         cfg, splits, out, train_workers=train_workers, ray_address=ray_address, progress=progress
     )
     task_labels = cfg.task_labels(label_tasks(train.label_specs))
+    task_data = {task: task_splits(splits, task_labels[task]) for task in runs}
+    maps = {task: view_and_label_map(d["train"]) for task, d in task_data.items()}
     blocks = {
-        task: task_comparison(cfg, by_design, task_splits(splits, task_labels[task]))
+        task: task_comparison(cfg, by_design, task_data[task], maps[task])
         for task, by_design in runs.items()
     }
     headline = blocks[next(iter(blocks))]
@@ -428,13 +482,16 @@ def _run_comparison(
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
-        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family)
+        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family, maps)
     (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
     return result
 
 
 def task_comparison(
-    cfg: ComparisonConfig, runs: Mapping[str, list[dict[str, Any]]], splits: Mapping[str, Any]
+    cfg: ComparisonConfig,
+    runs: Mapping[str, list[dict[str, Any]]],
+    splits: Mapping[str, Any],
+    view_map: tuple[np.ndarray, np.ndarray],
 ) -> dict[str, Any]:
     """One task's figures: every design, the trivial predictor, verdicts, every label.
 
@@ -443,6 +500,8 @@ def task_comparison(
             the bootstrap).
         runs: ``{design: [run metrics per seed]}`` of cameras trained for the task.
         splits: the task's splits (its labels only, :func:`task_splits`).
+        view_map: the training view and the task's label map
+            (:func:`~mincam_render.analysis.mask_structure.view_and_label_map`).
 
     Returns:
         ``{"error_name", "designs", "trivial", "verdict", "versus_trivial",
@@ -458,7 +517,8 @@ def task_comparison(
     return {
         "error_name": next(iter(trivial.values()))["error_name"],
         "designs": {
-            name: _design_summary(rs, intervals[name], errors[name]) for name, rs in runs.items()
+            name: _design_summary(rs, intervals[name], errors[name], view_map)
+            for name, rs in runs.items()
         },
         "trivial": {
             "error": trivial_iv.as_dict(),
@@ -506,6 +566,7 @@ def _keep_all_masks(
     runs: Mapping[str, Mapping[str, list[dict[str, Any]]]],
     result: Mapping[str, Any],
     family_dir: Path,
+    maps: Mapping[str, tuple[np.ndarray, np.ndarray]],
 ) -> dict[str, Any]:
     """Every minimalist design's best masks per task; their records.
 
@@ -520,8 +581,9 @@ def _keep_all_masks(
             where = family_dir / d.name / task if several else family_dir / d.name
             title = f"{result['task']} {task}" if several else result["task"]
             record = _keep_masks(
-                by_design[d.name], block["designs"][d.name], result["episodes"], where, title
-            )
+                by_design[d.name], block["designs"][d.name], result["episodes"], where, title,
+                maps[task],
+            )  # fmt: skip
             kept[f"{d.name}/{task}" if len(runs) > 1 else d.name] = record
     return kept
 

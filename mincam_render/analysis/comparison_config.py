@@ -139,6 +139,12 @@ class ComparisonConfig:
         mask_res: mask texels per side rendered (None: the family camera's); a
             baseline grid can be at most this fine (64 x 64 needs 64).
         protocol: per-task cameras (the paper's) or one joint camera (:class:`Protocol`).
+        oracle_background: an oracle, not a camera: every frame's converged
+            background (the empty room with the frame's lights and daylight) is
+            replaced by one fixed background (the first episode's mean), so the
+            cameras see the people and the door (with their render noise) in a
+            room whose light never changes. Bounds what knowing the background
+            exactly would give (differentially rendered families).
         tasks: under ``PER_TASK``, the tasks trained (names of
             :func:`~mincam_render.core.labels.label_tasks`, e.g. ``("people_count",)``);
             empty: every task of the family.
@@ -162,6 +168,7 @@ class ComparisonConfig:
     mask_res: int | None = None
     protocol: Protocol = Protocol.PER_TASK
     tasks: tuple[str, ...] = ()
+    oracle_background: bool = False
 
     def __post_init__(self) -> None:
         try:

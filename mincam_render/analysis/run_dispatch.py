@@ -128,7 +128,7 @@ def train_design_run(
 ) -> dict[str, Any]:
     """Train (or resume) one run into ``runs_dir/<task.name>``; its metrics (with episodes).
 
-    ``splits``: ``{"train": TrainingData, "val": (TrainingData, ...), "tests": {name:
+    ``splits``: ``{"train": TrainingData, "val": {name: TrainingData}, "tests": {name:
     TrainingData}}``; a task's run sees only its labels (:func:`task_splits`).
     A design without the detector model is supplement A's ablation: its masks
     are trained without the model, then frozen while a fresh head is trained
@@ -160,7 +160,7 @@ def task_splits(splits: Mapping[str, Any], labels: tuple[str, ...]) -> dict[str,
         return dict(splits)
     return {
         "train": splits["train"].with_labels(labels),
-        "val": tuple(v.with_labels(labels) for v in splits["val"]),
+        "val": {k: v.with_labels(labels) for k, v in splits["val"].items()},
         "tests": {k: v.with_labels(labels) for k, v in splits["tests"].items()},
     }
 

@@ -13,7 +13,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import torch
@@ -33,7 +33,7 @@ from mincam_render.optics.camera import FreeformCamera
 
 def train_run(
     train: TrainingData,
-    val: TrainingData | Sequence[TrainingData],
+    val: TrainingData | Sequence[TrainingData] | Mapping[str, TrainingData],
     test: TrainingData | None,
     out_dir: str | os.PathLike,
     *,
@@ -53,7 +53,9 @@ def train_run(
     """Train one camera into ``out_dir`` (resumable) and write ``run.json`` + ``metrics.json``.
 
     A minimalist camera of ``pixels`` pixels unless ``baseline_grid`` is given.
-    ``val``: the validation episode, or several pooled for early stopping.
+    ``val``: the validation episode, or several pooled for early stopping; named
+    ones (a mapping) are also evaluated one by one after training
+    (``metrics["validation_episodes"][name]``).
     ``on_the_fly`` replaces ``train`` as the source of training batches (``train``
     still provides target statistics and the baseline exposure). ``episodes``:
     test episodes evaluated one by one (``metrics["episodes"][name]``), beside
@@ -69,6 +71,8 @@ def train_run(
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
+    named = dict(val) if isinstance(val, Mapping) else {}
+    episodes_val = list(named.values()) if named else cast(TrainingData | list[TrainingData], val)
     with exclusive_writer(out_dir, "training") as out:
         if frozen_masks_from is not None:
             model: Model = _frozen_mask_camera(train, frozen_masks_from, sensor_model, config)
@@ -77,9 +81,9 @@ def train_run(
         if reference is not None:
             if not isinstance(model, MincamCamera):
                 raise ValueError(f"reference masks ({reference}) are a minimalist camera's")
-            set_reference_masks(model, reference, train, val, config, out / "teacher",
+            set_reference_masks(model, reference, train, episodes_val, config, out / "teacher",
                                 frozen=not tune_reference)  # fmt: skip
-        run = describe_run(model, train, val, test, config, on_the_fly is not None)
+        run = describe_run(model, train, episodes_val, test, config, on_the_fly is not None)
         if frozen_masks_from is not None:
             run["frozen_masks_from"] = str(frozen_masks_from)
         if reference is not None:
@@ -89,7 +93,7 @@ def train_run(
         res = train_model(
             model,
             on_the_fly if on_the_fly is not None else train,
-            val,
+            episodes_val,
             config,
             out_dir=out,
             resume=resume,
@@ -98,6 +102,8 @@ def train_run(
             on_progress=on_progress,
         )
         metrics = _run_metrics(run, res, model, len(train), test, episodes)
+        if named:
+            metrics["validation_episodes"] = {k: evaluate(model, d) for k, d in named.items()}
         _write_json_atomic(out / "metrics.json", metrics)
         return metrics
 

@@ -259,6 +259,34 @@ class TrainingData:
             scales=None if self.scales is None else self.scales[start:stop],
         )
 
+    def with_static_part(self, static_w: np.ndarray, replacement_w: np.ndarray) -> TrainingData:
+        """The frames with their static part replaced: ``T - static + replacement`` (W).
+
+        E.g. every frame's converged background replaced by one fixed
+        background: the movers in a room whose lighting never changes (an
+        oracle's input). Float32 in memory.
+
+        Args:
+            static_w: ``[frame, detector, row, col]`` the frames' static part (W).
+            replacement_w: ``[detector, row, col]`` what replaces it in every frame (W).
+
+        Raises:
+            ValueError: shapes that do not fit the frames.
+        """
+        if np.shape(static_w) != self.transport.shape:
+            raise ValueError(
+                f"static part has shape {np.shape(static_w)}; the frames {self.transport.shape}"
+            )
+        if np.shape(replacement_w) != self.transport.shape[1:]:
+            raise ValueError(
+                f"replacement has shape {np.shape(replacement_w)}; a frame "
+                f"{self.transport.shape[1:]}"
+            )
+        frames = self.frames_np(0, len(self.transport)) - np.asarray(static_w, np.float32)
+        frames += np.asarray(replacement_w, np.float32)
+        src = dict(self.source, static_part="replaced")
+        return replace(self, transport=frames, scales=None, source=src)
+
     def with_light_scaled(self, factor: float) -> TrainingData:
         """The same frames with every emitter's radiance times ``factor`` (> 0).
 

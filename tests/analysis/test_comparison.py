@@ -191,8 +191,12 @@ def test_cli_study_sweeps_designs_with_the_ablation_and_writes_the_table(variant
         "paired difference mincam-2px - baseline-1x1"
     )
     assert all(line in table for line in verdicts)
-    for n in names:  # every minimalist design keeps its masks
+    for n in names:  # every minimalist design keeps its masks, and what they look at
         assert (out / "masks" / "patches" / n / "masks.json").is_file()
+        assert (out / "masks" / "patches" / n / "looks_at.png").is_file()
+        structure = metrics["designs"][n]["structure"]
+        assert len(structure["tv_per_texel"]) == int(n.split("-")[1][0]) and structure["labels"]
+    assert metrics["designs"]["baseline-2x2"]["structure"] is None
     for run in metrics["designs"]["mincam-2px-nosensor"]["runs"]:  # supplement A
         tested, masks = json.loads((Path(run) / "run.json").read_text()), Path(run).parent
         assert tested["model"]["sensor_model"] and tested["frozen_masks_from"] == str(masks)

@@ -79,7 +79,10 @@ def test_the_figures_are_the_comparisons_on_disk(study):
     design = metrics["designs"]["mincam-2px"]
     fig = result.ladder[1].designs["mincam-2px"]
     assert fig.error == design["error"]["mean"] and list(fig.ci95) == design["error"]["ci95"]
-    assert list(fig.val_per_seed) == design["val_error_per_seed"]
+    val = design["validation"]
+    assert fig.val_error == val["error"]["mean"] and list(fig.val_ci95) == val["error"]["ci95"]
+    assert fig.val().error.shape == (2, 2)  # seeds x validation episodes
+    assert len(fig.val_per_seed) == 2
     # every section shares the validation and test episodes: the trivial predictor's
     # test error depends on the training set only through its mean label
     assert {e for e in metrics["episodes"] if not e.startswith("train")} == {

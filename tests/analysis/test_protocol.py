@@ -8,6 +8,7 @@ from support import linear_task
 
 from mincam_render.analysis.comparison import combined_cameras, task_comparison
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design, Protocol
+from mincam_render.analysis.mask_structure import view_and_label_map
 from mincam_render.analysis.run_dispatch import comparison_tasks, task_splits, train_runs
 from mincam_render.core.labels import LabelKind, LabelSpec, label_tasks
 from mincam_render.core.seeds import stream_seed
@@ -82,7 +83,7 @@ def test_runs_of_a_task_are_named_and_seeded_by_it():
 def splits():
     return {
         "train": two_task_episode(240, 0),
-        "val": (two_task_episode(80, 1), two_task_episode(80, 2)),
+        "val": {"val-0": two_task_episode(80, 1), "val-1": two_task_episode(80, 2)},
         "tests": {"test-0": two_task_episode(80, 3), "test-1": two_task_episode(80, 4)},
     }
 
@@ -90,7 +91,7 @@ def splits():
 def test_task_splits_keep_only_the_tasks_labels(splits):
     count = task_splits(splits, ("count",))
     assert [s.name for s in count["train"].label_specs] == ["count"]
-    assert all(list(v.labels) == ["count"] for v in count["val"])
+    assert all(list(v.labels) == ["count"] for v in count["val"].values())
     assert all(list(v.labels) == ["count"] for v in count["tests"].values())
     assert task_splits(splits, ())["train"] is splits["train"]
     with pytest.raises(ValueError, match="need one or more of"):
@@ -106,21 +107,24 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(splits, tmp_pat
     run = runs["count"]["mincam-2px"][0]
     assert run["run_dir"] == str(tmp_path / "runs" / "count" / "mincam-2px-seed0")
     assert list(run["episodes"]["test-0"]["labels"]) == ["count"]
+    assert list(run["validation_episodes"]) == ["val-0", "val-1"]
+    assert list(run["validation_episodes"]["val-1"]["labels"]) == ["count"]
     side = runs["bright_left"]["baseline-2x2"][1]
     assert list(side["episodes"]["test-1"]["labels"]) == ["bright_left"]
-    blocks = {
-        t: task_comparison(cfg, by_design, task_splits(splits, (t,)))
-        for t, by_design in runs.items()
-    }
+    blocks = {}
+    for t, by_design in runs.items():
+        task = task_splits(splits, (t,))
+        blocks[t] = task_comparison(cfg, by_design, task, view_and_label_map(task["train"]))
     assert blocks["count"]["error_name"] == "count RMSE"
     assert blocks["bright_left"]["error_name"] == "bright_left error rate"
     assert set(blocks["count"]["labels"]) == {"count"}
     combined = combined_cameras(cfg, blocks)
     assert combined["mincam-2px"]["pixels"] == 4  # two tasks, two freeform pixels each
     assert combined["baseline-2x2"]["pixels"] == 4  # one sensor read by two heads
-    assert combined["mincam-2px"]["tasks"]["count"] == blocks["count"]["designs"]["mincam-2px"][
-        "error"
-    ]
+    assert (
+        combined["mincam-2px"]["tasks"]["count"]
+        == blocks["count"]["designs"]["mincam-2px"]["error"]
+    )
     # a joint camera learns both labels at once
     joint = train_runs(
         ComparisonConfig(designs=designs, seeds=1, train=recipe, protocol="joint"),

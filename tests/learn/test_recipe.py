@@ -155,3 +155,17 @@ def test_training_on_several_validation_episodes_records_the_pooled_error(tmp_pa
     run = describe_run(model, train, [v1, v2], None, cfg, False)
     assert [v["range"] for v in run["data"]["val"]] == [[200, 300], [300, 400]]
     assert describe_run(model, train, v1, None, cfg, False)["data"]["val"] == v1.source
+
+
+def test_a_static_part_is_replaced_frame_by_frame():
+    data = linear_task(10, k=2, res=4)
+    rng = np.random.default_rng(0)
+    static = rng.uniform(0, 1e-9, data.transport.shape).astype(np.float32)
+    fixed = np.full(data.transport.shape[1:], 5e-10, np.float32)
+    out = data.with_static_part(static, fixed)
+    np.testing.assert_array_equal(out.transport, data.transport - static + fixed)
+    assert out.scales is None and out.labels is not None and out.source["static_part"]
+    with pytest.raises(ValueError, match="static part has shape"):
+        data.with_static_part(static[:3], fixed)
+    with pytest.raises(ValueError, match="replacement has shape"):
+        data.with_static_part(static, fixed[0])

@@ -470,9 +470,7 @@ def test_a_decayed_run_resumes_with_its_decayed_rates(monkeypatch, tmp_path):
     """Killed between two decays, a run resumes with the rates and count it had."""
     from mincam_render.learn import loop
 
-    monkeypatch.setattr(
-        loop, "pooled_validation", lambda *a, **k: {"loss": 1.0, "error": 1.0}
-    )
+    monkeypatch.setattr(loop, "pooled_validation", lambda *a, **k: {"loss": 1.0, "error": 1.0})
     monkeypatch.setattr(loop.RunLog, "evaluation", lambda *a, **k: None)
     train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
     cfg = tr.TrainConfig(

@@ -402,3 +402,38 @@ def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
     # biases beyond the target are reported, and the noises still get a floor
     over = split_noise_budget(target, {"depth": 0.02}, diff, bg)
     assert over["biases_exceed_target"] and over["difference_noise"] > 0
+
+
+@pytest.mark.parametrize("empty_room", [False, True])
+def test_converged_backgrounds_are_the_frames_without_their_movers(
+    differential_dataset, tmp_path, empty_room
+):
+    from dataclasses import replace
+
+    from mincam_render.data.render_job import render_dataset
+    from mincam_render.data.render_job.backgrounds import converged_backgrounds
+
+    request, out = differential_dataset
+    if empty_room:  # nobody comes in: every frame is its background, bit for bit
+        request = replace(request, overrides={**request.overrides, **EMPTY_ROOM})
+        out = tmp_path / "empty"
+        render_dataset(request, out, workers=0)
+    b = converged_backgrounds(out)
+    t = ds.open_dataset(out).frames(0, 24)
+    assert b.shape == t.shape and b.dtype == np.float32
+    fam = load_family("workspace", seed=0, num_frames=24, overrides=request.overrides)
+    for i in range(24):  # common random numbers: nothing moving, nothing added
+        moving = fam.track.active[i].sum() > 0 or fam.track.door_angle_rad[i] != 0.0
+        assert np.array_equal(t[i], b[i]) is not moving
+        assert moving is not empty_room
+
+
+def test_converged_backgrounds_need_a_differential_dataset(tmp_path, variant):
+    from mincam_render.data.render_job import RenderRequest, render_dataset
+    from mincam_render.data.render_job.backgrounds import converged_backgrounds
+
+    request = RenderRequest(family="patches", num_frames=4, spp=1, max_depth=0,
+                            shared_render=False, differential=False)  # fmt: skip
+    render_dataset(request, tmp_path / "ds", workers=0)
+    with pytest.raises(ds.DatasetError, match="not rendered differentially"):
+        converged_backgrounds(tmp_path / "ds")

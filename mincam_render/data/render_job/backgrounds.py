@@ -280,3 +280,32 @@ def _shard_backgrounds(out: Path, manifest: dict, progress: bool) -> Callable[[i
         return {k: loaded[k] for k in set(keys[shard * size : (shard + 1) * size])}
 
     return of
+
+
+def converged_backgrounds(out: Path) -> np.ndarray:
+    """``B[frame, detector, row, col]`` (W, float32): every frame's converged background.
+
+    The static part of each frame of a differential dataset (the empty room
+    with the frame's lights and daylight, from the converged components;
+    ``docs/dataset_format.md``), so ``T - B`` is what the frame's people and
+    door add, with its render noise. An oracle's input: what a camera could
+    read if it knew the background exactly.
+
+    Raises:
+        DatasetError: the dataset was not rendered differentially, or a
+            background is missing.
+    """
+    manifest = ds.read_manifest(out)
+    job = manifest["job"]
+    if job["render"].get("background") is None:
+        raise ds.DatasetError(f"{out}: not rendered differentially: no backgrounds to remove")
+    family = _load_family(job)
+    interval = job["render"]["background"]["interval_s"]
+    keys = background_keys(family, job)
+    loaded = load_backgrounds(out, manifest, keys)
+    return np.stack(
+        [
+            loaded[key].converged(family.background_components(i, interval)).astype(np.float32)
+            for i, key in enumerate(keys)
+        ]
+    )

@@ -67,7 +67,6 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="noise-0.03", changes={"transport_noise": 0.03}),
         RecipeVariant(name="noise-0.1", changes={"transport_noise": 0.1}),
         RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
-        RecipeVariant(name="steps-10k", changes={"max_steps": 10000}),
     )
 
 

@@ -41,7 +41,7 @@ def markdown(result: DesignProtocolResult) -> str:
     """Every section as Markdown tables (validation and test beside each other)."""
     lines = [f"# Design protocol: {result.task} ({result.error_name})", ""]
     lines += _protocol_lines(result) + _recipe_lines(result) + _ladder_lines(result)
-    lines += _reference_lines(result)
+    lines += _reference_lines(result) + _oracle_lines(result)
     if result.selection is not None:
         s = result.selection
         lines += [
@@ -115,6 +115,21 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
             f"{_interval(d.change.mean, d.change.ci95, '+')} ({d.relative:+.1%}){gain}"
         )
     return [*lines, ""]
+
+
+def _oracle_lines(result: DesignProtocolResult) -> list[str]:
+    if result.oracle is None:
+        return []
+    o = result.oracle
+    same = {p.episodes: p for p in result.ladder}.get(o.episodes)
+    rows = [
+        [name, _interval(f.error, f.ci95), _interval(same.designs[name].error,
+                                                     same.designs[name].ci95) if same else ""]
+        for name, f in o.designs.items()
+    ]  # fmt: skip
+    title = f"## Oracle: the background known exactly ({o.episodes} training episodes)"
+    header = ["design", "oracle test error", "camera test error (same episodes)"]
+    return [title, "", *_table(header, rows), ""]
 
 
 def _reference_lines(result: DesignProtocolResult) -> list[str]:

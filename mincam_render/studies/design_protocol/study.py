@@ -17,7 +17,9 @@ measured on the same test episodes and pairs with the others.
    stops paying.
 4. **References** (:func:`reference_table`): end-to-end masks against PCA, PLS
    and distilled masks of the same pixels, each also tuned end to end.
-5. **Selection** (:func:`selection_agreement`): how well the pooled validation
+5. **Oracle** (:func:`oracle_point`): the learning curves' designs on the
+   most episodes with the background known exactly: the information limit.
+6. **Selection** (:func:`selection_agreement`): how well the pooled validation
    error ranks runs and designs against their test error.
 
 Everything resumes: comparisons keep their finished runs on disk.
@@ -61,12 +63,17 @@ class ProtocolRow:
 
 @dataclass(frozen=True)
 class RecipeRow:
-    """One recipe variant: every design's figures and its paired difference from the base."""
+    """One recipe variant: every design's figures and its paired differences from the base.
+
+    ``versus_base`` on the test episodes, ``versus_base_validation`` on the
+    validation episodes (what choosing a recipe may look at).
+    """
 
     variant: str
     changes: Mapping[str, Any]
     designs: Mapping[str, DesignFigure]
     versus_base: Mapping[str, Paired]
+    versus_base_validation: Mapping[str, Paired]
 
 
 @dataclass(frozen=True)
@@ -127,6 +134,7 @@ class DesignProtocolResult:
     ladder: Sequence[LadderPoint] = ()
     doublings: Sequence[Doubling] = ()
     references: Sequence[ReferenceRow] = ()
+    oracle: LadderPoint | None = None
     selection: Selection | None = None
     versions: Mapping[str, str] = field(default_factory=dict)
 
@@ -181,8 +189,10 @@ def recipe_table(
     """Every recipe variant on the validation and test episodes (section 2).
 
     Returns:
-        ``(rows, chosen)``: ``chosen[design]`` is the variant with the lowest
-        pooled validation error (the recipe validation would pick).
+        ``(rows, chosen)``: ``chosen[design]`` is the recipe validation picks:
+        among the variants lower than the base on the validation episodes (the
+        paired interval below 0), the one with the lowest validation error; the
+        base where no variant is.
     """
     base_cfg = cfg.episodes.train
     rows: list[RecipeRow] = []
@@ -201,13 +211,29 @@ def recipe_table(
                 changes=dict(variant.changes),
                 designs=figures,
                 versus_base={n: Paired.of(f, base[n]) for n, f in figures.items()},
+                versus_base_validation={
+                    n: _paired_validation(f, base[n]) for n, f in figures.items()
+                },
             )
         )
-    chosen = {}
-    for d in cfg.ladder_designs:
-        tried = [r for r in rows if d.name in r.designs]
-        chosen[d.name] = min(tried, key=lambda r: r.designs[d.name].val_error or np.inf).variant
-    return rows, chosen
+    return rows, {d.name: _chosen(rows, d.name) for d in cfg.ladder_designs}
+
+
+def _paired_validation(a: DesignFigure, b: DesignFigure) -> Paired:
+    va, vb = a.val(), b.val()
+    if va is None or vb is None:
+        raise ValueError(f"{a.design}: the runs kept no validation-episode errors")
+    return Paired.between(a.design, va, b.design, vb)
+
+
+def _chosen(rows: Sequence[RecipeRow], design: str) -> str:
+    """The variant validation picks for ``design`` (:func:`recipe_table`)."""
+    better = [
+        r for r in rows[1:] if design in r.designs and r.versus_base_validation[design].a_lower
+    ]
+    if not better:
+        return rows[0].variant
+    return min(better, key=lambda r: r.designs[design].val_error or np.inf).variant
 
 
 def learning_curves(
@@ -250,6 +276,29 @@ def learning_curves(
         for name in a.designs
     ]
     return points, doublings
+
+
+def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> LadderPoint:
+    """The ladder's designs on the most episodes, with the background known exactly (oracle).
+
+    Every frame's converged background replaced by one fixed background
+    (:attr:`~mincam_render.analysis.comparison_config.ComparisonConfig.oracle_background`):
+    what remains of the error is the people's own signal, its render noise and
+    the data, not the light changing around them.
+    """
+    n = cfg.ladder[-1]
+    result = compare(
+        cfg.comparison(n, cfg.ladder_designs, oracle_background=True),
+        out / "oracle" / f"episodes-{n}",
+    )
+    block = headline(result, cfg.task)
+    return LadderPoint(
+        episodes=n,
+        frames=n * cfg.episodes.train_frames,
+        render_s=0.0,
+        designs={d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs},
+        trivial=float(block["trivial"]["error"]["mean"]),
+    )
 
 
 def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ReferenceRow]:
@@ -320,7 +369,7 @@ def run(
         out: directory of every comparison (``out/<section>/<name>/``).
         episodes_dir: the shared episodes (default ``out/episodes``).
         sections: which sections to run, of ``protocol``, ``recipes``,
-            ``ladder``, ``references``.
+            ``ladder``, ``references``, ``oracle``.
         train_workers: local worker processes per comparison's training.
         render_seconds: render wall time of the first ``n`` training episodes
             (default: read from their render logs).
@@ -349,6 +398,8 @@ def run(
         parts["ladder"], parts["doublings"] = learning_curves(cfg, compare, out, seconds)
     if "references" in sections:
         parts["references"] = reference_table(cfg, compare, out)
+    if "oracle" in sections:
+        parts["oracle"] = oracle_point(cfg, compare, out)
     figures = [f for r in parts.get("recipes", []) for f in r.designs.values()]
     figures += [f for p in parts.get("ladder", []) for f in p.designs.values()]
     return DesignProtocolResult(
