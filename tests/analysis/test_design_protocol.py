@@ -38,13 +38,15 @@ CFG = DesignProtocolConfig(
     reference_episodes=1,
     reference_pixels=(2,),
     protocol_episodes=1,
+    restarts=2,
 )
 
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory, variant):
     out = tmp_path_factory.mktemp("protocol")
-    return out, run(CFG, out)
+    sections = ("protocol", "recipes", "ladder", "references", "restarts")
+    return out, run(CFG, out, sections=sections)
 
 
 def test_every_section_reports_the_designs_it_ran(study):
@@ -71,6 +73,11 @@ def test_every_section_reports_the_designs_it_ran(study):
     assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 2)
     labels = [r.label for r in result.protocol]
     assert labels == ["count"]
+    (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
+    assert restarts.design == "mincam-2px" and restarts.restarts == 2
+    picks = restarts.chosen["runs"]
+    assert picks[0] in (0, 1) and picks[1] in (2, 3)
+    assert len(restarts.plain.per_seed) == 2 and restarts.train_s_per_camera[1] > 0
 
 
 def test_the_figures_are_the_comparisons_on_disk(study):
@@ -95,6 +102,7 @@ def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     paths = write_report(result, tmp_path, stem="protocol")
     text = paths["md"].read_text()
     assert "## Learning curves" in text and "## Recipes" in text and "### 2 px" in text
+    assert "## Seed spread" in text
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
 

@@ -91,6 +91,8 @@ class DesignProtocolConfig:
         protocol_episodes: training episodes of the per-task against joint table.
         protocol_pixels: per-task pixel budgets of that table; each meets a joint
             camera of the same pixels and one of the per-task cameras' total.
+        restarts: runs per kept camera in the restarts section (the best on
+            validation is kept).
     """
 
     episodes: ComparisonConfig = field(
@@ -106,6 +108,7 @@ class DesignProtocolConfig:
     references: tuple[MaskReference, ...] = tuple(MaskReference)
     protocol_episodes: int = 8
     protocol_pixels: tuple[int, ...] = (2,)
+    restarts: int = 3
 
     def __post_init__(self) -> None:
         if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
@@ -115,6 +118,7 @@ class DesignProtocolConfig:
             check_int("training episodes", n, 1, 1000)
         for k in (*self.reference_pixels, *self.protocol_pixels):
             check_int("pixels", k, 1)
+        check_int("restarts", self.restarts, 2)
         if not self.recipes or self.recipes[0].changes:
             raise ValueError("recipes: the first variant is the base recipe (no changes)")
         names = [r.name for r in self.recipes]

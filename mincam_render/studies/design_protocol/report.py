@@ -41,7 +41,7 @@ def markdown(result: DesignProtocolResult) -> str:
     """Every section as Markdown tables (validation and test beside each other)."""
     lines = [f"# Design protocol: {result.task} ({result.error_name})", ""]
     lines += _protocol_lines(result) + _recipe_lines(result) + _ladder_lines(result)
-    lines += _reference_lines(result) + _oracle_lines(result)
+    lines += _reference_lines(result) + _oracle_lines(result) + _restart_lines(result)
     if result.selection is not None:
         s = result.selection
         lines += [
@@ -129,6 +129,25 @@ def _oracle_lines(result: DesignProtocolResult) -> list[str]:
     ]  # fmt: skip
     title = f"## Oracle: the background known exactly ({o.episodes} training episodes)"
     header = ["design", "oracle test error", "camera test error (same episodes)"]
+    return [title, "", *_table(header, rows), ""]
+
+
+def _restart_lines(result: DesignProtocolResult) -> list[str]:
+    if not result.restarts:
+        return []
+    rows = []
+    for r in result.restarts:
+        c = r.chosen
+        rows.append([
+            r.design,
+            f"{_interval(r.plain.error, r.plain.ci95)} (spread {r.spread_plain:.3f}; "
+            f"{r.train_s_per_camera[0]:.0f} s)",
+            f"{_interval(c['error'], tuple(c['ci95']))} (spread {r.spread_chosen:.3f}; "
+            f"{r.train_s_per_camera[1]:.0f} s)",
+        ])  # fmt: skip
+    r0 = result.restarts[0]
+    title = f"## Seed spread: plain seeds against the best of {r0.restarts} restarts on validation"
+    header = ["design", "plain seeds (std over seeds; training per camera)", "chosen on validation"]
     return [title, "", *_table(header, rows), ""]
 
 

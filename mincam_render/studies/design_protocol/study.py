@@ -19,7 +19,9 @@ measured on the same test episodes and pairs with the others.
    and distilled masks of the same pixels, each also tuned end to end.
 5. **Oracle** (:func:`oracle_point`): the learning curves' designs on the
    most episodes with the background known exactly: the information limit.
-6. **Selection** (:func:`selection_agreement`): how well the pooled validation
+6. **Restarts** (:func:`restart_table`): the minimalist designs' seed spread,
+   plain against the best of several restarts chosen on validation.
+7. **Selection** (:func:`selection_agreement`): how well the pooled validation
    error ranks runs and designs against their test error.
 
 Everything resumes: comparisons keep their finished runs on disk.
@@ -38,6 +40,7 @@ import numpy as np
 
 from mincam_render.analysis.comparison import Design, run_comparison
 from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol
+from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig
 from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 
@@ -112,6 +115,30 @@ class ReferenceRow:
 
 
 @dataclass(frozen=True)
+class Restarts:
+    """Restarts chosen on validation against plain seeds (the seed spread, section 6).
+
+    Args:
+        design: the minimalist design.
+        restarts: runs per kept camera; the one with the lowest validation error is kept.
+        plain: the first ``seeds`` runs as plain seeds (one camera each).
+        chosen: each group of ``restarts`` runs reduced to its validation pick.
+        spread_plain: standard deviation over cameras of the plain seeds' test error.
+        spread_chosen: the same over the picked cameras.
+        train_s_per_camera: training time of one kept camera (s): a run, or
+            ``restarts`` runs.
+    """
+
+    design: str
+    restarts: int
+    plain: DesignFigure
+    chosen: Mapping[str, Any]
+    spread_plain: float
+    spread_chosen: float
+    train_s_per_camera: tuple[float, float]
+
+
+@dataclass(frozen=True)
 class Selection:
     """Spearman rank correlation of pooled validation error with test error."""
 
@@ -135,6 +162,7 @@ class DesignProtocolResult:
     doublings: Sequence[Doubling] = ()
     references: Sequence[ReferenceRow] = ()
     oracle: LadderPoint | None = None
+    restarts: Sequence[Restarts] = ()
     selection: Selection | None = None
     versions: Mapping[str, str] = field(default_factory=dict)
 
@@ -301,6 +329,62 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
     )
 
 
+def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[Restarts]:
+    """Restarts chosen on validation against plain seeds, on the most episodes (section 6).
+
+    Each minimalist design of the ladder is trained with ``seeds x restarts``
+    seeds; group ``g`` (runs ``g R .. g R + R - 1``) keeps its run with the
+    lowest error pooled over the validation episodes, so there are as many
+    kept cameras as plain seeds, each costing ``R`` runs.
+    """
+    from dataclasses import replace as _replace
+
+    seeds, r = cfg.episodes.seeds, cfg.restarts
+    designs = tuple(d for d in cfg.ladder_designs if d.is_mincam)
+    n = cfg.ladder[-1]
+    result = compare(
+        _replace(cfg.comparison(n, designs), seeds=seeds * r), out / "restarts" / f"episodes-{n}"
+    )
+    block = headline(result, cfg.task)
+    rows = []
+    for d in designs:
+        every = DesignFigure.from_block(block, d.name)
+        test, val = every.errors(), every.val()
+        if val is None:
+            raise ValueError(f"{d.name}: the runs kept no validation-episode errors")
+        episodes = np.arange(len(val.frames))
+        picks = [
+            min(range(g * r, g * r + r), key=lambda i: val.pooled(np.array([i]), episodes))
+            for g in range(seeds)
+        ]
+        chosen = EpisodeErrors(test.error[picks], test.frames, test.pooling)
+        plain = EpisodeErrors(test.error[:seeds], test.frames, test.pooling)
+        iv = bootstrap_interval(chosen)
+        rows.append(
+            Restarts(
+                design=d.name,
+                restarts=r,
+                plain=_replace(every, per_seed=every.per_seed[:seeds], **_figure_of(plain)),
+                chosen={
+                    "runs": picks,
+                    "per_seed": [every.per_seed[i] for i in picks],
+                    "error": iv.mean,
+                    "ci95": (iv.low, iv.high),
+                    "episode_errors": chosen.as_dict(),
+                },  # fmt: skip
+                spread_plain=float(np.std(every.per_seed[:seeds], ddof=1)),
+                spread_chosen=float(np.std([every.per_seed[i] for i in picks], ddof=1)),
+                train_s_per_camera=(every.train_s_per_run, every.train_s_per_run * r),
+            )
+        )
+    return rows
+
+
+def _figure_of(errors: EpisodeErrors) -> dict[str, Any]:
+    iv = bootstrap_interval(errors)
+    return {"error": iv.mean, "ci95": (iv.low, iv.high), "episode_errors": errors.as_dict()}
+
+
 def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ReferenceRow]:
     """End-to-end masks against reference masks of the same pixels (section 4)."""
     rows = []
@@ -369,7 +453,7 @@ def run(
         out: directory of every comparison (``out/<section>/<name>/``).
         episodes_dir: the shared episodes (default ``out/episodes``).
         sections: which sections to run, of ``protocol``, ``recipes``,
-            ``ladder``, ``references``, ``oracle``.
+            ``ladder``, ``references``, ``oracle``, ``restarts``.
         train_workers: local worker processes per comparison's training.
         render_seconds: render wall time of the first ``n`` training episodes
             (default: read from their render logs).
@@ -400,6 +484,8 @@ def run(
         parts["references"] = reference_table(cfg, compare, out)
     if "oracle" in sections:
         parts["oracle"] = oracle_point(cfg, compare, out)
+    if "restarts" in sections:
+        parts["restarts"] = restart_table(cfg, compare, out)
     figures = [f for r in parts.get("recipes", []) for f in r.designs.values()]
     figures += [f for p in parts.get("ladder", []) for f in p.designs.values()]
     return DesignProtocolResult(
