@@ -208,7 +208,7 @@ def _render(
         mi_scene, camera, spp=spp, seed=seed, max_depth=max_depth
     )
     seconds = time.perf_counter() - t0
-    warnings += user_scene.check_transport(t)
+    warnings += user_scene.check_transport(t, mi_scene)
     return t, {"backend": info, "seconds": seconds, "noise": noise, "warnings": warnings}
 
 

@@ -20,6 +20,10 @@ scene's integrator, and weights radiance by ``A_t d^2 / |x-q|^4 f / p(q)``.
 ``q`` comes from a one-sample mixture of uniform area sampling and
 cosine-weighted directions from ``x`` (see :func:`cosine_sampling_fraction`); for
 the prototype this is plain area sampling, ``p = 1 / A_d``.
+Such a ray never hits a point, spot or directional light (the sun); each ray
+also samples the direct light of every such emitter through its texel
+(:mod:`mincam_render.render.delta_lights`), so their light counts whether it
+arrives straight or bounced.
 The samples of a texel are stratified (Mitsuba's ``multijitter`` sampler: a
 jittered ``a x b`` grid with N-rooks marginals in every dimension, scrambled per
 texel and seed): a texel sees a wide cone of the scene through the detector, and
@@ -38,12 +42,14 @@ updated, replayed garbage (sums of 1e21-1e28 W).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import re
+from collections.abc import Sequence
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
@@ -52,6 +58,8 @@ import numpy as np
 from mincam_render.core.checks import check_int
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.backend import use_variant
+from mincam_render.render.board import Board
+from mincam_render.render.delta_lights import TexelRect, delta_emitters, delta_light_transport
 from mincam_render.render.mitsuba_scene import SceneInput, load_scene
 from mincam_render.render.sun_patch import SunPatchPathIntegrator, sun_sampled_apart
 
@@ -81,28 +89,6 @@ _COSINE_FRACTION_INDEX = 12
 _CENTERS_OFFSET = 15
 
 
-class _Board(NamedTuple):
-    """One detector's board, gathered per ray from :attr:`_PassGeometry.params` (Dr.Jit).
-
-    Attributes:
-        a_det: detector side (m).
-        w_mask: mask side (m).
-        dist: mask-to-detector distance (m).
-        right: board frame's right axis, world unit vector.
-        up: board frame's up axis, world unit vector.
-        fwd: board frame's forward axis (towards the scene), world unit vector.
-        center: the ray's detector centre, world (m).
-    """
-
-    a_det: mi.Float
-    w_mask: mi.Float
-    dist: mi.Float
-    right: mi.Vector3f
-    up: mi.Vector3f
-    fwd: mi.Vector3f
-    center: mi.Point3f
-
-
 def _param(geo: _PassGeometry, i: int) -> mi.Float:
     """Scalar ``i`` of ``geo.params`` (a gather, so the kernel hash does not depend on it)."""
     return dr.gather(mi.Float, geo.params, i)
@@ -119,7 +105,7 @@ def _texel_coords(spp: int, shape: tuple[int, int, int]) -> tuple[mi.UInt32, mi.
     return u, v, k
 
 
-def _board(geo: _PassGeometry, k: mi.UInt32) -> _Board:
+def _board(geo: _PassGeometry, k: mi.UInt32) -> Board:
     """The board of detector ``k`` per ray (its centre with parallax, if ``geo`` has it)."""
 
     def vec(i: int) -> mi.Vector3f:
@@ -133,13 +119,13 @@ def _board(geo: _PassGeometry, k: mi.UInt32) -> _Board:
         dr.gather(mi.Float, geo.params, base + 1),
         dr.gather(mi.Float, geo.params, base + 2),
     )
-    return _Board(a_det, w_mask, dist, right, up, fwd, center)
+    return Board(a_det, w_mask, dist, right, up, fwd, center)
 
 
 def _mask_and_detector_points(
     sampler: mi.Sampler,
     geo: _PassGeometry,
-    board: _Board,
+    board: Board,
     texel: tuple[mi.UInt32, mi.UInt32],
     grid: tuple[int, int],
 ) -> tuple[mi.Float, mi.Float, mi.Float, mi.Float, mi.Bool]:
@@ -176,7 +162,7 @@ def _mask_and_detector_points(
 
 
 def _mask_ray(
-    board: _Board, x_s: mi.Float, x_t: mi.Float, q_s: mi.Float, q_t: mi.Float
+    board: Board, x_s: mi.Float, x_t: mi.Float, q_s: mi.Float, q_t: mi.Float
 ) -> tuple[mi.Ray3f, mi.Float]:
     """The world ray from ``x`` along ``x - q`` and ``1 / |x - q|`` (m^-1).
 
@@ -213,7 +199,7 @@ def _directional_response(geo: _PassGeometry, cos_theta: mi.Float) -> mi.Float |
 
 def _sample_weight(
     geo: _PassGeometry,
-    board: _Board,
+    board: Board,
     inv_r: mi.Float,
     on_detector: mi.Bool,
     texels: int,
@@ -239,9 +225,21 @@ def _sample_weight(
     return dr.select(on_detector, g * f_dir * texel_area / pdf_q, 0.0)
 
 
+def _texel_rect(
+    board: Board, texel: tuple[mi.UInt32, mi.UInt32], grid: tuple[int, int]
+) -> TexelRect:
+    """Texel ``(u, v)`` (column, row) in board-frame coordinates from the detector centre (m)."""
+    (u, v), (rows, cols) = texel, grid
+    du, dv = board.w_mask / cols, board.w_mask / rows
+    s_lo = mi.Float(u) * du - 0.5 * board.w_mask
+    t_hi = 0.5 * board.w_mask - mi.Float(v) * dv
+    return TexelRect(s_lo, s_lo + du, t_hi - dv, t_hi)
+
+
 def _transport_pass(
     scene: mi.Scene,
     integrator: mi.Integrator,
+    delta: Sequence[mi.Emitter],
     sampler: mi.Sampler,
     geo: _PassGeometry,
     seed: mi.UInt32,
@@ -250,6 +248,10 @@ def _transport_pass(
 ) -> tuple[mi.Float, mi.Float | None]:
     """One wavefront of ``K*R*C*S`` rays: per texel (flat K*R*C), the mean over S (W).
 
+    Each ray adds the light of the ``delta`` emitters (point, spot,
+    directional) that reaches the detector straight through its texel
+    (:mod:`mincam_render.render.delta_lights`); its samples are drawn after the
+    integrator's, so a scene without them renders as it did before.
     Also the mean of the squared samples (W^2) if ``second_moment``, else None.
     The steps record the kernel's operations in a fixed order (one launch).
     """
@@ -264,6 +266,11 @@ def _transport_pass(
     radiance, _, _ = integrator.sample(scene, sampler, ray, active=on_detector)
     weight = _sample_weight(geo, board, inv_r, on_detector, rows * cols)
     value = mi.Float(radiance[0]) * weight
+    if delta:
+        texel = _texel_rect(board, (u, v), (rows, cols))
+        value += delta_light_transport(
+            scene, delta, sampler, board, texel, functools.partial(_directional_response, geo)
+        )
     mean = dr.block_sum(value, spp) * (1.0 / spp)
     return mean, dr.block_sum(value * value, spp) * (1.0 / spp) if second_moment else None
 
@@ -455,6 +462,7 @@ def _render(
     else:
         integrator = mi.load_dict({"type": "path", "max_depth": max_depth})
     geo = _geometry(camera, parallax)
+    delta = delta_emitters(mi_scene)
 
     total = np.zeros(n_texels, dtype=np.float64)
     total_sq = np.zeros(n_texels, dtype=np.float64) if second_moment else None
@@ -463,7 +471,14 @@ def _render(
             shape = (camera.num_detectors, rows, cols, n)
             seed_i = mi.UInt32(_pass_seed(seed, i))
             mean, mean_sq = _transport_pass(
-                mi_scene, integrator, _stratified_sampler(n), geo, seed_i, shape, second_moment
+                mi_scene,
+                integrator,
+                delta,
+                _stratified_sampler(n),
+                geo,
+                seed_i,
+                shape,
+                second_moment,
             )
             total += mean.numpy().astype(np.float64) * n
             if second_moment:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from dataclasses import dataclass
 
 import drjit as dr
@@ -18,6 +19,7 @@ import mitsuba as mi
 import numpy as np
 
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.render.delta_lights import delta_emitters
 from mincam_render.render.mitsuba_scene import SceneError
 
 log = logging.getLogger(__name__)
@@ -213,11 +215,12 @@ def _check_camera_distance(corners: np.ndarray, camera: FreeformCamera) -> None:
         )
 
 
-def check_transport(transport: np.ndarray) -> list[str]:
-    """Check a rendered ``T[detector, row, col]``: detectors that see no light.
+def check_transport(transport: np.ndarray, scene: mi.Scene) -> list[str]:
+    """Check a rendered ``T[detector, row, col]`` of ``scene``: detectors that see no light.
 
     Raises:
-        SceneError: every detector sees zero (with what to check).
+        SceneError: every detector sees zero (with what to check, and the
+            emitters the scene has, by Mitsuba class).
 
     Returns:
         warnings (also logged): the detectors that see zero, by index.
@@ -228,7 +231,8 @@ def check_transport(transport: np.ndarray) -> list[str]:
     if len(dark) == len(power):
         raise SceneError(
             f"all {len(power)} detectors see no light: check the pose (--position, --look-at; "
-            "the board faces look_at), the scene's units (--scene-scale) and its emitters"
+            "the board faces look_at), the scene's units (--scene-scale) and its emitters "
+            f"({_emitter_census(scene)})"
         )
     if len(dark) == 0:
         return []
@@ -238,6 +242,20 @@ def check_transport(transport: np.ndarray) -> list[str]:
     )
     log.warning("%s", message)
     return [message]
+
+
+def _emitter_census(scene: mi.Scene) -> str:
+    """The scene's emitters by Mitsuba class, and where its delta lights would count."""
+    counts = Counter(e.class_name() for e in scene.emitters())
+    if not counts:
+        return "found none"
+    found = ", ".join(f"{n} {name}" for name, n in sorted(counts.items()))
+    if not delta_emitters(scene):
+        return f"found {found}"
+    return (
+        f"found {found}; point, spot and directional lights reach a detector only from "
+        "in front of the board, within its field of view, unblocked"
+    )
 
 
 def spp_for_noise(

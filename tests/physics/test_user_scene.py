@@ -78,14 +78,15 @@ def test_check_scene_refuses_a_camera_far_from_the_scene(variant):
     assert user_scene.check_scene(scene, _camera(), require_emitter=True) == []
 
 
-def test_check_transport_names_dark_detectors_and_refuses_all_dark():
+def test_check_transport_names_dark_detectors_and_refuses_all_dark(variant):
+    scene = load_scene(mi.cornell_box())
     t = np.ones((4, 2, 2), dtype=np.float32)
     t[[1, 3]] = 0.0
-    (message,) = user_scene.check_transport(t)
+    (message,) = user_scene.check_transport(t, scene)
     assert "2 of 4 detectors" in message and "[1, 3]" in message
-    with pytest.raises(SceneError, match="all 4 detectors see no light"):
-        user_scene.check_transport(np.zeros((4, 2, 2)))
-    assert user_scene.check_transport(np.ones((4, 2, 2))) == []
+    with pytest.raises(SceneError, match=r"all 4 detectors see no light.*found 1 AreaLight\)"):
+        user_scene.check_transport(np.zeros((4, 2, 2)), scene)
+    assert user_scene.check_transport(np.ones((4, 2, 2)), scene) == []
 
 
 def test_noise_estimate_matches_the_spread_over_seeds(variant):
@@ -173,3 +174,38 @@ def test_cli_transport_refuses_a_scene_without_emitter_and_conflicting_pose(vari
     assert alone.exit_code == 2 and "--sensor-id needs --pose-from-sensor" in alone.output
     far = runner.invoke(main, ["transport", str(cornell), "--position", "1e30,0,0"])
     assert far.exit_code != 0 and "--position" in far.output
+
+
+def _point_light_xml(tmp_path, z_m: float, *, ball: bool):
+    scene = {
+        "type": "scene",
+        "lamp": {"type": "point", "position": [0.0, 0.0, z_m], "intensity": 10.0},
+    }
+    if ball:  # lit from the front, it sends some light back to the board
+        scene["ball"] = sphere((0.0, 0.0, 1.0), 0.2, bsdf={"type": "diffuse"})
+    path = tmp_path / f"lamp_{z_m:+g}.xml"
+    scene_dict_to_xml(scene, path)
+    return scene, path
+
+
+def test_cli_counts_a_point_light_in_front_and_names_it_when_behind(variant, tmp_path):
+    """The issue's case: a point light (10 W/sr) 0.5 m in front of the board, a sphere
+    behind it. Its direct light (~3.1e-5 W per detector, I A / r^2) was dropped,
+    leaving 7e-7 W bounced off the sphere; now the CLI's power is the API's.
+    Behind the board, the error names the point light it found."""
+    scene, path = _point_light_xml(tmp_path, 0.5, ball=True)
+    res = CliRunner().invoke(
+        main, ["transport", str(path), "--out", str(tmp_path / "o"), "--grid", "2x2"]
+        + ["--mask-res", "8", "--spp", "16"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    cam = _camera((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    power = _detector_power(None, tmp_path, "o")
+    expected = render_transport(load_scene(scene), cam, spp=16, seed=0).sum(axis=(1, 2))
+    np.testing.assert_allclose(power, expected, rtol=1e-6)
+    direct = 10.0 * cam.detector_size_m**2 / 0.5**2
+    assert np.all((power > direct) & (power < 1.1 * direct)), (power, direct)
+    _, behind = _point_light_xml(tmp_path, -0.5, ball=False)
+    res = CliRunner().invoke(main, ["transport", str(behind), "--out", str(tmp_path / "b")])
+    assert res.exit_code != 0 and "Traceback" not in res.output
+    assert "all 24 detectors see no light" in res.output and "found 1 PointLight" in res.output
