@@ -55,7 +55,7 @@ from mincam_render.core.photometry import (
     rectangle_projected_solid_angle,
 )
 from mincam_render.core.seeds import stream_seed
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import GAIN_AUGMENTATION_20, TrainConfig
 from mincam_render.scenes import load_family
 
 #: The paper's single point (supplement A), count RMSE of 4 freeform pixels.
@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
         val_episodes=1,  # as measured (ablation_light_level.json)
         seeds=a.seeds,
         designs=(Design(pixels=4), Design(pixels=4, sensor_model=False)),
-        train=TrainConfig(max_steps=a.steps),
+        train=TrainConfig(max_steps=a.steps, gain_range=GAIN_AUGMENTATION_20),  # as measured
     )
     unit = illuminance_at_unit_scale(base, min(a.train_frames, 1000))
     print(f"illuminance at light factor 1: {unit['illuminance_lux']:.1f} lx "

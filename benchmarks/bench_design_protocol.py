@@ -3,7 +3,7 @@ r"""The design protocol of a task: per task against joint, recipes, learning cur
 Usage::
 
     python benchmarks/bench_design_protocol.py --task workspace --work /data/protocol-ws \\
-        [--sections protocol,recipes,ladder,references] [--train-workers 2]
+        [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -98,7 +98,9 @@ def main() -> None:
     ap.add_argument("--task", choices=sorted(TASKS), required=True)
     ap.add_argument("--work", type=Path, required=True, help="episodes and runs (resumable)")
     ap.add_argument("--episodes", type=Path, default=None, help="shared episodes directory")
-    ap.add_argument("--sections", default="protocol,recipes,ladder,references")
+    ap.add_argument(
+        "--sections", default="protocol,recipes,ladder,references,oracle,restarts"
+    )
     ap.add_argument("--train-workers", type=int, default=1)
     ap.add_argument("--out", type=Path, default=RESULTS / "design_protocol.json")
     args = ap.parse_args()

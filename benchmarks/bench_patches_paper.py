@@ -59,6 +59,7 @@ from provenance import machine
 
 from mincam_render.learn import train as tr
 from mincam_render.learn.models import CountLoss
+from mincam_render.learn.train_config import GAIN_AUGMENTATION_20
 from mincam_render.scenes import load_family
 from mincam_render.scenes import patches_linear as pl
 
@@ -335,6 +336,7 @@ def main() -> None:
         patience=10**6,
         count_loss=count_loss,
         seed=a.seed,
+        gain_range=GAIN_AUGMENTATION_20,  # as patches_paper*.json were measured
     )
     checkpoints = sorted({a.steps // 16, a.steps // 8, a.steps // 4, a.steps // 2, a.steps} - {0})
     results = {

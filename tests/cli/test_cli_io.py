@@ -124,10 +124,10 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     metrics = json.loads((out / "metrics.json").read_text())
     # independent episodes: one dataset each, each its own scene seed, all complete
     eps = metrics["episodes"]
-    assert sorted(eps) == ["test-0", "test-1", "train-0", "train-1", "val-0"]
-    assert len({e["dataset"] for e in eps.values()}) == 5
+    assert sorted(eps) == ["test-0", "test-1", "train-0", "train-1", "val-0", "val-1", "val-2"]
+    assert len({e["dataset"] for e in eps.values()}) == 7
     seeds = {open_dataset(out / "episodes" / k).manifest["request"]["seed"] for k in eps}
-    assert len(seeds) == 5
+    assert len(seeds) == 7
     for k in eps:
         assert open_dataset(out / "episodes" / k).verify() == []
     designs = metrics["designs"]
@@ -209,8 +209,8 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
-        (("pipeline",), [], ComparisonConfig, 12),
-        (("study",), ["--out", "o"], ComparisonConfig, 12),
+        (("pipeline",), [], ComparisonConfig, 15),
+        (("study",), ["--out", "o"], ComparisonConfig, 15),
     ],
 )
 def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(

@@ -109,15 +109,15 @@ def test_cross_entropy_count_trains_resumes_and_prunes(variant, tmp_path):
     train, val, test = linear_task(260, k=3).split((0.7, 0.15, 0.15))
     ce = CountLoss.CROSS_ENTROPY
     # at 150 steps this cross-entropy run learns for some seeds and stays at the
-    # constant prediction for others (3 of seeds 0-11 collapse to 1.00 x the std
-    # with the batch stream of core.seeds); seed 7 is one that learns (0.59 x)
-    model = tr.build_mincam(train, 3, count_loss=ce, seed=7)
+    # constant prediction for others (without gain augmentation, the default, 7 of
+    # seeds 0-11 stay at 1.00 x the std); seed 10 is one that learns (0.56 x)
+    model = tr.build_mincam(train, 3, count_loss=ce, seed=10)
     before = tr.predict(model, val)[2]
-    tr.train_model(model, train, val, replace_cfg(seed=7), out_dir=tmp_path)
+    tr.train_model(model, train, val, replace_cfg(seed=10), out_dir=tmp_path)
     after = tr.predict(model, val)[2]
     err = tr.evaluate(model, test)["error"]
     assert after < before  # cross-entropy over ~15 classes falls slower than MSE
-    assert err < 0.7 * float(test.labels["count"].std())  # measured 0.59 x
+    assert err < 0.7 * float(test.labels["count"].std())  # measured 0.56 x
     with pytest.raises(ValueError, match="written for"):  # an MSE head is another model
         tr.train_model(
             tr.build_mincam(train, 3, count_loss=CountLoss.MSE), train, val, CFG, out_dir=tmp_path

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design, Protocol
 from mincam_render.core.checks import check_int, check_number
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import GAIN_AUGMENTATION_20, TrainConfig
 
 #: The workspace with a roster of six people (max six present, so each has a look).
 ROSTER_OVERRIDES = {"max_people": 6, "people": {"roster": 6}}
@@ -73,11 +73,11 @@ def default_comparison(detectors: int = 8, texels: int = 32) -> ComparisonConfig
         test_episodes=3,
         seeds=2,
         designs=default_designs(detectors, texels),
-        train=TrainConfig(max_steps=1000),
+        train=TrainConfig(max_steps=1000, gain_range=GAIN_AUGMENTATION_20),
         fidelity=AUDIT_FIDELITY,
         mask_res=None if texels == 32 else texels,
         # as audited (privacy.json, privacy_16det.json): one camera for every label,
-        # early stopping on one validation episode
+        # early stopping on one validation episode, the +-20 % gain augmentation
         protocol=Protocol.JOINT,
         val_episodes=1,
     )
