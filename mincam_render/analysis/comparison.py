@@ -55,6 +55,7 @@ from mincam_render.analysis.statistics import (
     paired_statement,
     verdict,
 )
+from mincam_render.core import strict_json
 from mincam_render.core.labels import LabelKind
 from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
@@ -217,7 +218,8 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
         if s.kind is LabelKind.BINARY:
             mean = (mean >= 0.5).astype(np.float32)
         pred[s.name] = np.broadcast_to(mean, (n, s.size)).astype(np.float32)
-    return metrics(pred, lab, float("nan"), test)
+    scored = metrics(pred, lab, float("nan"), test)
+    return scored | {"loss": None, "loss_null_reason": "the trivial predictor has no training loss"}
 
 
 def episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
@@ -435,11 +437,11 @@ def _run_comparison(
         "figure": str(out / "comparison.png"),
         "versions": package_versions(),
     }
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
         result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / task)
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     return result
 
 

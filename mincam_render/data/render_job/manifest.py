@@ -13,6 +13,7 @@ import logging
 import time
 from pathlib import Path
 
+from mincam_render.core import strict_json
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.planning import _describe_family, package_versions, plan_render
 from mincam_render.data.render_job.request import RenderRequest
@@ -23,7 +24,7 @@ log = logging.getLogger(__name__)
 
 def _append_log(out: Path, entry: dict) -> None:
     with open(out / ds.LOG_NAME, "a") as f:
-        f.write(json.dumps(entry, default=ds._json_default) + "\n")
+        f.write(strict_json.dumps(entry, indent=None) + "\n")
 
 
 def _open_or_plan(
