@@ -137,7 +137,7 @@ def run_curves(run_dir: Path, tests: dict, config: RobustnessConfig, kind: str) 
         record = json.loads(path.read_text())
         if record["config"] == as_json(config):
             return record
-    model = tr.load_mincam(run_dir, next(iter(tests.values())))
+    model = tr.restore_mincam(tr.open_run(run_dir), next(iter(tests.values())), "robustness")
     record = robustness_curves(model, tests, config, name=run_dir.name, robust=kind == "robust")
     path.write_text(json.dumps(record) + "\n")
     return record
