@@ -441,6 +441,13 @@ def _run_comparison(
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
         result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / task)
+    result["not_of_this_comparison"] = others_in_folders(
+        {
+            "episodes": (episodes, set(data)),
+            "runs": (out / "runs", {Path(r["run_dir"]).name for rs in runs.values() for r in rs}),
+            "masks": (Path(masks_dir or out / "masks") / task, set(result.get("masks", {}))),
+        }
+    )
     (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     return result
 
@@ -641,3 +648,32 @@ def summarise_study(result: dict[str, Any], reference: str) -> dict[str, Any]:
     result["configurations"] = study_summary(result)
     result["reference_verdicts"] = reference_verdicts(result, reference)
     return result
+
+
+def _hidden(path: Path) -> bool:
+    return path.name.startswith(".")
+
+
+def others_in_folders(folders: Mapping[str, tuple[Path, set[str]]]) -> dict[str, Any]:
+    """What the comparison's folders hold besides its own entries (earlier comparisons' left).
+
+    Args:
+        folders: ``{kind: (folder, names of this comparison's entries in it)}``.
+
+    Returns:
+        ``{kind: [other entries' names]}`` of the kinds that hold others, and a
+        ``note`` when any does: ``metrics.json`` lists what its folder holds, so
+        nobody prints the masks of another comparison's design for this one's.
+    """
+    others = {
+        kind: sorted(p.name for p in folder.iterdir() if not (p.name in ours or _hidden(p)))
+        for kind, (folder, ours) in folders.items()
+        if folder.is_dir()
+    }
+    listed: dict[str, Any] = {kind: names for kind, names in others.items() if names}
+    if listed:
+        listed["note"] = (
+            "left in these folders by an earlier comparison with other options: not of this "
+            "one, and not in its figures"
+        )
+    return listed

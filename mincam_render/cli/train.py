@@ -539,4 +539,3 @@ def export_masks_cmd(
     )
     if not run.finished:
         click.echo(f"the export is marked unfinished: {run_dir} is {run.training}")
-

@@ -97,4 +97,3 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True  # someone else's
     return True
-

@@ -108,8 +108,7 @@ class TrainedRun:
         """
         if self.kind is not kind:
             raise ValueError(
-                f"{self.path} is a {self.kind.value} run: {use} takes {_KIND_NAMES[kind]} "
-                "runs only"
+                f"{self.path} is a {self.kind.value} run: {use} takes {_KIND_NAMES[kind]} runs only"
             )
 
 
