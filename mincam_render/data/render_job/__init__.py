@@ -33,7 +33,12 @@ from mincam_render.data.render_job.executors import (
     RenderError,
 )
 from mincam_render.data.render_job.job import RenderSummary, render_dataset
-from mincam_render.data.render_job.planning import _describe_family, package_versions, plan_render
+from mincam_render.data.render_job.planning import (
+    _describe_family,
+    package_versions,
+    plan_render,
+    source_revision,
+)
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.data.render_job.scene import _load_family, _render_camera
 from mincam_render.data.render_job.shards import FRAME_DELAY_ENV, _worker_init, render_shard
@@ -54,4 +59,5 @@ __all__ = [
     "render_backgrounds",
     "render_dataset",
     "render_shard",
+    "source_revision",
 ]
