@@ -29,9 +29,11 @@ def user_error(err: Exception) -> click.ClickException:
     """One line for an error: bad input (exit 2), or a failure while working (exit 1).
 
     Bad input: invalid values, files and data (ValueError, KeyError, path errors).
-    A failure: a worker or the machine failed (RuntimeError, a full disk), or an
-    optional extra is not installed (ImportError).
+    A failure: a worker or the machine failed (RuntimeError, a full disk, not
+    enough memory), or an optional extra is not installed (ImportError).
     """
+    if isinstance(err, MemoryError):  # numpy says how much it could not allocate
+        return click.ClickException(f"not enough memory: {err}")
     failed = isinstance(err, RuntimeError | ImportError) or (
         isinstance(err, OSError) and err.errno in _MACHINE_ERRNOS
     )

@@ -28,6 +28,7 @@ here imports Mitsuba, Dr.Jit or torch (the command line imports this for
 """
 
 from mincam_render.data.render_job.backgrounds import background_keys, render_backgrounds
+from mincam_render.data.render_job.estimate import JobEstimate, JobLimits, JobTooLarge
 from mincam_render.data.render_job.executors import (
     POOL_BREAK_EVEN_S,
     RenderError,
@@ -45,6 +46,9 @@ from mincam_render.data.render_job.shards import FRAME_DELAY_ENV, _worker_init, 
 
 __all__ = [
     "FRAME_DELAY_ENV",
+    "JobEstimate",
+    "JobLimits",
+    "JobTooLarge",
     "POOL_BREAK_EVEN_S",
     "RenderError",
     "RenderRequest",
