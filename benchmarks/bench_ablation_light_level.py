@@ -49,6 +49,7 @@ from provenance import machine
 
 from mincam_render.analysis.comparison import Design, run_comparison
 from mincam_render.analysis.comparison_config import ComparisonConfig
+from mincam_render.core import strict_json
 from mincam_render.core.photometry import (
     WHITE_LIGHT_EFFICACY_LM_PER_W,
     irradiance_to_lux,
@@ -203,7 +204,7 @@ def plot(result: dict, path: Path) -> None:
 def write(result: dict, results: Path) -> None:
     """``ablation_light_level.json``, ``.png`` and ``.md`` in ``results``."""
     results.mkdir(parents=True, exist_ok=True)
-    (results / "ablation_light_level.json").write_text(json.dumps(result, indent=2) + "\n")
+    (results / "ablation_light_level.json").write_text(strict_json.dumps(result, indent=2) + "\n")
     plot(result, results / "ablation_light_level.png")
     (results / "ablation_light_level.md").write_text(report(result) + "\n")
 

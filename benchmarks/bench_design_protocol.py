@@ -98,9 +98,7 @@ def main() -> None:
     ap.add_argument("--task", choices=sorted(TASKS), required=True)
     ap.add_argument("--work", type=Path, required=True, help="episodes and runs (resumable)")
     ap.add_argument("--episodes", type=Path, default=None, help="shared episodes directory")
-    ap.add_argument(
-        "--sections", default="protocol,recipes,ladder,references,oracle,restarts"
-    )
+    ap.add_argument("--sections", default="protocol,recipes,ladder,references,oracle,restarts")
     ap.add_argument("--train-workers", type=int, default=1)
     ap.add_argument("--out", type=Path, default=RESULTS / "design_protocol.json")
     args = ap.parse_args()

@@ -31,6 +31,8 @@ from pathlib import Path
 
 from provenance import machine
 
+from mincam_render.core import strict_json
+
 REPO = Path(__file__).resolve().parents[1]
 DEPTHS = (3, 6, 12, 24)
 
@@ -146,7 +148,7 @@ def main() -> None:
         "depth_check": depth,
         "result": result,
     }
-    out.write_text(json.dumps(payload, indent=1) + "\n")
+    out.write_text(strict_json.dumps(payload, indent=1) + "\n")
     print(f"wrote {out} and {out.parent / 'energy.png'}")
 
 

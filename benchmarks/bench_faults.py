@@ -46,6 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_render.core import strict_json
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benchmarks"))
 from provenance import machine  # noqa: E402
@@ -141,7 +143,7 @@ def train_kill(tmp: Path, dataset: Path, rng) -> dict:
 def _edit_json(path: Path, change) -> None:
     data = json.loads(path.read_text())
     change(data)
-    path.write_text(json.dumps(data))
+    path.write_text(strict_json.dumps(data, indent=None))
 
 
 def _rewrite(path: Path, change) -> None:
@@ -489,7 +491,7 @@ def main() -> None:
     result["machine"] = host
     result["wall_time_s"] = time.monotonic() - started
     path = REPO / "benchmarks" / "results" / "faults.json"
-    path.write_text(json.dumps(result, indent=2) + "\n")
+    path.write_text(strict_json.dumps(result, indent=2) + "\n")
     for name, s in result.items():
         if isinstance(s, dict) and "trials" in s:
             print(f"{name}: {s['survived']}/{s['trials']} survived, data lost {s['data_lost']}")

@@ -38,6 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mincam_render.core import strict_json
+
 sys.path.insert(0, str(Path(__file__).parent))
 from provenance import machine  # noqa: E402
 
@@ -201,7 +203,7 @@ def main() -> None:
     print(json.dumps({k: res[k] for k in ("package", "sun", "paths")}, indent=2), flush=True)
     res["transport"] = transport_figures()
     out = RESULTS / f"format_v4_{args.label}.json"
-    out.write_text(json.dumps(res, indent=2) + "\n")
+    out.write_text(strict_json.dumps(res, indent=2) + "\n")
     print(f"wrote {out}")
 
 

@@ -57,6 +57,7 @@ import numpy as np
 import torch
 from provenance import machine
 
+from mincam_render.core import strict_json
 from mincam_render.learn import train as tr
 from mincam_render.learn.models import CountLoss
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20
@@ -164,7 +165,7 @@ def linear_data(fam, frames: int, operator_spp: int, seed: int, cache: Path, wor
         "generate_processes": n_jobs,
         "frames_per_s": frames / gen_s,
     }
-    meta_path.write_text(json.dumps(meta, indent=2))
+    meta_path.write_text(strict_json.dumps(meta, indent=2))
     return np.load(path_t, mmap_mode="r"), np.load(path_c), meta
 
 
@@ -451,7 +452,7 @@ def main() -> None:
         )
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / json_name
-    path.write_text(json.dumps(results, indent=2, default=str))
+    path.write_text(strict_json.dumps(results, indent=2))
     if results["cameras"]:
         write_table(results, path.with_suffix(".md"))
     print(f"wrote {path}")

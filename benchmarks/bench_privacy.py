@@ -38,6 +38,8 @@ import subprocess
 import time
 from pathlib import Path
 
+from mincam_render.core import strict_json
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -94,7 +96,7 @@ def rederive_verdicts(path: Path) -> None:
 
     record = json.loads(path.read_text())
     record["corner"] = corner_verdicts(record)
-    path.write_text(json.dumps(record, indent=2, default=str) + "\n")
+    path.write_text(strict_json.dumps(record, indent=2) + "\n")
     path.with_suffix(".md").write_text(table(record))
     print(table(record))
 
@@ -123,7 +125,7 @@ def main() -> None:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     record = {"benchmark": "bench_privacy", "machine": machine(), "wall_time_s": seconds,
               "report": paths["html"], **privacy}  # fmt: skip
-    args.out.write_text(json.dumps(record, indent=2, default=str) + "\n")
+    args.out.write_text(strict_json.dumps(record, indent=2) + "\n")
     args.out.with_suffix(".md").write_text(table(privacy))
     shutil.copyfile(paths["png"], args.out.with_suffix(".png"))
     print(table(privacy))

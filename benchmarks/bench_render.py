@@ -43,7 +43,6 @@ the second half of the samples against the first half's.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import time
@@ -54,6 +53,7 @@ import drjit as dr
 import mitsuba as mi
 from provenance import cpu_times, machine
 
+from mincam_render.core import strict_json
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data.render_job import (
     RenderRequest,
@@ -373,7 +373,7 @@ def main() -> None:
         "memory": memory,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(report, indent=1, default=str))
+    args.out.write_text(strict_json.dumps(report, indent=1))
     print(f"wrote {args.out}")
 
 

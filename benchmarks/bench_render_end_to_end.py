@@ -34,6 +34,8 @@ from pathlib import Path
 
 from provenance import machine
 
+from mincam_render.core import strict_json
+
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -145,7 +147,7 @@ def main() -> None:
         f"{r['family']}:{r['frames']}": r["planning_s_measured"] for r in result["planning"]
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1) + "\n")
+    args.out.write_text(strict_json.dumps(result, indent=1) + "\n")
     print(f"wrote {args.out}")
 
 

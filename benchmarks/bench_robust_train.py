@@ -36,7 +36,6 @@ Usage (from a clean tree):
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -49,6 +48,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_train_throughput import random_data  # noqa: E402
 from provenance import machine  # noqa: E402
 
+from mincam_render.core import strict_json
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.evaluation import mean_loss_under  # noqa: E402
 from mincam_render.learn.step import validation_draws  # noqa: E402
@@ -202,7 +202,7 @@ def main() -> None:
         f"{'within' if worst <= BUDGET else 'OVER'} budget"
     )
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    args.out.write_text(strict_json.dumps(result, indent=2) + "\n")
     print(f"wrote {args.out}")
 
 

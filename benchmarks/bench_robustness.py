@@ -63,6 +63,7 @@ from mincam_render.analysis.robustness import (  # noqa: E402
     robustness_curves,
 )
 from mincam_render.analysis.robustness_report import write_robustness_report  # noqa: E402
+from mincam_render.core import strict_json
 from mincam_render.core.seeds import stream_seed  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20  # noqa: E402
@@ -146,9 +147,9 @@ def run_curves(run_dir: Path, tests: dict, config: RobustnessConfig, kind: str) 
         record = json.loads(path.read_text())
         if record["config"] == as_json(config):
             return record
-    model = tr.load_mincam(run_dir, next(iter(tests.values())))
+    model = tr.restore_mincam(tr.open_run(run_dir), next(iter(tests.values())), "robustness")
     record = robustness_curves(model, tests, config, name=run_dir.name, robust=kind == "robust")
-    path.write_text(json.dumps(record) + "\n")
+    path.write_text(strict_json.dumps(record, indent=None) + "\n")
     return record
 
 

@@ -14,7 +14,6 @@ the full run takes a few minutes on 2 cores. Exit status 1 if any case fails.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import resource
 import time
@@ -34,6 +33,7 @@ from mincam_render import (
     parallel_rectangles_coupling,
     render_transport,
 )
+from mincam_render.core import strict_json
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import lux_to_irradiance
 from mincam_render.data.render_job import RenderRequest, plan_render
@@ -563,7 +563,7 @@ def main() -> int:
         "failed": [c["case"] for c in CASES if not c["ok"]],
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1, default=float) + "\n")
+    args.out.write_text(strict_json.dumps(result, indent=1) + "\n")
     print(f"\n{len(CASES) - len(result['failed'])}/{len(CASES)} cases ok; wrote {args.out}")
     return 1 if result["failed"] else 0
 

@@ -30,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 from provenance import machine  # noqa: E402
 
+from mincam_render.core import strict_json
 from mincam_render.core.photometry import VISIBLE_FRACTION_OF_SUNLIGHT  # noqa: E402
 from mincam_render.scenes.sky import (  # noqa: E402
     clear_sky_irradiance,
@@ -111,7 +112,7 @@ def main() -> None:
 
     res = {"machine": machine(), "pvlib": pvlib.__version__, "summary": summary, "cases": cases}
     out = Path(__file__).parent / "results" / "sun_position.json"
-    out.write_text(json.dumps(res, indent=2) + "\n")
+    out.write_text(strict_json.dumps(res, indent=2) + "\n")
     print(json.dumps(summary, indent=2))
     print(f"wrote {out}")
 

@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import statistics
 import sys
 import time
@@ -51,6 +50,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from provenance import machine  # noqa: E402
 
+from mincam_render.core import strict_json
 from mincam_render.core.labels import LabelKind, LabelSpec  # noqa: E402
 from mincam_render.data.dataset import open_dataset  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
@@ -292,7 +292,7 @@ def main() -> None:
     )
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / "train_throughput.json"
-    path.write_text(json.dumps(res, indent=2, default=str) + "\n")
+    path.write_text(strict_json.dumps(res, indent=2) + "\n")
     print(f"wrote {path}")
 
 

@@ -13,7 +13,6 @@ Usage:
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -22,6 +21,7 @@ from pathlib import Path
 
 from provenance import machine
 
+from mincam_render.core import strict_json
 from mincam_render.data.dataset import SHARD_DIR
 from mincam_render.data.render_job import (
     POOL_BREAK_EVEN_S,
@@ -69,7 +69,7 @@ def main() -> None:
         "rows": rows,
     }
     path = Path(__file__).parent / "results" / "workers.json"
-    path.write_text(json.dumps(result, indent=2) + "\n")
+    path.write_text(strict_json.dumps(result, indent=2) + "\n")
     print(f"wrote {path}")
 
 

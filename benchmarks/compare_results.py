@@ -24,6 +24,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from mincam_render.core import strict_json
+
 ID_FIELDS = ("name", "family", "case", "job", "label", "kind")
 REVISION_FIELDS = ("git_revision", "revision")
 
@@ -144,7 +146,7 @@ def main(argv: list[str] | None = None) -> None:
     print(markdown(rows))
     if args.json:
         table = {"path": str(args.path), "before": before_rev, "after": args.after, "rows": rows}
-        args.json.write_text(json.dumps(table, indent=1) + "\n")
+        args.json.write_text(strict_json.dumps(table, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -6,13 +6,14 @@ the script's folder first on ``sys.path``).
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+from mincam_render.core import strict_json
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -58,5 +59,5 @@ def cpu_times() -> tuple[int, int]:
 def write_result(path: Path, result: dict[str, Any]) -> None:
     """Write a benchmark's results JSON (its folder created) and say where."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    path.write_text(strict_json.dumps(result, indent=2) + "\n")
     print(f"wrote {path}")

@@ -30,6 +30,7 @@ from mincam_render.analysis.comparison import (
     paired_differences,
     reference_verdicts,
 )
+from mincam_render.core import strict_json
 
 
 def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:
@@ -68,7 +69,7 @@ def main() -> None:
     lines = add_paired(result, args.also)
     revision = machine()["git_revision"]
     result["paired_added"] = {"git_revision": revision, "date": str(datetime.date.today())}
-    args.study.write_text(json.dumps(result, indent=2, default=str) + "\n")
+    args.study.write_text(strict_json.dumps(result, indent=2) + "\n")
     md = args.study.with_suffix(".md")
     section = [
         "",

@@ -61,6 +61,7 @@ from mincam_render.analysis.statistics import (
     paired_statement,
     verdict,
 )
+from mincam_render.core import strict_json
 from mincam_render.core.labels import LabelKind, label_tasks
 from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
@@ -232,7 +233,8 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
         if s.kind is LabelKind.BINARY:
             mean = (mean >= 0.5).astype(np.float32)
         pred[s.name] = np.broadcast_to(mean, (n, s.size)).astype(np.float32)
-    return metrics(pred, lab, float("nan"), test)
+    scored = metrics(pred, lab, float("nan"), test)
+    return scored | {"loss": None, "loss_null_reason": "the trivial predictor has no training loss"}
 
 
 def episode_errors(per_seed: list[Mapping[str, Mapping[str, Any]]]) -> EpisodeErrors:
@@ -479,11 +481,22 @@ def _run_comparison(
         "figure": str(out / "comparison.png"),
         "versions": package_versions(),
     }
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     plot_comparison(result, out / "comparison.png")
     if masks_dir is not None:
         result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family, maps)
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    run_dirs = [r["run_dir"] for designs in runs.values() for rs in designs.values() for r in rs]
+    result["not_of_this_comparison"] = others_in_folders(
+        {
+            "episodes": (episodes, set(data)),
+            "runs": (out / "runs", {_entry_in(out / "runs", d) for d in run_dirs}),
+            "masks": (
+                Path(masks_dir or out / "masks") / family,
+                {name.split("/")[0] for name in result.get("masks", {})},
+            ),
+        }
+    )
+    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     return result
 
 
@@ -800,3 +813,37 @@ def summarise_study(result: dict[str, Any], reference: str) -> dict[str, Any]:
     result["configurations"] = study_summary(result)
     result["reference_verdicts"] = reference_verdicts(result, reference)
     return result
+
+
+def _hidden(path: Path) -> bool:
+    return path.name.startswith(".")
+
+
+def _entry_in(folder: Path, path: str | Path) -> str:
+    """The name of the entry of ``folder`` that holds ``path`` (a run in ``runs/<task>/``)."""
+    return Path(path).resolve().relative_to(folder.resolve()).parts[0]
+
+
+def others_in_folders(folders: Mapping[str, tuple[Path, set[str]]]) -> dict[str, Any]:
+    """What the comparison's folders hold besides its own entries (earlier comparisons' left).
+
+    Args:
+        folders: ``{kind: (folder, names of this comparison's entries in it)}``.
+
+    Returns:
+        ``{kind: [other entries' names]}`` of the kinds that hold others, and a
+        ``note`` when any does: ``metrics.json`` lists what its folder holds, so
+        nobody prints the masks of another comparison's design for this one's.
+    """
+    others = {
+        kind: sorted(p.name for p in folder.iterdir() if not (p.name in ours or _hidden(p)))
+        for kind, (folder, ours) in folders.items()
+        if folder.is_dir()
+    }
+    listed: dict[str, Any] = {kind: names for kind, names in others.items() if names}
+    if listed:
+        listed["note"] = (
+            "left in these folders by an earlier comparison with other options: not of this "
+            "one, and not in its figures"
+        )
+    return listed

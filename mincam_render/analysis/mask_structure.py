@@ -166,7 +166,7 @@ def run_structure(
     run_dir: str | os.PathLike, view_map: tuple[np.ndarray, np.ndarray], labels: tuple[str, ...]
 ) -> MaskStructure:
     """:class:`MaskStructure` of a finished minimalist run's masks."""
-    from mincam_render.learn.runs import run_masks
+    from mincam_render.learn.restore import run_masks
 
     masks, camera, _ = run_masks(run_dir)
     return mask_structure(masks, camera.transmittance_range, view_map[1], labels)

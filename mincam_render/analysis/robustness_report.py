@@ -10,7 +10,6 @@ and of tolerances, and each design's fabrication spec).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -19,6 +18,7 @@ from typing import Any
 
 from mincam_render.analysis.report import Report, figure_png
 from mincam_render.analysis.robustness import CURVES, MIX
+from mincam_render.core import strict_json
 
 #: Panel titles of the curves.
 TITLES = {
@@ -142,7 +142,7 @@ def write_robustness_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "robustness.json", "png": out / "robustness.png"}
-    atomic_write_bytes(paths["json"], (json.dumps(list(designs), indent=1) + "\n").encode())
+    atomic_write_bytes(paths["json"], (strict_json.dumps(list(designs), indent=1) + "\n").encode())
     png = robustness_figure(designs)
     atomic_write_bytes(paths["png"], png)
     page = Report("Designs that survive the workshop: robustness to tolerances")

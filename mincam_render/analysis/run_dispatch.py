@@ -40,7 +40,7 @@ from mincam_render.analysis.comparison_config import ComparisonConfig, Design
 from mincam_render.core.checks import check_int
 from mincam_render.core.labels import label_tasks
 from mincam_render.core.seeds import stream_seed
-from mincam_render.learn.train import train_run
+from mincam_render.learn.train import run_finished, train_run
 from mincam_render.learn.train_config import TrainConfig
 
 #: What a comparison keeps of the masks' training in supplement A's ablation.
@@ -229,7 +229,7 @@ def _finished(task: RunTask, runs_dir: Path) -> bool:
     """Whether the run's ``metrics.json`` (and its tested camera's, in the ablation) exists."""
     run_dir = runs_dir / task.name
     tested = run_dir if task.design.sensor_model else run_dir / _HEAD_RUN
-    return (run_dir / "metrics.json").is_file() and (tested / "metrics.json").is_file()
+    return run_finished(run_dir) and run_finished(tested)
 
 
 # ---- local worker processes ------------------------------------------------------------------

@@ -200,7 +200,17 @@ def verdict(name_a: str, a: Interval, name_b: str, b: Interval) -> str:
     return f"no verdict: the 95 % intervals of {name_a} and {name_b} overlap"
 
 
-def converged(history: Sequence[Mapping[str, float]]) -> dict[str, float | bool]:
+def _undecided(steps: int) -> dict[str, float | bool | str | None]:
+    """:func:`converged`'s record of a run with no evaluation by half its steps."""
+    return {
+        "converged": False,
+        "improvement": None,
+        "improvement_null_reason": "no evaluation by half the steps: nothing to compare",
+        "steps": steps,
+    }
+
+
+def converged(history: Sequence[Mapping[str, float]]) -> dict[str, float | bool | str | None]:
     """Did the last doubling of steps improve the best validation loss by < 2 %?
 
     Args:
@@ -209,16 +219,17 @@ def converged(history: Sequence[Mapping[str, float]]) -> dict[str, float | bool]
     Returns:
         ``{"converged", "improvement", "steps"}``: the relative improvement of
         the best validation loss from step ``S / 2`` to the last step ``S``
-        (``nan`` and not converged with fewer than two evaluations).
+        (None, with ``improvement_null_reason``, and not converged when no
+        evaluation was made by step ``S / 2``).
     """
     if len(history) < 2:
-        return {"converged": False, "improvement": float("nan"), "steps": 0}
+        return _undecided(0)
     steps = np.array([h["step"] for h in history], np.float64)
     loss = np.array([h["val_loss"] for h in history], np.float64)
     last = steps[-1]
     half = steps <= last / 2
     if not half.any():
-        return {"converged": False, "improvement": float("nan"), "steps": int(last)}
+        return _undecided(int(last))
     best_half, best_all = loss[half].min(), loss.min()
     improvement = float((best_half - best_all) / max(abs(best_half), 1e-12))
     return {

@@ -13,12 +13,26 @@ import logging
 import click
 
 from mincam_render.cli import bench, preview, render, report, studies, train, transport
+from mincam_render.cli.errors import Stopped, stop_on_signals, stopped_error
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _StoppableGroup(click.Group):
+    """The entry point: a stop signal ends any command in one line (:func:`stop_on_signals`)."""
+
+    def invoke(self, ctx: click.Context) -> object:
+        """Run the command; a :class:`Stopped` becomes its one line and exit code."""
+        try:
+            return super().invoke(ctx)
+        except Stopped as stop:
+            raise stopped_error(stop.signum) from None
+
+
+@click.group(cls=_StoppableGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("-v", "--verbose", is_flag=True, help="Log debug messages.")
-def main(verbose: bool) -> None:
+@click.pass_context
+def main(ctx: click.Context, verbose: bool) -> None:
     """Render, train and export minimalist cameras of freeform pixels."""
+    stop_on_signals(ctx)
     logging.basicConfig(
         level=logging.DEBUG if verbose else logging.INFO,
         format="%(levelname)s %(name)s: %(message)s",

@@ -123,10 +123,34 @@ def scene_settings(
 
 
 def with_detectors(overrides: dict[str, Any], detectors: int | None) -> dict[str, Any]:
-    """``overrides`` with ``camera.detectors`` set (the ``--detectors`` shorthand); None: as is."""
+    """``overrides`` with ``camera.detectors`` set (the ``--detectors`` shorthand); None: as is.
+
+    Raises:
+        click.BadParameter: ``--set camera.detectors`` is given too, with another
+            value or not an integer (neither silently wins).
+    """
     if detectors is None:
         return overrides
-    return {**overrides, "camera": {**overrides.get("camera", {}), "detectors": detectors}}
+    camera = overrides.get("camera", {})
+    if not isinstance(camera, dict):
+        raise click.BadParameter(
+            f"camera={camera!r} is not a table of camera fields; give one field as "
+            "camera.KEY=VALUE",
+            param_hint="--set",
+        )
+    given = camera.get("detectors", detectors)
+    if isinstance(given, bool) or not isinstance(given, int):
+        raise click.BadParameter(
+            f"camera.detectors={given!r}: expected an integer (and --detectors "
+            f"{detectors} sets it too: give one of the two)",
+            param_hint="--set",
+        )
+    if given != detectors:
+        raise click.BadParameter(
+            f"{detectors} disagrees with --set camera.detectors={given}: give one of the two",
+            param_hint="--detectors",
+        )
+    return {**overrides, "camera": {**camera, "detectors": detectors}}
 
 
 def out_option(help_text: str, default: str | None = None) -> Callable:

@@ -141,6 +141,12 @@ _RUN_OPTIONS = [
         "description, camera, targets and frame count.",
     ),
     click.option("--no-progress", is_flag=True, help="Hide the progress bar."),
+    click.option(
+        "-y", "--yes", is_flag=True,
+        help="Render a new job even when its estimate (frames x measured seconds per frame, "
+        "shards x bytes per shard, shown before rendering) is above a day in one process or "
+        "the free disk; without it such a job is refused before anything is written.",
+    ),
 ]  # fmt: skip
 
 
@@ -155,6 +161,7 @@ def render_cmd(
     ray_address: str | None,
     replan: bool,
     no_progress: bool,
+    yes: bool,
     **request_options: Any,
 ) -> None:
     """Render a dataset of transport images T[frame, detector, row, col] with labels.
@@ -165,7 +172,9 @@ def render_cmd(
     non-empty --out is refused. The fidelity plan is measured once per
     description, camera, targets and frame count (on the seed-0 episode, so every
     seed shares it) and kept; shipped plans (scenes/plans/) start at once.
-    Format: docs/dataset_format.md.
+    A new job's time and disk are estimated before anything is written (its
+    first frames rendered and timed); one above a day in one process or the
+    free disk is refused unless --yes. Format: docs/dataset_format.md.
 
     \b
     Example:
@@ -174,7 +183,7 @@ def render_cmd(
           --detectors 2 --mask-res 8 --spp 4
     """
     from mincam_render.data.dataset import DatasetError
-    from mincam_render.data.render_job import RenderError, render_dataset
+    from mincam_render.data.render_job import JobLimits, RenderError, render_dataset
 
     try:
         summary = render_dataset(
@@ -184,8 +193,9 @@ def render_cmd(
             ray_address=ray_address,
             progress=not no_progress,
             use_plan_cache=not replan,
+            limits=JobLimits(confirmed=yes),
         )
-    except (ValueError, DatasetError, RenderError, OSError, ImportError) as err:
+    except (ValueError, DatasetError, RenderError, OSError, ImportError, MemoryError) as err:
         raise user_error(err) from None
     click.echo(
         f"{out}: {summary.num_frames} frames in {summary.shards_total} shards; rendered "

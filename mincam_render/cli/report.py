@@ -219,8 +219,18 @@ def report_energy_cmd(
 @out_option(
     "Output directory (created): robustness.html, .png and .json.", default="runs/robustness"
 )
+@click.option(
+    "--allow-unfinished",
+    is_flag=True,
+    help="Report on runs whose training did not finish (their best state so far), named "
+    "'(unfinished)' in the report.",
+)
 def report_robustness_cmd(
-    runs: tuple[Path, ...], data_dirs: tuple[Path, ...], out: Path, **config: object
+    runs: tuple[Path, ...],
+    data_dirs: tuple[Path, ...],
+    out: Path,
+    allow_unfinished: bool,
+    **config: object,
 ) -> None:
     """Trained designs under fabrication and detector perturbations: error, tolerance, spec.
 
@@ -237,17 +247,19 @@ def report_robustness_cmd(
     """
     from mincam_render.analysis.robustness import robustness_curves
     from mincam_render.analysis.robustness_report import write_robustness_report
-    from mincam_render.learn.train import load_mincam, load_run
+    from mincam_render.learn.train import open_run, restore_mincam
 
     try:
         cfg = RobustnessConfig(**config)  # type: ignore[arg-type]
         designs = []
         for run_dir in runs:
-            run, _ = load_run(run_dir)
-            tests = _test_data(run, data_dirs)
-            model = load_mincam(run_dir, next(iter(tests.values())))
-            robust = run["config"].get("perturbation") is not None
-            designs.append(robustness_curves(model, tests, cfg, name=run_dir.name, robust=robust))
+            run = open_run(run_dir, allow_unfinished=allow_unfinished)
+            tests = _test_data(run.record, data_dirs)
+            use = "a robustness report (it perturbs masks and diodes)"
+            model = restore_mincam(run, next(iter(tests.values())), use)
+            robust = run.record["config"].get("perturbation") is not None
+            name = run_dir.name if run.finished else f"{run_dir.name} (unfinished)"
+            designs.append(robustness_curves(model, tests, cfg, name=name, robust=robust))
         paths = write_robustness_report(designs, out)
     except (ValueError, KeyError, OSError) as err:
         raise user_error(err) from None

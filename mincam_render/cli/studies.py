@@ -7,7 +7,6 @@ defaults they show.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -16,6 +15,7 @@ import click
 
 from mincam_render.analysis.comparison_config import ComparisonConfig as C
 from mincam_render.analysis.comparison_config import Protocol
+from mincam_render.core import strict_json
 from mincam_render.learn.train_config import HeadKind
 
 from .errors import user_error
@@ -356,6 +356,6 @@ def study_cmd(
         designs += [Design(grid=g, head=head) for g in baseline_grids]
     reference = Design(pixels=reference_pixels, head=heads[0]).name
     result = summarise_study(_compare(out, tuple(designs), **episode), reference)
-    (out / "metrics.json").write_text(json.dumps(result, indent=2, default=str) + "\n")
+    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
     (out / "study.md").write_text(study_table(result) + "\n")
     click.echo(study_table(result))

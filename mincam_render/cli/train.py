@@ -8,7 +8,6 @@ default, so the recipe has one source of truth.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from mincam_render.core import strict_json
+from mincam_render.core.checks import check_name
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train_config import HeadKind, TrainConfig
 from mincam_render.optics.perturbation import PerturbationModel
@@ -33,10 +34,8 @@ from .options import (
 )
 
 if TYPE_CHECKING:
-    import torch
-
     from mincam_render.learn.batches import RenderedBatches
-    from mincam_render.learn.models import MincamCamera
+    from mincam_render.learn.restore import TrainedRun
     from mincam_render.learn.training_data import TrainingData
 
 log = logging.getLogger(_pkg)
@@ -297,8 +296,6 @@ def train_cmd(
         if robust and baseline is not None:
             raise InputError("--robust perturbs masks and diodes: not with --baseline")
         config = _recipe_with_perturbation(recipe, robust)
-        if no_resume and (out / "checkpoint.pt").exists():
-            (out / "checkpoint.pt").unlink()
         train, val, test = _splits(dataset, family, frames, spp, config.seed)
         metrics = train_run(
             train,
@@ -343,16 +340,29 @@ def _fresh_batches(
 
 def _export_run_masks(run_dir: Path, export_dir: Path, train: TrainingData) -> None:
     """--export-masks: the printable masks of a finished run."""
-    from mincam_render.export.masks import export_masks
-    from mincam_render.learn.train import run_masks
+    from mincam_render.learn.train import open_run
 
-    m, camera, run = run_masks(run_dir)
-    export_masks(
+    write_masks(open_run(run_dir), export_dir, str(train.source.get("family", "")))
+
+
+def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -> dict[str, Any]:
+    """Export ``run``'s masks into ``folder``; an unfinished run's export is marked so.
+
+    The sidecar's provenance holds the run, its data and how far its training got
+    (``training``); an unfinished run's print sheet says so in its title line.
+    """
+    from mincam_render.export.masks import export_masks
+    from mincam_render.learn.train import masks_of
+
+    m, camera = masks_of(run)
+    return export_masks(
         m,
         camera,
-        export_dir,
-        task=str(train.source.get("family", "")),
-        provenance={"run": str(run_dir), "data": run["data"]},
+        folder,
+        task=task,
+        pdf=pdf,
+        provenance={"run": str(run.path), "data": run.record["data"], "training": run.training},
+        sheet_note="" if run.finished else f"UNFINISHED RUN ({run.training})",
     )
 
 
@@ -424,6 +434,12 @@ def sweep_cmd(
     help="A minimalist-camera run directory from `mincam-render train`.",
 )
 @out_option("Output directory (created).", default="runs/prune")
+@click.option(
+    "--allow-unfinished",
+    is_flag=True,
+    help="Prune a run whose training did not finish (its best state so far); prune.json "
+    "marks every record unfinished.",
+)
 def prune_cmd(
     dataset: Path | None,
     family: str | None,
@@ -431,6 +447,7 @@ def prune_cmd(
     spp: int,
     run_dir: Path,
     out: Path,
+    allow_unfinished: bool,
     **recipe: Any,
 ) -> None:
     """Greedy pruning (supplement C): drop the least useful pixel, retrain the head, repeat.
@@ -443,20 +460,26 @@ def prune_cmd(
       mincam-render prune --family patches --frames 300 --steps 100 \\
           --run runs/patches4 --out runs/patches4_prune
     """
-    from mincam_render.learn.train import greedy_prune, load_run, plot_sweep
+    from mincam_render.learn.train import (
+        ModelKind,
+        greedy_prune,
+        open_run,
+        plot_sweep,
+        restore_mincam,
+    )
 
     try:
         config = TrainConfig(**recipe)
-        run, state = load_run(run_dir)
-        if run["model"]["kind"] != "mincam":
-            raise ValueError(f"{run_dir}: only minimalist-camera runs can be pruned")
+        run = open_run(run_dir, allow_unfinished=allow_unfinished)
+        run.require(ModelKind.MINCAM, "prune")  # before the data are read
         train, val, test = _splits(dataset, family, frames, spp, config.seed)
-        model = _restored_mincam(run, state, train)
+        model = restore_mincam(run, train, "prune")
         records = greedy_prune(model, train, val, test, config, progress=True)
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
     out.mkdir(parents=True, exist_ok=True)
-    (out / "prune.json").write_text(json.dumps(records, indent=2, default=str))
+    source = {"run": str(run_dir), "run_training": run.training}
+    (out / "prune.json").write_text(strict_json.dumps([source | r for r in records]))
     rows = [
         {
             "kind": "mincam",
@@ -475,59 +498,44 @@ def prune_cmd(
     click.echo(f"wrote {out / 'prune.json'}, prune.png")
 
 
-def _restored_mincam(
-    run: dict[str, Any], state: dict[str, torch.Tensor], train: TrainingData
-) -> MincamCamera:
-    """The minimalist camera of a run (its description and weights), for ``train``'s data."""
-    from mincam_render.learn.models import CountLoss
-    from mincam_render.learn.train import build_mincam
-
-    # the run's own count loss (its description lists count_classes when classified)
-    loss = CountLoss.CROSS_ENTROPY if "count_classes" in run["model"] else CountLoss.MSE
-    model = build_mincam(
-        train,
-        detectors=run["model"]["detectors"],
-        sensor_model=run["model"]["sensor_model"],
-        count_loss=loss,
-        head=HeadKind(run["model"].get("head", HeadKind.MLP.value)),
-    )
-    model.load_state_dict(state)
-    return model
-
-
 @click.command("export-masks")
 @click.argument("run_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--task", default=None, help="Task name [default: the run's scene family].")
 @out_option("Masks go into OUT/<task>/.", default="masks")
 @click.option("--no-pdf", is_flag=True, help="Skip the PDF print sheet.")
-def export_masks_cmd(run_dir: Path, task: str | None, out: Path, no_pdf: bool) -> None:
+@click.option(
+    "--allow-unfinished",
+    is_flag=True,
+    help="Export the best masks so far of a run whose training did not finish; masks.json "
+    "and the print sheet mark the export unfinished.",
+)
+def export_masks_cmd(
+    run_dir: Path, task: str | None, out: Path, no_pdf: bool, allow_unfinished: bool
+) -> None:
     """Export a trained camera's masks for printing.
 
     Writes into OUT/<task>/: mask_NN.png (16-bit transmittance), masks.exr,
     print_sheet.svg/.pdf at true size with cut marks and labels, masks.json.
+    The folder is written whole and replaces an earlier export there; a folder
+    holding anything else is refused.
 
     \b
     Example:
       mincam-render export-masks runs/patches4 --task patches --out masks
     """
-    from mincam_render.export.masks import export_masks
-    from mincam_render.learn.train import run_masks
+    from mincam_render.learn.train import open_run
 
     try:
-        m, camera, run = run_masks(run_dir)
-        task = task or str(run["data"]["train"].get("family") or "task")
-        # export_masks is annotated dict[str, Path], but its "png" entry is a list of paths
-        paths: dict[str, Any] = export_masks(
-            m,
-            camera,
-            out / task,
-            task=task,
-            pdf=not no_pdf,
-            provenance={"run": str(run_dir), "data": run["data"]},
-        )
+        task = None if task is None else check_name("--task", task)  # before the run is read
+        run = open_run(run_dir, allow_unfinished=allow_unfinished)
+        family = str(run.record["data"]["train"].get("family") or "task")
+        task = task or check_name("--task (the run's family)", family)
+        paths = write_masks(run, out / task, task, pdf=not no_pdf)
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
     click.echo(
         f"wrote {len(paths['png'])} masks to {out / task} "
         f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
     )
+    if not run.finished:
+        click.echo(f"the export is marked unfinished: {run_dir} is {run.training}")

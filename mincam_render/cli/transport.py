@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 from pathlib import Path
@@ -10,6 +9,8 @@ from typing import TYPE_CHECKING, Any
 
 import click
 import numpy as np
+
+from mincam_render.core import strict_json
 
 from . import __name__ as _pkg
 from .errors import user_error
@@ -225,7 +226,7 @@ def _write(out: Path, config: dict[str, Any], t: np.ndarray, camera: FreeformCam
         title=f"transport images, {config['scene']}, {config['spp']} spp",
         board_positions_m=np.asarray(camera.layout.positions_m),
     )
-    (out / "config.json").write_text(json.dumps(config, indent=2, default=str))
+    (out / "config.json").write_text(strict_json.dumps(config))
 
 
 def _transport_pose(

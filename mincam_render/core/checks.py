@@ -1,4 +1,4 @@
-"""Checks of scalar arguments: an integer or a finite number within bounds.
+"""Checks of scalar arguments: an integer or a finite number within bounds, a plain name.
 
 Every refusal is one ``ValueError`` line naming the argument, its value and what
 is allowed, e.g. ``spp = 0: allowed an integer in [1, 2^20]`` or
@@ -85,6 +85,35 @@ def check_number(
     if not (math.isfinite(v) and _within(v, lo, hi, lo_open, hi_open)):
         raise _refuse(name, value, what, lo, hi, unit, lo_open, hi_open)
     return v
+
+
+def check_name(name: str, value: object) -> str:
+    """``value`` if it names one file or folder inside another, else ``ValueError``.
+
+    A task or design name becomes a folder below an output directory: one path
+    component, so nothing is written outside that directory. Refused: an empty
+    name, a path separator (slash or backslash), a NUL byte, and a leading dot
+    (``.``, ``..``, hidden files).
+
+    Args:
+        name: the argument as the message names it (``"--task"``).
+        value: what was given.
+
+    Raises:
+        ValueError: not a string, or not a plain name.
+    """
+    if not (isinstance(value, str) and _plain(value)):
+        raise ValueError(
+            f"{name} = {value!r}: allowed a plain name (one folder name: no '/', '\\' or "
+            "leading '.'), e.g. patches"
+        )
+    return value
+
+
+def _plain(value: str) -> bool:
+    """One path component: not empty, no separator, NUL, surrounding space or leading dot."""
+    unsafe = {"/", "\\", "\0"}
+    return value == value.strip() != "" and not value.startswith(".") and not set(value) & unsafe
 
 
 def _within(v: float, lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> bool:

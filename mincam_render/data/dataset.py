@@ -38,6 +38,7 @@ import numpy as np
 
 from mincam_render.core.checks import check_int
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.strict_json import to_strict
 from mincam_render.optics.camera import (
     DetectorElectronics,
     DetectorLayout,
@@ -90,7 +91,8 @@ def sha256_file(path: str | os.PathLike) -> str:
     return h.hexdigest()
 
 
-def _fsync_dir(path: Path) -> None:
+def fsync_dir(path: Path) -> None:
+    """Flush a directory's entries (a rename into it) to disk, where the system allows."""
     try:
         fd = os.open(path, os.O_RDONLY)
     except OSError:
@@ -120,7 +122,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     finally:
         if tmp.exists():
             tmp.unlink()
-    _fsync_dir(path.parent)
+    fsync_dir(path.parent)
     return path
 
 
@@ -151,8 +153,14 @@ def remove_stale_temporaries(root: str | os.PathLike) -> list[Path]:
 
 
 def json_bytes(obj: Any) -> bytes:
-    """Canonical JSON (sorted keys, fixed indentation) so equal content gives equal bytes."""
-    return (json.dumps(obj, indent=1, sort_keys=True, default=_json_default) + "\n").encode()
+    """Canonical, strict JSON (sorted keys, fixed indentation): equal content, equal bytes.
+
+    Non-finite numbers are written as null (:mod:`mincam_render.core.strict_json`).
+    """
+    text = json.dumps(
+        to_strict(obj), indent=1, sort_keys=True, allow_nan=False, default=_json_default
+    )
+    return (text + "\n").encode()
 
 
 def _json_default(obj: Any) -> Any:

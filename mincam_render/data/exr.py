@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
+from mincam_render.core import strict_json
+
 _CHANNEL = "detector{:04d}"
 
 
@@ -26,7 +28,7 @@ def write_transport_exr(path: str | os.PathLike, transport_w: np.ndarray, metada
         "compression": OpenEXR.ZIP_COMPRESSION,
         "type": OpenEXR.scanlineimage,
         "mincam_units": "W per unit transmittance",
-        "mincam_metadata": json.dumps(metadata, default=str),
+        "mincam_metadata": strict_json.dumps(metadata, indent=None),
     }
     channels = {_CHANNEL.format(k): np.ascontiguousarray(t[k]) for k in range(t.shape[0])}
     tmp = path.with_name(path.name + ".partial.exr")

@@ -19,6 +19,7 @@ decides: older plans then stop matching.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -82,8 +83,12 @@ def plan_key(fields: dict[str, Any]) -> str:
 
 
 def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
-    """``(plan, "shipped" | "cache")`` of ``fields``, or None when none is kept."""
+    """``(plan, "shipped" | "cache")`` of ``fields``, or None when none is kept.
+
+    A missing folder of shipped plans is said once (:func:`shipped_plans_missing`).
+    """
     key = plan_key(fields)
+    shipped_plans_missing()
     for where, folder in (("shipped", SHIPPED_DIR), ("cache", cache_dir())):
         path = folder / f"{key}.json"
         if not path.is_file():
@@ -96,6 +101,24 @@ def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
         except (OSError, ValueError, KeyError, TypeError) as err:
             log.warning("ignoring the plan %s (%s); planning again", path, err)
     return None
+
+
+@functools.cache
+def shipped_plans_missing() -> bool:
+    """Whether the shipped plans' folder is missing; the first call logs a warning if so.
+
+    A package installed without its plans still works, but measures every plan
+    again (minutes per description): said once per process, never silently.
+    """
+    missing = not SHIPPED_DIR.is_dir()
+    if missing:
+        log.warning(
+            "the shipped fidelity plans are missing (no folder %s): every plan is measured "
+            "again and kept in %s",
+            SHIPPED_DIR,
+            cache_dir(),
+        )
+    return missing
 
 
 def store_plan(

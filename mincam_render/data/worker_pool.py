@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import os
+import signal
 import time
 import traceback
 from collections import deque
@@ -129,8 +130,12 @@ def _worker_main(
 ) -> None:
     """Body of a worker process: run up to ``tasks_per_worker`` tasks sent through ``conn``.
 
-    The first message is the initializer's arguments.
+    The first message is the initializer's arguments. Ctrl-C (SIGINT, sent to the
+    whole terminal's process group) is the parent's to handle: it stops its
+    workers itself, so a worker ignores it; a parent that is gone ends the
+    worker quietly (:func:`_send`), never with a broken-pipe traceback.
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         initargs = conn.recv()
     except EOFError:  # the parent is gone
@@ -147,14 +152,27 @@ def _worker_main(
         key, args = message
 
         def on_progress(n: int = 1, key: Hashable = key) -> None:
-            conn.send(("progress", key, n))
+            _send(conn, ("progress", key, n))
 
         try:
             result = fn(*args, on_progress=on_progress)
         except BaseException as err:  # sent to the parent, which raises it again
-            conn.send(("error", key, _picklable(err)))
+            _send(conn, ("error", key, _picklable(err)))
             return
-        conn.send(("done", key, result))
+        _send(conn, ("done", key, result))
+
+
+def _send(conn: Connection, message: tuple) -> None:
+    """Send ``message`` to the parent; if the parent is gone, end this worker at once, quietly.
+
+    Nothing a worker holds is worth finishing without its parent (only the parent
+    writes files), and an exception here would print a traceback over the
+    parent's last line.
+    """
+    try:
+        conn.send(message)
+    except OSError:  # BrokenPipeError, ConnectionResetError: the parent ended
+        os._exit(0)
 
 
 def _picklable(err: BaseException) -> BaseException:

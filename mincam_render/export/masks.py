@@ -20,16 +20,18 @@
 from __future__ import annotations
 
 import base64
+import functools
 import io
-import json
 import os
-from collections.abc import Mapping
+import re
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PIL import Image
 
+from mincam_render.core import strict_json
 from mincam_render.optics.camera import MM, FreeformCamera
 
 if TYPE_CHECKING:
@@ -229,8 +231,14 @@ def export_masks(
     task: str = "",
     provenance: Mapping[str, Any] | None = None,
     pdf: bool = True,
-) -> dict[str, Path]:
-    """Write the printable masks of a camera into ``out_dir`` (created).
+    sheet_note: str = "",
+) -> dict[str, Any]:
+    """Write the printable masks of a camera into ``out_dir``, whole.
+
+    The files are written into a fresh folder that then replaces ``out_dir``
+    (:func:`~mincam_render.data.folder_swap.swap_in_folder`): an earlier export
+    there is replaced entirely (no stale ``mask_NN.png`` survives), and a folder
+    holding anything an export does not write is refused.
 
     Args:
         transmittance: ``M[pixel, row, col]`` (numpy, 0-1); values outside the
@@ -241,37 +249,77 @@ def export_masks(
         task: task name for labels.
         provenance: dataset/run information for the sidecar (JSON-ready).
         pdf: also write ``print_sheet.pdf``.
+        sheet_note: a warning printed in the print sheet's title line
+            (``"UNFINISHED RUN (...)"``); none when empty.
 
     Returns:
-        ``{"png": [...], "exr", "svg", "pdf", "json"}`` paths.
+        ``{"png": [paths], "exr", "svg", "pdf" (if written), "json"}`` paths.
 
     Raises:
-        ValueError: wrong shape or non-finite values.
+        ValueError: wrong shape or non-finite values; ``out_dir`` holds other files.
 
     """
+    from mincam_render.data.folder_swap import swap_in_folder
+
     m = _checked_transmittance(transmittance)
     layout_cam = _layout_camera(camera, m.shape[0])
-    clipped = np.clip(m, *camera.transmittance_range)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    # Every file is written atomically and masks.json, which marks a finished
-    # export, last; a stale one goes first, so a killed export never looks complete.
-    (out / "masks.json").unlink(missing_ok=True)
-    paths: dict[str, Any] = {"png": []}
-    for k in range(m.shape[0]):
-        p = out / f"mask_{k:02d}.png"
-        _atomic_write(p, _png16(clipped[k]))
-        paths["png"].append(p)
-    paths["exr"] = _write_exr(m, out / "masks.exr")
     title = f"mincam_render masks: {task}" if task else "mincam_render masks"
-    paths["svg"] = out / "print_sheet.svg"
-    _atomic_write(paths["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
+    if sheet_note:
+        title += f" | {sheet_note}"
+    write = functools.partial(
+        _write_export,
+        m,
+        layout_cam,
+        title=title,
+        sidecar=functools.partial(_sidecar, task=task, provenance=provenance),
+        pdf=pdf,
+    )
+    out = Path(out_dir)
+    names = swap_in_folder(out, write, owned=_written_by_an_export)
+    return {k: [out / n for n in v] if isinstance(v, list) else out / v for k, v in names.items()}
+
+
+def _write_export(
+    m: np.ndarray,
+    layout_cam: FreeformCamera,
+    folder: Path,
+    *,
+    title: str,
+    sidecar: Callable[..., dict[str, Any]],
+    pdf: bool,
+) -> dict[str, Any]:
+    """Write every file of an export of ``M[pixel, row, col]`` into ``folder``; their names.
+
+    ``sidecar(m, clipped, layout_cam, names=...)`` gives ``masks.json``'s content,
+    written last.
+    """
+    clipped = np.clip(m, *layout_cam.transmittance_range)
+    names: dict[str, Any] = {"png": [f"mask_{k:02d}.png" for k in range(m.shape[0])]}
+    for k, name in enumerate(names["png"]):
+        _atomic_write(folder / name, _png16(clipped[k]))
+    names["exr"] = _write_exr(m, folder / "masks.exr").name
+    names["svg"] = "print_sheet.svg"
+    _atomic_write(folder / names["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
     if pdf:
-        paths["pdf"] = print_sheet_pdf(clipped, layout_cam, out / "print_sheet.pdf", title=title)
-    sidecar = _sidecar(m, clipped, layout_cam, task=task, provenance=provenance, paths=paths)
-    paths["json"] = out / "masks.json"
-    _atomic_write(paths["json"], json.dumps(sidecar, indent=2, default=str).encode())
-    return paths
+        names["pdf"] = print_sheet_pdf(
+            clipped, layout_cam, folder / "print_sheet.pdf", title=title
+        ).name
+    record = sidecar(m, clipped, layout_cam, names=names)
+    names["json"] = "masks.json"
+    _atomic_write(folder / names["json"], strict_json.dumps(record).encode())
+    return names
+
+
+#: The files an export writes besides its ``mask_NN.png``.
+EXPORT_FILES = ("masks.exr", "print_sheet.svg", "print_sheet.pdf", "masks.json")
+
+
+def _written_by_an_export(path: Path) -> bool:
+    """Whether ``path`` in a masks folder is a file an export writes (or its temporary)."""
+    name = path.name
+    png = re.fullmatch(r"mask_\d{2,}\.png", name) is not None
+    temporary = name.startswith(".") and name.endswith((".tmp", ".tmp.exr"))
+    return path.is_file() and (png or temporary or name in EXPORT_FILES)
 
 
 def _checked_transmittance(transmittance: np.ndarray) -> np.ndarray:
@@ -335,7 +383,7 @@ def _sidecar(
     *,
     task: str,
     provenance: Mapping[str, Any] | None,
-    paths: dict[str, Any],
+    names: dict[str, Any],
 ) -> dict[str, Any]:
     """``masks.json``'s content: geometry (SI units, sheet in mm), range, files, provenance."""
     lo, hi = layout_cam.transmittance_range
@@ -360,9 +408,9 @@ def _sidecar(
         "camera": layout_cam.to_dict(),
         "provenance": dict(provenance or {}),
         "files": {
-            "png": [p.name for p in paths["png"]],
+            "png": list(names["png"]),
             "exr": "masks.exr",
             "svg": "print_sheet.svg",
-            "pdf": "print_sheet.pdf" if "pdf" in paths else None,
+            "pdf": names.get("pdf"),
         },
     }

@@ -6,7 +6,6 @@ TensorBoard's "relative" axis shows loss against training time across resumes.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -14,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import torch
+
+from mincam_render.core import strict_json
 
 #: Steps between training-loss events (their mean): a TensorBoard event per step
 #: would cost more than a tenth of a step of a small camera.
@@ -24,7 +25,8 @@ def write_history(path: Path, history: list[dict[str, float]]) -> None:
     """``history.jsonl``: one JSON line per evaluation kept in the checkpoint (atomic)."""
     from mincam_render.data.dataset import atomic_write_bytes
 
-    atomic_write_bytes(path, "".join(json.dumps(r) + "\n" for r in history).encode())
+    lines = "".join(strict_json.dumps(r, indent=None) + "\n" for r in history)
+    atomic_write_bytes(path, lines.encode())
 
 
 @dataclass(frozen=True)
@@ -111,7 +113,7 @@ class RunLog:
             )
         self.writer.flush()
         with (self.out / "history.jsonl").open("a") as fh:
-            fh.write(json.dumps(record) + "\n")
+            fh.write(strict_json.dumps(record, indent=None) + "\n")
 
     def close(self) -> None:
         """Close the event file."""

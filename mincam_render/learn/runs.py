@@ -2,8 +2,9 @@
 
 :func:`train_run` writes ``run.json`` (what was trained on what, with which
 recipe), trains resumably (:func:`~mincam_render.learn.loop.train_model`) and
-writes ``metrics.json``; :func:`load_run`, :func:`load_mincam` and :func:`run_masks` read a
-finished run.
+writes ``metrics.json`` last (it marks a finished run; :mod:`~mincam_render.learn.restore`
+reads runs back). A run is the same run when its data have the same content
+(:func:`data_identity`: each dataset's manifest hash, not the path it was given by).
 """
 
 from __future__ import annotations
@@ -15,17 +16,17 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, cast
 
-import numpy as np
 import torch
 
+from mincam_render.core import strict_json
 from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
-from mincam_render.learn.builders import build_baseline, build_head, build_mincam, describe_model
-from mincam_render.learn.checkpoint import load_checkpoint
+from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.reference_masks import set_reference_masks
+from mincam_render.learn.restore import FINISHED_MARK, ModelKind, open_run
 from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
@@ -89,6 +90,8 @@ def train_run(
         if reference is not None:
             run["reference"] = {"masks": MaskReference(reference).value, "tuned": tune_reference}
         _refuse_other_data(out, run, resume)
+        if not (resume and (out / "checkpoint.pt").is_file()):
+            _remove_training_outputs(out)
         _write_json_atomic(out / "run.json", run)
         res = train_model(
             model,
@@ -104,7 +107,7 @@ def train_run(
         metrics = _run_metrics(run, res, model, len(train), test, episodes)
         if named:
             metrics["validation_episodes"] = {k: evaluate(model, d) for k, d in named.items()}
-        _write_json_atomic(out / "metrics.json", metrics)
+        _write_json_atomic(out / FINISHED_MARK, metrics)  # last: the run is finished
         return metrics
 
 
@@ -164,18 +167,17 @@ def _frozen_mask_camera(
     train: TrainingData, source: str | os.PathLike, sensor_model: bool, config: TrainConfig
 ) -> MincamCamera:
     """A minimalist camera with the masks of finished run ``source``, frozen, and a fresh head."""
-    run, state = load_run(source)
-    if run["model"]["kind"] != "mincam":
-        raise ValueError(f"{source}: a {run['model']['kind']} run has no masks to freeze")
+    run = open_run(source)
+    run.require(ModelKind.MINCAM, "freezing masks")
     model = build_mincam(
         train,
-        detectors=run["model"]["detectors"],
+        detectors=run.record["model"]["detectors"],
         sensor_model=sensor_model,
         count_loss=config.count_loss,
         seed=config.seed,
     )
     with torch.no_grad():
-        model.logits.copy_(state["logits"])
+        model.logits.copy_(run.state["logits"])
     model.logits.requires_grad_(False)
     return model
 
@@ -259,6 +261,52 @@ def config_record(config: TrainConfig) -> dict[str, Any]:
     return record
 
 
+#: What a training writes into its run directory besides ``run.json``; a training that
+#: starts afresh removes them first, so nothing of an earlier one is left beside it.
+TRAINING_OUTPUTS = ("checkpoint.pt", "history.jsonl", "mask_evolution.png", FINISHED_MARK)
+#: TensorBoard's event files (one per start of a training).
+EVENT_FILES = "events.out.tfevents.*"
+
+
+def _remove_training_outputs(out: Path) -> None:
+    """Remove an earlier training's outputs from ``out`` (a training starting afresh)."""
+    for name in TRAINING_OUTPUTS:
+        (out / name).unlink(missing_ok=True)
+    for events in out.glob(EVENT_FILES):
+        events.unlink()
+
+
+#: A source's content identity (its dataset's manifest hash), and the path it replaces.
+CONTENT_KEY, PATH_KEY = "manifest_sha256", "dataset"
+
+
+def data_identity(data: Any, *, by_content: bool = True) -> Any:
+    """What defines the data of a run (``run.json``'s ``data``), to compare two runs.
+
+    Args:
+        data: the record (nested dicts and lists of sources).
+        by_content: a source with its dataset's manifest hash is identified by it,
+            not by the path its dataset was given by (a moved or re-spelled
+            folder is the same data); False: by path, the hashes left out (how
+            runs written before sources carried hashes compare).
+    """
+    if isinstance(data, list):
+        return [data_identity(v, by_content=by_content) for v in data]
+    if not isinstance(data, dict):
+        return data
+    drop = PATH_KEY if by_content and data.get(CONTENT_KEY) else CONTENT_KEY
+    return {k: data_identity(v, by_content=by_content) for k, v in data.items() if k != drop}
+
+
+def _has_content(data: Any) -> bool:
+    """Whether any source in ``data`` carries its dataset's manifest hash."""
+    if isinstance(data, list):
+        return any(map(_has_content, data))
+    return isinstance(data, dict) and (
+        bool(data.get(CONTENT_KEY)) or any(map(_has_content, data.values()))
+    )
+
+
 def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
     """A run resumed on other data or another recipe would mix two trainings: refuse it."""
     path, ckpt = out / "run.json", out / "checkpoint.pt"
@@ -268,9 +316,16 @@ def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
         old = json.loads(path.read_text())
     except ValueError:
         return  # a damaged run.json is rewritten; the checkpoint check still applies
-    new = json.loads(json.dumps(run, default=str))
-    for key in ("data", "config"):
-        if old.get(key) != new[key]:
+    new = json.loads(strict_json.dumps(run))
+    # a run written before sources carried their manifest's hash compares by path
+    by_content = _has_content(old.get("data"))
+    changed = {
+        "data": data_identity(old.get("data"), by_content=by_content)
+        != data_identity(new["data"], by_content=by_content),
+        "config": old.get("config") != new["config"],
+    }
+    for key, differs in changed.items():
+        if differs:
             raise ValueError(
                 f"{out} was trained with another {key} (see {path}); use another --out, "
                 "delete it, or train with --no-resume"
@@ -280,81 +335,8 @@ def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
 def _write_json_atomic(path: Path, obj: Any) -> None:
     from mincam_render.data.dataset import atomic_write_bytes
 
-    atomic_write_bytes(path, (json.dumps(obj, indent=2, default=str) + "\n").encode())
+    atomic_write_bytes(path, (strict_json.dumps(obj) + "\n").encode())
 
 
 def _camera_dict(camera: FreeformCamera) -> dict[str, Any]:
     return json.loads(json.dumps(camera.to_dict(), default=lambda o: getattr(o, "value", str(o))))
-
-
-def load_run(run_dir: str | os.PathLike) -> tuple[dict[str, Any], dict[str, torch.Tensor]]:
-    """``(run.json contents, best model state)`` of a finished :func:`train_run`."""
-    run_dir = Path(run_dir)
-    run_path, ckpt_path = run_dir / "run.json", run_dir / "checkpoint.pt"
-    if not run_path.is_file() or not ckpt_path.is_file():
-        raise ValueError(f"{run_dir}: not a training run (needs run.json and checkpoint.pt)")
-    try:
-        run = json.loads(run_path.read_text())
-    except ValueError:
-        raise ValueError(f"{run_path}: not valid JSON (truncated?)") from None
-    ck = load_checkpoint(ckpt_path)
-    return run, ck["best_state"]
-
-
-def run_masks(run_dir: str | os.PathLike) -> tuple[np.ndarray, FreeformCamera, dict[str, Any]]:
-    """Trained transmittance ``M[pixel, row, col]``, camera and run info of a mincam run."""
-    from mincam_render.data.dataset import camera_from_dict
-    from mincam_render.optics.maskplane import transmittance
-
-    run, state = load_run(run_dir)
-    if run["model"]["kind"] != "mincam":
-        raise ValueError(f"{run_dir}: a {run['model']['kind']} run has no masks to export")
-    camera = camera_from_dict(run["camera"])
-    with torch.no_grad():
-        m = transmittance(state["logits"], camera.transmittance_range).numpy()
-    return m, camera, run
-
-
-def load_mincam(run_dir: str | os.PathLike, data: TrainingData) -> MincamCamera:
-    """The trained minimalist camera of a finished run, to be measured on ``data``.
-
-    Built from the run's own camera, detectors, head (with its count classes) and
-    weights; ``data`` must have the run's mask resolution and enough detectors.
-
-    Raises:
-        ValueError: not a minimalist-camera run, or ``data`` does not fit it.
-    """
-    from mincam_render.data.dataset import camera_from_dict
-
-    run, state = load_run(run_dir)
-    desc = run["model"]
-    if desc["kind"] != "mincam":
-        raise ValueError(f"{run_dir}: a {desc['kind']} run is not a minimalist camera")
-    camera = camera_from_dict(run["camera"])
-    if data.camera.mask_resolution != camera.mask_resolution:
-        raise ValueError(
-            f"{run_dir}: masks of {camera.mask_resolution} texels, but the data's transport "
-            f"has {data.camera.mask_resolution}"
-        )
-    if max(desc["detectors"]) >= data.transport.shape[1]:
-        raise ValueError(
-            f"{run_dir}: reads detectors {desc['detectors']}; the data has "
-            f"{data.transport.shape[1]}"
-        )
-    head = build_head(
-        data,
-        len(desc["detectors"]) * max(desc["history"] - 1, 1),
-        count_classes=desc.get("count_classes"),
-    )
-    model = MincamCamera(
-        camera,
-        head,
-        detectors=desc["detectors"],
-        sensor_model=desc["sensor_model"],
-        history=desc["history"],
-        mask_block=desc.get("mask_block", 1),
-    )
-    # a privacy-trained run's adversary is not part of the camera that is measured
-    model.load_state_dict({k: v for k, v in state.items() if not k.startswith("adversary.")})
-    model.eval()
-    return model

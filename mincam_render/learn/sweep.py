@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import functools
-import json
 import logging
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from mincam_render.core import strict_json
 from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
@@ -163,7 +163,7 @@ def write_sweep(
     """Write ``sweep.json``, ``sweep.md`` and ``sweep.png`` (error vs pixel count, log x)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(json.dumps(list(rows), indent=2, default=str))
+    (out / "sweep.json").write_text(strict_json.dumps(list(rows)))
     (out / "sweep.md").write_text(sweep_table(rows) + "\n")
     plot_sweep(rows, out / "sweep.png", title)
     return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}

@@ -20,8 +20,9 @@ in its own module:
 * :mod:`~mincam_render.learn.run_log` -- TensorBoard events, ``history.jsonl``;
 * :mod:`~mincam_render.learn.snapshots` -- mask snapshots, ``mask_evolution.png``;
 * :mod:`~mincam_render.learn.loop` -- :func:`train_model` (the recipe);
-* :mod:`~mincam_render.learn.runs` -- :func:`train_run` into a run directory,
-  :func:`load_run`, :func:`load_mincam`, :func:`run_masks`;
+* :mod:`~mincam_render.learn.runs` -- :func:`train_run` into a run directory;
+* :mod:`~mincam_render.learn.restore` -- a run read back (:func:`open_run`), its
+  camera (:func:`restore_model`) and masks (:func:`run_masks`), for every kind of run;
 * :mod:`~mincam_render.learn.sweep` -- error against pixel count (:func:`sweep`);
 * :mod:`~mincam_render.learn.prune` -- supplement C's :func:`greedy_prune`.
 """
@@ -58,8 +59,19 @@ from mincam_render.learn.models import (
     task_loss,
 )
 from mincam_render.learn.prune import greedy_prune
+from mincam_render.learn.restore import (
+    ModelKind,
+    TrainedRun,
+    UnfinishedRunError,
+    masks_of,
+    open_run,
+    restore_mincam,
+    restore_model,
+    run_finished,
+    run_masks,
+)
 from mincam_render.learn.run_log import LOG_EVERY
-from mincam_render.learn.runs import load_mincam, load_run, run_masks, train_run
+from mincam_render.learn.runs import train_run
 from mincam_render.learn.snapshots import plot_mask_evolution
 from mincam_render.learn.step import build_optimizer, train_step
 from mincam_render.learn.sweep import (
@@ -86,11 +98,14 @@ __all__ = [
     "HeadKind",
     "MincamCamera",
     "Model",
+    "ModelKind",
     "RenderedBatches",
     "TemporalConvHead",
     "TrainConfig",
     "TrainResult",
+    "TrainedRun",
     "TrainingData",
+    "UnfinishedRunError",
     "build_baseline",
     "build_head",
     "build_mincam",
@@ -103,15 +118,18 @@ __all__ = [
     "greedy_prune",
     "head_kind",
     "learning_rate_for",
-    "load_mincam",
-    "load_run",
+    "masks_of",
     "median_filter",
     "median_filter_window",
     "metrics",
+    "open_run",
     "plot_mask_evolution",
     "plot_sweep",
     "postprocess",
     "predict",
+    "restore_mincam",
+    "restore_model",
+    "run_finished",
     "run_masks",
     "sweep",
     "sweep_table",

@@ -160,6 +160,8 @@ class TrainingData:
             history=getattr(ds, "history", history),
             source={
                 "dataset": str(getattr(ds, "path", "")),
+                # the data's identity: a moved or re-spelled folder is the same data
+                "manifest_sha256": _manifest_sha256(ds),
                 "split": split,
                 "range": list(ds.splits[split]),
                 "family": name,
@@ -477,3 +479,13 @@ def render_frames(
             labs[s.name].append(np.asarray(lab[s.name], np.float32).reshape(s.size))
     transport = np.stack(ts).astype(np.float32)
     return transport, {k: np.stack(v) for k, v in labs.items()}
+
+
+def _manifest_sha256(ds: Any) -> str | None:
+    """sha256 of the manifest of dataset ``ds`` (its content's identity); None without one."""
+    from pathlib import Path
+
+    from mincam_render.data.dataset import MANIFEST_NAME, sha256_file
+
+    path = Path(getattr(ds, "path", "")) / MANIFEST_NAME
+    return sha256_file(path) if path.is_file() else None

@@ -113,6 +113,8 @@ def test_converged_compares_the_best_loss_at_half_and_all_steps(losses, expected
     assert c["converged"] is expected
     if len(losses) > 1:
         assert c["improvement"] == pytest.approx((0.5 - min(losses)) / 0.5)
+    else:  # nothing to compare: null with its reason (strict JSON has no NaN)
+        assert c["improvement"] is None and "no evaluation" in c["improvement_null_reason"]
 
 
 def test_bad_episode_errors_are_refused():

@@ -107,7 +107,9 @@ def test_cli_preview_unknown_family(variant, tmp_path):
     assert not (tmp_path / "p").exists()
 
 
-def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(variant, tmp_path):
+def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(
+    variant, tmp_path, monkeypatch
+):
     from mincam_render.data.dataset import open_dataset, sha256_file
     from mincam_render.data.render_job import package_versions
 
@@ -173,6 +175,19 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(v
     for kind, d in designs.items():
         for key in ("error", "error_per_seed", "convergence", "steps"):
             assert redone[kind][key] == d[key]
+    assert metrics["not_of_this_comparison"] == {}  # the folders hold only its own
+    # --out spelled another way (relative, from its parent) and another design: the
+    # finished runs resume by their data's content; metrics.json names what is not its own
+    monkeypatch.chdir(tmp_path)
+    other = [*args[:-6], "--pixels", "1", "--baseline-grid", "2x2", "--out", "main"]
+    third = CliRunner().invoke(main, other)
+    assert third.exit_code == 0, third.output
+    result = json.loads((out / "metrics.json").read_text())
+    assert result["designs"]["baseline-2x2"]["steps"] == designs["baseline-2x2"]["steps"]
+    left = result["not_of_this_comparison"]
+    assert left["masks"] == ["mincam-2px"]
+    assert left["runs"] == ["mincam-2px-seed0", "mincam-2px-seed1"]
+    assert "episodes" not in left and "earlier comparison" in left["note"]
 
 
 def test_cli_train_refuses_more_pixels_than_rendered_detectors(variant, tmp_path):

@@ -78,9 +78,9 @@ def test_a_privacy_run_trains_records_its_weight_and_loads(variant, tmp_path):
     run = json.loads((tmp_path / "run.json").read_text())
     assert run["config"]["privacy_weight"] == 2.0
     assert metrics["test"]["error"] < float(test.labels["count"].std()) * 1.5
-    _, state = tr.load_run(tmp_path)
-    assert any(k.startswith("adversary.") for k in state)
-    model = tr.load_mincam(tmp_path, test)  # the measured camera has no adversary
+    trained = tr.open_run(tmp_path)
+    assert any(k.startswith("adversary.") for k in trained.state)
+    model = tr.restore_model(trained, test)  # the measured camera has no adversary
     assert not hasattr(model, "adversary")
     # a run without the term keeps run.json's recipe as before (no privacy_weight key)
     plain = tmp_path / "plain"

@@ -50,9 +50,9 @@ def test_robust_training_differs_from_nominal_and_is_recorded(variant, tmp_path)
     tr.train_model(robust, train, val, CFG)
     assert not torch.allclose(nominal.logits, robust.logits)
     metrics = tr.train_run(train, val, test, tmp_path / "run", config=CFG)
-    run, _ = tr.load_run(tmp_path / "run")
-    assert run["config"]["perturbation"]["mask_shift_mm"] == pytest.approx(0.3)
-    loaded = tr.load_mincam(tmp_path / "run", test)
+    run = tr.open_run(tmp_path / "run")
+    assert run.record["config"]["perturbation"]["mask_shift_mm"] == pytest.approx(0.3)
+    loaded = tr.restore_model(run, test)
     assert tr.evaluate(loaded, test)["error"] == pytest.approx(metrics["test"]["error"])
 
 

@@ -80,3 +80,18 @@ def test_the_command_line_starts_without_torch_or_mitsuba():
         [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True
     )
     assert run.stdout.strip() == "[]", run.stdout + run.stderr
+
+
+def test_runs_are_read_back_through_one_restore_path():
+    """A trained camera comes back from its run directory in one place (learn/restore).
+
+    Restore written three times behaved three ways (a privacy run's adversary kept
+    by one, a TCN head lost by another): every checkpoint read is the resumable
+    state's (learn/checkpoint) or the restore path's.
+    """
+    readers = {
+        path.relative_to(REPO).as_posix()
+        for path in (REPO / "mincam_render").rglob("*.py")
+        if "load_checkpoint(" in path.read_text() or "torch.load(" in path.read_text()
+    }
+    assert readers == {"mincam_render/learn/checkpoint.py", "mincam_render/learn/restore.py"}

@@ -734,15 +734,18 @@ def test_export_masks_killed_at_random_moments_never_looks_complete(finished_run
     assert _export_is_consistent(out / "t")
 
 
-def test_export_interrupted_mid_way_leaves_no_sidecar(finished_run, tmp_path, monkeypatch):
-    """A kill between files (simulated): no masks.json, so the export does not look done."""
+def test_export_interrupted_mid_way_leaves_the_earlier_export_whole(
+    finished_run, tmp_path, monkeypatch
+):
+    """A kill between files (simulated): the folder holds the earlier export, untouched."""
     import mincam_render.export.masks as masks
 
     out = tmp_path / "m"
     CliRunner().invoke(
         main, ["export-masks", str(finished_run), "--out", str(out), "--task", "t", "--no-pdf"]
     )
-    assert (out / "t" / "masks.json").is_file()  # an earlier, finished export
+    earlier = {p.name: p.read_bytes() for p in (out / "t").iterdir()}
+    assert "masks.json" in earlier  # an earlier, finished export
 
     def killed(*a, **k):
         raise KeyboardInterrupt
@@ -751,7 +754,53 @@ def test_export_interrupted_mid_way_leaves_no_sidecar(finished_run, tmp_path, mo
     CliRunner().invoke(
         main, ["export-masks", str(finished_run), "--out", str(out), "--task", "t", "--no-pdf"]
     )
-    assert not (out / "t" / "masks.json").exists()  # the stale sidecar went first
+    assert {p.name: p.read_bytes() for p in (out / "t").iterdir()} == earlier
+    assert [p.name for p in out.iterdir()] == ["t"]  # the half-written one is gone
+
+
+# ---- SIGTERM and Ctrl-C while rendering ---------------------------------------------------
+
+
+def _group_gone(pgid: int, timeout_s: float = 10.0) -> bool:
+    """Whether every process of group ``pgid`` has ended (within ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.mark.parametrize(("sig", "whole_group"), [(signal.SIGTERM, False), (signal.SIGINT, True)])
+def test_a_stopped_render_says_so_in_one_line_stops_its_workers_and_resumes(
+    tmp_path, variant, sig, whole_group
+):
+    """Regression: SIGTERM ended a render silently while its workers printed BrokenPipe."""
+    from mincam_render.data.render_job import FRAME_DELAY_ENV
+
+    args = ["render", "patches", "--frames", "64", "--shard-frames", "8", "--detectors", "2"]
+    args += ["--mask-res", "8", "--spp", "2", "--seed", "5", "--no-progress", "--workers", "2"]
+    reference, out = tmp_path / "reference", tmp_path / "stopped"
+    assert cli_process([*args, "--out", str(reference)]).wait(timeout=300) == 0
+    p = cli_process(
+        [*args, "--out", str(out)], env={FRAME_DELAY_ENV: "0.2"}, start_new_session=True
+    )
+    deadline = time.monotonic() + 180
+    while not list(out.glob("shards/*.json")):  # stopped after a shard, before the last
+        assert p.poll() is None and time.monotonic() < deadline, p.communicate()[1]
+        time.sleep(0.02)
+    (os.killpg if whole_group else os.kill)(p.pid, sig)  # Ctrl-C reaches the whole group
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 128 + sig, err
+    one_clear_line(err, f"stopped by {sig.name}", "run the same command again")
+    assert "Traceback" not in err and "BrokenPipe" not in err
+    assert _group_gone(p.pid)  # no worker left behind
+    again = cli_process([*args, "--out", str(out)])
+    assert again.wait(timeout=300) == 0
+    files = {q.relative_to(out): q.read_bytes() for q in out.rglob("*.npy")}
+    assert files == {q.relative_to(reference): q.read_bytes() for q in reference.rglob("*.npy")}
 
 
 # ---- memory over long runs ---------------------------------------------------------------

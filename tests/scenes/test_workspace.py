@@ -325,3 +325,20 @@ def test_open_doorway_shows_the_corridor_and_the_wall_above_it_faces_the_room(
     else:
         assert hit[1] == pytest.approx(d_room, abs=1e-5)
         np.testing.assert_allclose(normal, [0.0, -1.0, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["workspace", "lighting"])
+def test_an_empty_room_renders_with_nobody_counted(name):
+    """Regression: max_people = 0 passed validation, then failed to build the people mesh."""
+    from mincam_render.render.transport import render_transport
+
+    empty = load_family(name, seed=3, num_frames=20, overrides={"max_people": 0})
+    scene = empty.build_scene()
+    cam = _small_camera(empty, res=4)
+    for i in (0, 19):
+        labels = empty.set_frame(scene, i)
+        assert not empty.frame_state(i)["people"]
+        t = render_transport(scene, cam, spp=2, seed=i)
+        assert t.shape == (2, 4, 4) and np.all(np.isfinite(t)) and np.all(t >= 0)
+    if "count" in labels:
+        assert float(np.asarray(labels["count"]).sum()) == 0.0

@@ -51,15 +51,9 @@ def one_thread() -> Iterator[None]:
 
 def design_camera(run_dir: str | os.PathLike, data: TrainingData) -> Any:
     """The trained camera (``MincamCamera`` or ``BaselineCamera``) of a finished run."""
-    from mincam_render.learn.train import build_baseline, load_mincam, load_run
+    from mincam_render.learn.train import open_run, restore_model
 
-    run, state = load_run(run_dir)
-    if run["model"]["kind"] == "mincam":
-        return load_mincam(run_dir, data)
-    model = build_baseline(data, tuple(run["model"]["grid"]))
-    model.load_state_dict(state)
-    model.eval()
-    return model
+    return restore_model(open_run(run_dir), data)
 
 
 def measurements(camera: Any, data: TrainingData, *, seed: int) -> np.ndarray:

@@ -49,6 +49,7 @@ from mincam_render.analysis.statistics import (
     converged,
     paired_difference,
 )
+from mincam_render.core import strict_json
 from mincam_render.core.seeds import stream_seed
 
 #: The reconstruction figures (foreground, then the whole view), in ``privacy.json``'s order.
@@ -405,5 +406,5 @@ def analyze_privacy(
     }
     privacy["corner"] = corner_verdicts(privacy)
     _write_examples(out / "examples.npz", episodes["test-0"], examples, cfg.attack.examples)
-    (out / "privacy.json").write_text(json.dumps(privacy, indent=2, default=str) + "\n")
+    (out / "privacy.json").write_text(strict_json.dumps(privacy) + "\n")
     return privacy

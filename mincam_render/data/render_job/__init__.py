@@ -28,18 +28,27 @@ here imports Mitsuba, Dr.Jit or torch (the command line imports this for
 """
 
 from mincam_render.data.render_job.backgrounds import background_keys, render_backgrounds
+from mincam_render.data.render_job.estimate import JobEstimate, JobLimits, JobTooLarge
 from mincam_render.data.render_job.executors import (
     POOL_BREAK_EVEN_S,
     RenderError,
 )
 from mincam_render.data.render_job.job import RenderSummary, render_dataset
-from mincam_render.data.render_job.planning import _describe_family, package_versions, plan_render
+from mincam_render.data.render_job.planning import (
+    _describe_family,
+    package_versions,
+    plan_render,
+    source_revision,
+)
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.data.render_job.scene import _load_family, _render_camera
 from mincam_render.data.render_job.shards import FRAME_DELAY_ENV, _worker_init, render_shard
 
 __all__ = [
     "FRAME_DELAY_ENV",
+    "JobEstimate",
+    "JobLimits",
+    "JobTooLarge",
     "POOL_BREAK_EVEN_S",
     "RenderError",
     "RenderRequest",
@@ -54,4 +63,5 @@ __all__ = [
     "render_backgrounds",
     "render_dataset",
     "render_shard",
+    "source_revision",
 ]

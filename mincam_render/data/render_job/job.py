@@ -21,6 +21,7 @@ import numpy as np
 from mincam_render.core.checks import check_int
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.backgrounds import _shard_backgrounds
+from mincam_render.data.render_job.estimate import JobLimits
 from mincam_render.data.render_job.executors import (
     DEFAULT_SHARDS_PER_WORKER,
     _first_shard_then_choose,
@@ -61,6 +62,7 @@ def render_dataset(
     progress: bool = False,
     shards_per_worker: int = DEFAULT_SHARDS_PER_WORKER,
     use_plan_cache: bool = True,
+    limits: JobLimits | None = None,
 ) -> RenderSummary:
     """Render (or finish) the dataset of ``request`` into directory ``out``.
 
@@ -79,11 +81,15 @@ def render_dataset(
         use_plan_cache: reuse a kept fidelity plan of the same description, camera,
             targets and frame count (:mod:`mincam_render.data.plan_cache`), and keep a
             new one; False measures the plan again.
+        limits: estimate a new job's time and disk before anything is written, log
+            it, and refuse it above these limits unless confirmed (:mod:`.estimate`);
+            None: no estimate.
 
     Returns:
         A :class:`RenderSummary`.
 
     Raises:
+        JobTooLarge: a new job above ``limits``, not confirmed (nothing is written).
         DatasetError: ``out`` holds another configuration or is not a dataset.
         RenderError: a worker died or Ray is unavailable.
         ValueError: invalid arguments.
@@ -91,7 +97,7 @@ def render_dataset(
     _check_executor_args(workers, shards_per_worker)
     with exclusive_writer(out, "render") as out:
         t_start = time.perf_counter()
-        manifest, kept, repaired, todo = _prepare(request, out, use_plan_cache, progress)
+        manifest, kept, repaired, todo = _prepare(request, out, use_plan_cache, progress, limits)
         backgrounds_of = _shard_backgrounds(out, manifest, progress) if todo else (lambda i: None)
         _log_start(out, kept, repaired, todo, workers, ray_address)
         finish = _ShardWriter(out, manifest, kept, progress and bool(todo))
@@ -110,13 +116,17 @@ def _check_executor_args(workers: int | None, shards_per_worker: int) -> None:
 
 
 def _prepare(
-    request: RenderRequest, out: Path, use_plan_cache: bool, progress: bool
+    request: RenderRequest,
+    out: Path,
+    use_plan_cache: bool,
+    progress: bool,
+    limits: JobLimits | None,
 ) -> tuple[dict, list[int], list[int], list[int]]:
     """``(manifest, kept, repaired, todo)`` of ``out``, opened or planned, its shards checked.
 
     Temporary files a killed render left are removed first.
     """
-    manifest = _open_or_plan(request, out, use_plan_cache, progress)
+    manifest = _open_or_plan(request, out, use_plan_cache, progress, limits)
     for tmp in ds.remove_stale_temporaries(out):
         log.info("removed %s, left by a killed render", tmp)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,9 @@ import logging
 import time
 from pathlib import Path
 
+from mincam_render.core import strict_json
 from mincam_render.data import dataset as ds
+from mincam_render.data.render_job.estimate import JobLimits, check_job, estimate_job
 from mincam_render.data.render_job.planning import _describe_family, package_versions, plan_render
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.data.writer_lock import LOCK_NAME
@@ -23,13 +25,24 @@ log = logging.getLogger(__name__)
 
 def _append_log(out: Path, entry: dict) -> None:
     with open(out / ds.LOG_NAME, "a") as f:
-        f.write(json.dumps(entry, default=ds._json_default) + "\n")
+        f.write(strict_json.dumps(entry, indent=None) + "\n")
 
 
 def _open_or_plan(
-    request: RenderRequest, out: Path, use_plan_cache: bool, progress: bool = False
+    request: RenderRequest,
+    out: Path,
+    use_plan_cache: bool,
+    progress: bool = False,
+    limits: JobLimits | None = None,
 ) -> dict:
-    """Reuse the manifest of ``out`` if it is the same request; plan a new one if empty."""
+    """Reuse the manifest of ``out`` if it is the same request; plan a new one if empty.
+
+    A new job is estimated and checked against ``limits`` (None: neither) before
+    its manifest is written (:mod:`.estimate`).
+
+    Raises:
+        JobTooLarge: a new job above ``limits``, not confirmed (nothing written).
+    """
     if out.exists() and not out.is_dir():
         raise ds.DatasetError(f"--out {out} exists and is not a directory")
     if (out / ds.MANIFEST_NAME).is_file():
@@ -40,6 +53,8 @@ def _open_or_plan(
         )
     t0 = time.perf_counter()
     manifest = plan_render(request, use_cache=use_plan_cache, progress=progress)
+    if limits is not None:
+        check_job(estimate_job(manifest, out), limits, out)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
     ds.write_manifest(out, manifest)
     _append_log(out, {"event": "planned", "seconds": time.perf_counter() - t0, "time": time.time()})

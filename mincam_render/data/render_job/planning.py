@@ -28,9 +28,12 @@ log = logging.getLogger(__name__)
 
 
 def package_versions() -> dict[str, str]:
-    """Versions of the packages that determine the output, and the git revision."""
+    """Versions of the packages that determine the output; the git revision of a checkout.
+
+    ``git_revision`` is there only when this package runs from a git checkout
+    (:func:`source_revision`); an installed package is named by its version.
+    """
     import importlib.metadata as md
-    import subprocess
 
     out = {}
     for name in ("mitsuba", "drjit", "torch", "numpy", "mincam_render"):
@@ -38,19 +41,36 @@ def package_versions() -> dict[str, str]:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
             out[name] = "not installed"
-    try:
-        repo = Path(__file__).resolve().parents[2]
-        rev = subprocess.run(
-            ["git", "-C", str(repo), "rev-parse", "HEAD"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=True,
-        ).stdout.strip()
-        out["git_revision"] = rev or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        out["git_revision"] = "unknown"
+    revision = source_revision()
+    if revision is not None:
+        out["git_revision"] = revision
     return out
+
+
+def source_revision() -> str | None:
+    """The git commit of the checkout this package runs from; None if it is not one.
+
+    Only when git tracks this very file is ``HEAD`` the revision of the code that
+    runs: a package installed into an environment that lies inside some other
+    work tree (a virtual environment in a project's repository) is not that
+    repository's commit.
+    """
+    import subprocess
+
+    here = Path(__file__).resolve()
+    git = ["git", "-C", str(here.parent)]
+    try:
+        tracked = subprocess.run(
+            [*git, "ls-files", "--error-unmatch", here.name], capture_output=True, timeout=10
+        )
+        if tracked.returncode != 0:
+            return None
+        head = subprocess.run(
+            [*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10, check=True
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return head.stdout.strip() or None
 
 
 def _describe_family(request: RenderRequest) -> tuple[SceneFamily, dict[str, Any], bool]:

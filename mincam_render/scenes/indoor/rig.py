@@ -175,7 +175,8 @@ class PeopleLayout:
         offsets = np.cumsum([0, *self.part_sizes[:-1]])
         parts = zip(BodyModel.PARTS, offsets, strict=True)
         one = np.concatenate([body.faces[p] + o for p, o in parts])
-        self.faces = np.concatenate([one + k * self.slot_size for k in range(slots)])
+        # (slots F, 3): no faces in an empty room (no slots)
+        self.faces = (one[None] + self.slot_size * np.arange(slots)[:, None, None]).reshape(-1, 3)
 
     def person(self, a: Appearance, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
         """``(vertices (V, 3) m, albedo (V,))`` of one slot holding person ``a`` in ``pose``."""
