@@ -60,6 +60,7 @@ import numpy as np
 
 from mincam_render.core.checks import check_int
 from mincam_render.core.seeds import stream_seed
+from mincam_render.render.precision import printable_masks
 
 if TYPE_CHECKING:
     import os
@@ -167,18 +168,6 @@ def smooth_masks(
         field.std(axis=(-2, -1), keepdims=True) + 1e-12
     )
     return lo + (hi - lo) / (1.0 + np.exp(-2.0 * field))
-
-
-def random_masks(
-    num: int, shape: tuple[int, int, int], transmittance_range: tuple[float, float], seed: int
-) -> np.ndarray:
-    """Random printable masks: half i.i.d. uniform, half binary with 10 % open texels."""
-    lo, hi = transmittance_range
-    rng = np.random.default_rng(seed)
-    half = num // 2
-    uniform = rng.uniform(lo, hi, size=(num - half, *shape))
-    binary = np.where(rng.random((half, *shape)) < 0.1, hi, lo)
-    return np.concatenate([uniform, binary])
 
 
 def block_mean(masks: np.ndarray, res: int) -> np.ndarray:
@@ -313,7 +302,7 @@ class _Bench:
             scene=scene,
             frames=sorted({int(round(x)) for x in frames}),
             scene_depth=scene_max_depth(scene),
-            masks_random=random_masks(
+            masks_random=printable_masks(
                 cfg.num_masks, shape, lo_hi, stream_seed(cfg.seed, "fidelity_bench/random_masks")
             ),
             masks_trained=smooth_masks(

@@ -30,6 +30,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.fidelity.signal import difference_pair
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -93,15 +94,16 @@ def _difference_pair(
     p: Probes, depth: int | None, seed_offset: int, spp: int, camera: FreeformCamera
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(X, C)`` per probe with one seed each (common random numbers)."""
+
+    def render(seed: int) -> np.ndarray:
+        return p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth)
+
     interval = p.request.background_interval_s
-    xs, cs = [], []
-    for i in p.indices:
-        seed = p.seed(i, seed_offset + 11)
-        p.family.set_frame_in_window(p.scene, i, interval)
-        xs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
-        p.family.set_background(p.scene, i, interval)
-        cs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
-    return np.stack(xs), np.stack(cs)
+    pairs = [
+        difference_pair(p.family, p.scene, render, i, p.seed(i, seed_offset + 11), interval)
+        for i in p.indices
+    ]
+    return np.stack([x for x, _ in pairs]), np.stack([c for _, c in pairs])
 
 
 def _pilots(
