@@ -224,7 +224,9 @@ def measurement_relative_error(
     scale = ErrorScale(scale)
     if scale is ErrorScale.SIGNAL and signal is None:
         raise ValueError("scale = 'signal' needs the label signal (signal=LabelSignal)")
-    measure = _measure(t.shape[1:], transmittance_range, num_masks, seed, box_texels)
+    measure = measurements_of(
+        t.shape[1:], transmittance_range, num_masks=num_masks, seed=seed, box_texels=box_texels
+    )
     p, p_ref = measure(t), measure(ref)
     denom = np.abs(p_ref)
     if scale is ErrorScale.MEAN:
@@ -239,14 +241,23 @@ def measurement_relative_error(
     return {"rms": float(np.sqrt(np.mean(rel**2))), "max": float(rel.max())}
 
 
-def _measure(
+def measurements_of(
     shape: tuple[int, ...],
     transmittance_range: tuple[float, float],
-    num_masks: int,
-    seed: int,
-    box_texels: int | None,
+    *,
+    num_masks: int = 16,
+    seed: int = 0,
+    box_texels: int | None = None,
 ) -> Callable[[np.ndarray], np.ndarray]:
-    """``T[frame, detector, row, col] -> P[frame, ...]`` of random masks or box pixels."""
+    """``T[frame, detector, row, col] -> P[frame, ...]`` (W) of the errors' masks.
+
+    Args:
+        shape: ``(detector, row, col)`` of the transport images.
+        transmittance_range: printable ``(lo, hi)``.
+        num_masks: random printable masks per detector (:func:`printable_masks`).
+        seed: their seed.
+        box_texels: box pixels of this size (:func:`box_measurements`) instead.
+    """
     if box_texels is not None:
         return lambda t: box_measurements(t, box_texels)
     masks = printable_masks(num_masks, shape, transmittance_range, seed)

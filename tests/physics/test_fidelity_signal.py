@@ -53,9 +53,9 @@ def test_signal_relative_error_is_the_total_relative_one_times_total_over_signal
     signal = LabelSignal(parts=(np.stack([amplitude[:, None, None, None] * mover[None]] * 2),))
     test = reference + 0.01 * background[None]
     total = measurement_relative_error(test, reference, LO_HI)["rms"]
-    relative = measurement_relative_error(
-        test, reference, LO_HI, scale="signal", signal=signal
-    )["rms"]
+    relative = measurement_relative_error(test, reference, LO_HI, scale="signal", signal=signal)[
+        "rms"
+    ]
     assert 0.009 < total < 0.01
     assert relative > 10 * total
 
@@ -110,9 +110,7 @@ def test_signal_scale_without_a_signal_is_refused(rng):
         measurement_relative_error(t, t, LO_HI, scale="signal")
 
 
-@pytest.mark.parametrize(
-    ("shape", "match"), [((2, 1, 1, 4, 4), "frames"), ((3, 2, 1, 4), "shape")]
-)
+@pytest.mark.parametrize(("shape", "match"), [((2, 1, 1, 4, 4), "frames"), ((3, 2, 1, 4), "shape")])
 def test_label_signal_of_the_wrong_shape_is_refused(shape, match):
     with pytest.raises(ValueError, match=match):
         LabelSignal(parts=(np.zeros(shape),))

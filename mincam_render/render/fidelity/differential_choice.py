@@ -16,11 +16,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed, stream_seed
+from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
 from mincam_render.render.fidelity.constants import (
     BACKGROUND_PILOT_SPP,
     DIFFERENCE_BASE_SPP,
     DIFFERENCE_PILOT_SPP,
+    DIFFERENCE_SEEDS,
     INTERPOLATION_SPP,
     MAX_AUTO_SPP,
     MAX_BACKGROUND_SPP,
@@ -54,6 +56,7 @@ def decide_differential(
     components = {c for part in parts.values() for c in part}
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
+    record["difference_seeds"] = _difference_seeds(p)
     pilots = _pilots(p, render_cam, max_depth or None, record)
     record.update(_settings_and_cost(p, pilots, len(parts), len(components), plain_spp))
     if p.request.differential:
@@ -88,6 +91,18 @@ def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str,
         reason = f"family {family.name!r} has no static background"
         return {"value": False, "source": "auto", "reason": reason, **record}
     return None
+
+
+def _difference_seeds(p: Probes) -> dict[str, Any]:
+    """Which frames share the seed of ``X - C``: the request's, else :data:`DIFFERENCE_SEEDS`."""
+    if p.request.difference_seeds is not None:
+        value = DifferenceSeeds(p.request.difference_seeds)
+        return {"value": value.value, "source": "flag", "reason": "set by --difference-seeds"}
+    reason = (
+        "chosen by measurement: the task figures trained and tested on episodes with "
+        "per-window and per-frame seeds (benchmarks/results/task_fidelity.json)"
+    )
+    return {"value": DIFFERENCE_SEEDS.value, "source": "auto", "reason": reason}
 
 
 def _difference_pair(
@@ -180,7 +195,7 @@ def _shared_difference(
     e_shared = p.error(xa + (xc - cc) - (xa - ca), xa)["rms"]
     e_noise = p.error(xa + (xb - cb) - (xa - ca), xa)["rms"]
     parallax_error = math.sqrt(max(e_shared**2 - e_noise**2, 0.0))
-    bound = SHARED_ERROR_SHARE * p.request.target_error
+    bound = SHARED_ERROR_SHARE * p.target_error
     record["shared_difference"] = {
         "value": parallax_error < bound,
         "source": "auto",
@@ -263,13 +278,17 @@ def _settings_and_cost(
     """
     # detectors rendered: 1 when the plain render is shared from the board centre
     request, k, frames = p.request, pilots["rendered_detectors"], p.family.num_frames
+    # per-frame seeds render C again with every frame: twice the frames' paths
+    per_frame = DifferenceSeeds(p.request.difference_seeds or DIFFERENCE_SEEDS)
+    seed_factor = 2 if per_frame is DifferenceSeeds.FRAME else 1
     biases = {
         "shared_difference_parallax": pilots["parallax"],
         "daylight_interpolation": pilots["interpolation"]["error"]["rms"],
     }
-    e_diff, e_bg, frame_paths = pilots["difference"], pilots["background"], pilots["frame_paths"]
+    e_diff, e_bg = pilots["difference"], pilots["background"]
+    frame_paths = seed_factor * pilots["frame_paths"]
     background_paths = k * components / frames
-    planned_error = PLAN_ERROR_SHARE * request.target_error
+    planned_error = PLAN_ERROR_SHARE * p.target_error
     budget = split_noise_budget(
         planned_error,
         biases,
@@ -294,7 +313,10 @@ def _settings_and_cost(
         else spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
     )
     frame_cost = frame_spp * frame_paths
-    background_cost = components * background_spp * k + backgrounds * frame_cost
+    # every window's own C at the frames' samples (rendered with either seeds)
+    background_cost = (
+        components * background_spp * k + backgrounds * frame_spp * pilots["frame_paths"]
+    )
     deep = pilots["deep"]
     return {
         "frame_max_depth": 0 if deep is None else deep,

@@ -217,6 +217,7 @@ def _adopt_differential(decisions: dict[str, Any], draft: Draft, request: PlanRe
         "spp": diff["background_spp"],
         "max_depth": draft.max_depth,
         "shared_difference": diff.get("shared_difference", {}).get("value", False),
+        "difference_seeds": diff["difference_seeds"]["value"],
     }
     for name, value, in_background in (
         ("spp", diff["frame_spp"], diff["background_spp"]),
