@@ -116,6 +116,8 @@ def noise_figures(
     second: Sequence[Path] | None,
     *,
     window_frames: int,
+    load: Callable[[Path], tuple[np.ndarray, np.ndarray]] = episode_transport,
+    transmittance_range: tuple[float, float] | None = None,
 ) -> NoiseFigures:
     """A level's error against the reference, per measurement kind, pooled over episodes.
 
@@ -126,17 +128,20 @@ def noise_figures(
         second: the same episodes at another level, the label signal's second
             estimate (None: the reference's alone, its noise included).
         window_frames: frames of one background window.
+        load: an episode's ``(T, S)`` (:func:`episode_transport`).
+        transmittance_range: the masks' printable range (None: the level's camera's).
     """
     paths, factor = level
     ref_paths, ref_factor, ref_name = reference
     share = (1.0 / factor) / (1.0 / factor + 1.0 / ref_factor)
     sums: dict[str, dict[str, list[float]]] = {}
+    lo_hi = transmittance_range or _range(paths[0])
     for i, path in enumerate(paths):
-        t, _ = episode_transport(path)
-        t_ref, s_ref = episode_transport(ref_paths[i])
-        estimates = [s_ref] if second is None else [s_ref, episode_transport(second[i])[1]]
+        t, _ = load(path)
+        t_ref, s_ref = load(ref_paths[i])
+        estimates = [s_ref] if second is None else [s_ref, load(second[i])[1]]
         signal = LabelSignal(parts=(np.stack(estimates),))
-        for kind, measure in measurement_kinds(t.shape[1:], _range(path)).items():
+        for kind, measure in measurement_kinds(t.shape[1:], lo_hi).items():
             error = measure(t) - measure(t_ref)
             _add(sums, kind, error, signal.rms(measure), window_frames)
     pooled = {kind: _pooled(v, share) for kind, v in sums.items()}
