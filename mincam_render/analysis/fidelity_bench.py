@@ -32,7 +32,11 @@ reference, for masks of two kinds: *random* printable masks (half i.i.d.
 uniform, half sparse binary, as in
 :func:`mincam_render.render.precision.measurement_relative_error`) and *trained-like*
 masks (smooth random fields in the printable range, the look of trained masks).
-Each row reports both RMS errors and ``error`` = the larger. ``effect`` removes
+Each row reports both RMS errors and ``error`` = the larger, all relative to the
+total light; beside them the error relative to the *label signal* (the spread
+over frames of what the labels' state changes, :mod:`mincam_render.render.fidelity.signal`)
+for the random masks and for single-texel box pixels (the finest pixel):
+``error_signal_random`` and ``error_signal_finest_box``. ``effect`` removes
 the base setting's Monte Carlo error in quadrature, ``sqrt(max(e^2 - e_base^2,
 0))``: an estimate of the systematic error the knob itself adds. The reference's
 own Monte Carlo error (from its two independent halves) is reported as
@@ -69,6 +73,7 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.precision import LabelSignal
     from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
@@ -79,6 +84,9 @@ REFERENCE_DEPTH = 16
 POINT_DETECTOR_SIZE_M = 1e-6
 #: Knobs in the order rows are produced.
 KNOBS = ("spp", "mask_res", "max_depth", "render", "detector", "storage", "paper", "auto")
+#: Background window (s) of the label signal of differential families (a render
+#: request's default).
+SIGNAL_INTERVAL_S = 60.0
 #: An effect whose estimated systematic error stays below this can be left out.
 NEGLIGIBLE_EFFECT = 0.01
 
@@ -101,6 +109,9 @@ class FidelityBenchConfig:
         mask_resolution: override of the camera's mask resolution, or None.
         include_auto: run the automatic fidelity decision and bench its choice.
         seed: family seed (trajectories) and render seeds.
+        signal_seconds: scene time (s) the label signal's frames are spread over
+            (at the family's frame rate): the bench's short sequence holds too few
+            changes of the labels' state to show their spread.
     """
 
     num_frames: int = 2
@@ -115,6 +126,7 @@ class FidelityBenchConfig:
     mask_resolution: int | None = None
     include_auto: bool = True
     seed: int = 0
+    signal_seconds: float = 600.0
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -141,6 +153,8 @@ class FidelityBenchConfig:
             object.__setattr__(self, name, v)
         if self.mask_resolution is not None and not 1 <= self.mask_resolution <= 4096:
             raise bad("mask_resolution", "None or an integer in [1, 4096]")
+        if not 1e-3 <= self.signal_seconds <= 1e6:
+            raise bad("signal_seconds", "a number of seconds in [1e-3, 1e6]")
 
 
 # ---- masks and errors (numpy, float64) ---------------------------------------------------
@@ -239,7 +253,8 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
 
     Returns:
         ``{"family", "rows": [{"family", "knob", "level", "error", "effect",
-        "error_random", "error_trained", "seconds", "seconds_spread", "settings"}],
+        "error_random", "error_trained", "error_signal_random", "error_signal_finest_box",
+        "seconds", "seconds_spread", "settings"}],
         "reference": {...}, "auto": {"settings", "decisions"} or None,
         "statements": [str], "machine": {...}}``. Seconds are per frame.
 
@@ -267,6 +282,7 @@ class _Bench:
     """
 
     cfg: FidelityBenchConfig
+    family_name: str
     family: SceneFamily
     camera: FreeformCamera
     scene: mi.Scene
@@ -277,6 +293,9 @@ class _Bench:
     base_settings: dict[str, Any]
     #: reference measurements of the random and trained-like masks (set by the reference)
     p_ref: tuple[np.ndarray, np.ndarray] | None = None
+    #: the reference itself and the label signal (set by the reference)
+    t_ref: np.ndarray | None = None
+    signal: LabelSignal | None = None
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
     @classmethod
@@ -297,6 +316,7 @@ class _Bench:
         lo_hi = camera.transmittance_range
         return cls(
             cfg=cfg,
+            family_name=family_name,
             family=family,
             camera=camera,
             scene=scene,
@@ -366,6 +386,7 @@ class _Bench:
         ref_seconds = (time.perf_counter() - t0) / len(self.frames)
         ref = 0.5 * (ref_a.astype(np.float64) + ref_b.astype(np.float64))
         self.p_ref = (measurements(ref, self.masks_random), measurements(ref, self.masks_trained))
+        self.t_ref, self.signal = ref, _label_signal(self)
         # halves differ by twice the variance of their mean
         half_r = relative_rms(
             measurements(ref_a, self.masks_random), measurements(ref_b, self.masks_random)
@@ -388,9 +409,33 @@ class _Bench:
         if self.p_ref is None:
             raise RuntimeError("render the reference first")
         p_ref_r, p_ref_t = self.p_ref
-        er = relative_rms(measurements(t, self.masks_random), p_ref_r)
+        p = measurements(t, self.masks_random)
+        er = relative_rms(p, p_ref_r)
         et = relative_rms(measurements(t, self.masks_trained), p_ref_t)
-        return {"error_random": er, "error_trained": et, "error": max(er, et)}
+        return {
+            "error_random": er,
+            "error_trained": et,
+            "error": max(er, et),
+            **self.signal_errors(t, p),
+        }
+
+    def signal_errors(self, t: np.ndarray, p: np.ndarray) -> dict[str, float | None]:
+        """``t``'s errors relative to the label signal: random masks, single-texel pixels.
+
+        The single texel's is None for a transport at a coarser resolution.
+        """
+        from mincam_render.render.precision import ErrorScale, measurement_relative_error
+
+        assert self.signal is not None and self.p_ref is not None and self.t_ref is not None
+        signal_rms = self.signal.rms(lambda x: measurements(x, self.masks_random))
+        random = float(np.sqrt(np.mean((p - self.p_ref[0]) ** 2))) / signal_rms
+        box = None
+        if t.shape == self.t_ref.shape:
+            lo_hi = self.camera.transmittance_range
+            box = measurement_relative_error(
+                t, self.t_ref, lo_hi, scale=ErrorScale.SIGNAL, signal=self.signal, box_texels=1
+            )["rms"]
+        return {"error_signal_random": random, "error_signal_finest_box": box}
 
     def setting(
         self,
@@ -446,6 +491,29 @@ class _Bench:
             sec / n,
         )
         return t
+
+
+def _label_signal(bench: _Bench) -> LabelSignal:
+    """The family's label signal over ``signal_seconds`` (two estimates, full depth)."""
+    from mincam_render.render.fidelity.constants import SIGNAL_FRAMES, SIGNAL_SPP
+    from mincam_render.render.fidelity.signal import render_label_signal
+    from mincam_render.scenes import load_family
+
+    cfg, fps = bench.cfg, float(bench.family.fps)
+    n = max(2, int(round(cfg.signal_seconds * fps)))
+    family = load_family(bench.family_name, seed=cfg.seed, num_frames=n)
+    frames = sorted({int(round(x)) for x in np.linspace(0, n - 1, min(SIGNAL_FRAMES, n))})
+    return render_label_signal(
+        family,
+        family.build_scene(),
+        bench.camera,
+        frames,
+        source=family.label_signal,
+        spp=SIGNAL_SPP,
+        seeds=lambda i, e: stream_seed(cfg.seed, f"fidelity_bench/signal/{e}", i),
+        interval_s=SIGNAL_INTERVAL_S,
+        max_depth=REFERENCE_DEPTH,
+    )
 
 
 def _bench_spp(bench: _Bench) -> float:
@@ -695,14 +763,23 @@ def plot_pareto(result: dict[str, Any], path: str | os.PathLike) -> Path:
 
 
 def pareto_table(result: dict) -> str:
-    """The rows as a plain-text table (knob, level, error, effect, seconds)."""
-    lines = [f"{'knob':<10} {'level':<40} {'error':>9} {'effect':>9} {'s/frame':>9}"]
+    """The rows as a plain-text table (knob, level, error, effect, vs signal, seconds)."""
+    lines = [
+        f"{'knob':<10} {'level':<40} {'error':>9} {'effect':>9} {'/signal':>8} "
+        f"{'/texel':>8} {'s/frame':>9}"
+    ]
     for r in result["rows"]:
+        box = r.get("error_signal_finest_box")
         lines.append(
             f"{r['knob']:<10} {str(r['level']):<40} {r['error']:>9.3%} {r['effect']:>9.3%} "
+            f"{r['error_signal_random']:>8.3f} {'' if box is None else f'{box:.3f}':>8} "
             f"{r['seconds']:>9.3f}"
         )
     return "\n".join(lines)
+
+
+def _optional(value: float | None) -> str:
+    return "" if value is None else f"{value:.3f}"
 
 
 def write_fidelity_report(
@@ -738,6 +815,8 @@ def write_fidelity_report(
                 "random masks",
                 "trained-like masks",
                 "effect",
+                "vs label signal (random masks)",
+                "vs label signal (1 texel)",
                 "s / frame",
             ],
             [
@@ -748,6 +827,8 @@ def write_fidelity_report(
                     f"{r['error_random']:.3%}",
                     f"{r['error_trained']:.3%}",
                     f"{r['effect']:.3%}",
+                    f"{r['error_signal_random']:.3f}",
+                    _optional(r["error_signal_finest_box"]),
                     f"{r['seconds']:.3f}",
                 ]
                 for r in res["rows"]
