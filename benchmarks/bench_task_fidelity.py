@@ -158,13 +158,13 @@ def summary(result: dict[str, Any], cfg: TaskFidelityConfig) -> dict[str, Any]:
 
 
 def plans(families: list[str], lock: Path | None) -> dict[str, Any]:
-    """Each family's plan (measured or kept) with its figures in both metrics."""
+    """Each family's plan, measured afresh, with its figures in both metrics."""
     from mincam_render.data.render_job import RenderRequest, plan_render
 
     out = {}
     for name in families:
         with holding(lock):
-            manifest = plan_render(RenderRequest(**PLAN_REQUESTS[name]))
+            manifest = plan_render(RenderRequest(**PLAN_REQUESTS[name]), use_cache=False)
         decisions = manifest["fidelity"]
         out[name] = {
             "request": PLAN_REQUESTS[name],
