@@ -13,10 +13,12 @@ from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.studies.design_protocol.figures import DesignFigure
 from mincam_render.studies.task_fidelity import SampleLevel, TaskFidelityConfig, noise_figures
 from mincam_render.studies.task_fidelity.study import (
+    LevelFigures,
     acceptance,
     chosen_level,
     render_seconds_per_frame,
     scaled_samples,
+    supported,
 )
 
 
@@ -48,6 +50,19 @@ def _levels(tmp_path: Path) -> tuple[SampleLevel, ...]:
     )
 
 
+def _level(designs, replicate=None) -> LevelFigures:
+    return LevelFigures(
+        level="1x",
+        factor=1.0,
+        difference_seeds="window",
+        render_s_per_frame=0.1,
+        designs=designs,
+        trivial=2.0,
+        noise=None,
+        replicate=replicate,
+    )
+
+
 def test_a_level_passes_when_every_figure_moves_less_than_a_quarter_of_its_half_width():
     ref = {"a": _figure("a", [[1.0, 1.2], [1.1, 0.9]]), "b": _figure("b", [[2.0, 2.0]] * 2)}
     # half-width 0.1: "a" moves by 0.02 (< 0.025), "b" by 0.03 (>= 0.025)
@@ -55,12 +70,29 @@ def test_a_level_passes_when_every_figure_moves_less_than_a_quarter_of_its_half_
         "a": _figure("a", [[1.02, 1.22], [1.12, 0.92]]),
         "b": _figure("b", [[2.03, 2.03]] * 2),
     }
-    checks = {c.design: c for c in acceptance(level, ref, 0.25)}
+    checks = {c.design: c for c in acceptance(_level(level), ref, 0.25)}
     assert checks["a"].passes and not checks["b"].passes
     np.testing.assert_allclose(checks["a"].moved, 0.02, atol=1e-12)
     np.testing.assert_allclose(checks["b"].half_width, 0.1, atol=1e-12)
-    # paired on the same seeds and test episodes: every pair moved by +0.03
+    # paired on the same test episodes: every pair moved by +0.03, so its interval excludes 0
     np.testing.assert_allclose(checks["b"].paired.mean, 0.03, atol=1e-9)
+    assert not checks["b"].within_seed_noise and not supported(tuple(checks.values()))
+
+
+def test_a_move_within_what_other_training_seeds_make_is_supported():
+    # "b" moves by 0.05 (not accepted: half-width 0.1), its paired interval holds
+    # 0 (seeds spread), and other training seeds on the same renders move it by 0.08
+    ref = {"b": _figure("b", [[2.0, 2.1], [1.8, 1.9]])}
+    level = {"b": _figure("b", [[2.2, 2.2], [1.75, 1.85]])}
+    replicate = {"b": _figure("b", [[2.1, 2.1], [2.06, 2.06]])}
+    (check,) = acceptance(_level(level, replicate), ref, 0.25)
+    assert not check.passes
+    np.testing.assert_allclose([check.moved, check.replicate_moved], [0.05, 0.08], atol=1e-12)
+    assert check.paired.ci95[0] <= 0 <= check.paired.ci95[1]
+    assert check.within_seed_noise and supported((check,))
+    # the same move with a replicate that moves less is a change the data resolve
+    (tight,) = acceptance(_level(level, level), ref, 0.25)
+    assert not tight.within_seed_noise
 
 
 def test_the_cheapest_accepted_level_with_the_plans_seeds_is_chosen(tmp_path):

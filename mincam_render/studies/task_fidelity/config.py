@@ -71,6 +71,9 @@ class TaskFidelityConfig:
         second_reference: a level whose episodes give the label signal's second
             estimate (None: the reference's alone).
         acceptance_share: share of a design's 95 % half-width its figure may move.
+        replicate_seeds: training seeds of a replicate at every level (seeds
+            after the comparison's): how far a figure moves when only the
+            training seeds change, the floor the acceptance is read against.
         noise_episodes: episodes whose render noise is measured at every level.
         background_interval_s: the plan's background window (s): the noise's second lag.
     """
@@ -88,6 +91,7 @@ class TaskFidelityConfig:
     reference: str = "4x"
     second_reference: str | None = None
     acceptance_share: float = 0.25
+    replicate_seeds: int = 3
     noise_episodes: tuple[str, ...] = ("test-0", "test-1", "test-2")
     background_interval_s: float = 60.0
 
@@ -101,6 +105,7 @@ class TaskFidelityConfig:
         if sum(lv.planned for lv in self.levels) != 1:
             raise ValueError(f"levels {names}: exactly one is the plan (planned=True)")
         check_number("acceptance_share", self.acceptance_share, 0, 1, lo_open=True)
+        check_int("replicate_seeds", self.replicate_seeds, 0, 100)
         check_number("background_interval_s", self.background_interval_s, 0, 1e6, lo_open=True)
 
     def level(self, name: str) -> SampleLevel:
@@ -111,6 +116,13 @@ class TaskFidelityConfig:
     def plan(self) -> SampleLevel:
         """The level that renders the plan itself."""
         return next(lv for lv in self.levels if lv.planned)
+
+    @property
+    def trained(self) -> ComparisonConfig:
+        """The comparison every level trains: its seeds, then the replicate's."""
+        from dataclasses import replace
+
+        return replace(self.comparison, seeds=self.comparison.seeds + self.replicate_seeds)
 
     @property
     def window_frames(self) -> int:

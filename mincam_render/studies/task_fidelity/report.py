@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from mincam_render.studies.task_fidelity.study import LevelFigures, TaskFidelityResult
+from mincam_render.studies.task_fidelity.study import Acceptance, LevelFigures, TaskFidelityResult
 
 
 def write_report(result: TaskFidelityResult, out: str | Path, *, stem: str) -> dict[str, Path]:
@@ -49,18 +49,29 @@ def markdown(result: TaskFidelityResult) -> str:
         ],
         [_noise_row(lv) for lv in result.levels if lv.noise is not None],
     )
-    lines += ["", "## Acceptance against the reference (moved, share of the 95 % half-width)", ""]
+    lines += ["", "## Against the reference (moved, its share of the 95 % half-width)", ""]
+    lines += [
+        "Paired: level - reference on the same test episodes, training seeds resampled. "
+        "Replicate: the same renders, other training seeds (how far seeds alone move it).",
+        "",
+    ]
     for level, checks in result.acceptance.items():
-        verdict = "accepted" if result.accepted(level) else "NOT accepted"
-        cells = "; ".join(
-            f"{a.design} {a.moved:+.3f} ({abs(a.moved) / a.half_width:.2f} of {a.half_width:.3f})"
-            f", paired {a.paired.mean:+.3f} [{a.paired.ci95[0]:+.3f}, {a.paired.ci95[1]:+.3f}]"
-            for a in checks
-            if a.half_width > 0
-        )
-        lines.append(f"- {level}: {verdict}: {cells}")
-    lines += ["", f"Chosen (cheapest accepted level with the plan's seeds): {result.chosen}."]
+        v = result.verdict(level)
+        said = ", ".join(k.replace("_", " ") for k, held in v.items() if held) or "none"
+        lines.append(f"- **{level}** ({said}):")
+        lines += [f"  - {_acceptance_cell(a)}" for a in checks]
+    lines += ["", f"Chosen (cheapest supported level with the plan's seeds): {result.chosen}."]
     return "\n".join(lines)
+
+
+def _acceptance_cell(a: Acceptance) -> str:
+    share = abs(a.moved) / a.half_width if a.half_width > 0 else float("inf")
+    rep = "" if a.replicate_moved is None else f"; replicate {a.replicate_moved:+.3f}"
+    lo, hi = a.paired.ci95
+    return (
+        f"{a.design}: {a.moved:+.3f} ({share:.2f} of {a.half_width:.3f}), "
+        f"paired {a.paired.mean:+.3f} [{lo:+.3f}, {hi:+.3f}]{rep}"
+    )
 
 
 def _noise_row(lv: LevelFigures) -> list[str]:

@@ -13,13 +13,18 @@ on better renders does not settle it):
    frame (the Pareto in task units), and the level's render error against the
    reference beside the label signal (:mod:`.noise`), with its autocorrelation
    at lags of one frame and one background window.
-2. **Acceptance** (:func:`acceptance`): a level passes against the reference
-   when every design's figure moves by less than ``acceptance_share`` of the
-   half-width of its own 95 % interval; the paired difference on the same test
-   episodes is reported beside it.
-3. **The target** (:func:`chosen_level`): the cheapest level with the plan's
-   seeds that passes; its error relative to the label signal (random masks) is
-   the loosest target the task check supports.
+2. **Acceptance** (:func:`acceptance`): a level is *accepted* against the
+   reference when every design's figure moves by less than ``acceptance_share``
+   of the half-width of its own 95 % interval; the paired difference on the
+   same test episodes (training seeds resampled) is reported beside it, and a
+   *replicate* (the same renders, other training seeds) measures how far
+   training seeds alone move a figure. A design's move is *within seed noise*
+   when its paired interval holds 0 and the move is no larger than the
+   replicate's; a level is *supported* when every design is accepted or within
+   seed noise (:meth:`TaskFidelityResult.verdict`).
+3. **The target** (:func:`chosen_level`): the cheapest supported level with the
+   plan's seeds; its error relative to the label signal (random masks) is the
+   loosest target the task check supports.
 
 Everything resumes: training runs are kept on disk.
 """
@@ -42,7 +47,11 @@ from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figure
 
 @dataclass(frozen=True)
 class LevelFigures:
-    """One level's task figures, render cost and render error."""
+    """One level's task figures, render cost and render error.
+
+    ``designs`` are trained with the comparison's seeds, ``replicate`` with the
+    replicate's (None without): the same renders, other training seeds.
+    """
 
     level: str
     factor: float
@@ -51,17 +60,42 @@ class LevelFigures:
     designs: Mapping[str, DesignFigure]
     trivial: float
     noise: NoiseFigures | None
+    replicate: Mapping[str, DesignFigure] | None = None
 
 
 @dataclass(frozen=True)
 class Acceptance:
-    """One design at one level against the reference: how far its figure moved."""
+    """One design at one level against the reference: how far its figure moved.
+
+    Args:
+        design: the design.
+        moved: its figure at the level less at the reference.
+        half_width: half the width of its 95 % interval at the level.
+        share: the acceptance share of ``half_width``.
+        passes: ``|moved|`` below ``share`` of ``half_width``.
+        paired: the paired difference (level - reference) on the same test
+            episodes, training seeds resampled on both sides.
+        replicate_moved: at the level, the replicate's figure less the
+            design's: how far other training seeds alone move it (None without).
+    """
 
     design: str
     moved: float
     half_width: float
+    share: float
     passes: bool
     paired: Paired
+    replicate_moved: float | None = None
+
+    @property
+    def within_seed_noise(self) -> bool:
+        """No change the data resolve: the paired interval holds 0, the move no larger.
+
+        No larger than the replicate's: other training seeds on the same renders.
+        """
+        lo, hi = self.paired.ci95
+        floor = abs(self.replicate_moved) if self.replicate_moved is not None else 0.0
+        return lo <= 0.0 <= hi and abs(self.moved) <= floor
 
 
 @dataclass(frozen=True)
@@ -80,11 +114,34 @@ class TaskFidelityResult:
         """Every design's figure at ``level`` within the share of its interval."""
         return all(a.passes for a in self.acceptance[level])
 
+    def verdict(self, level: str) -> dict[str, bool]:
+        """``accepted``, ``within_seed_noise`` (every design), ``supported`` (each either).
+
+        Also ``criterion_resolves``: the replicate (other training seeds, same
+        renders) would itself be accepted; where it is not, the quarter-interval
+        criterion cannot tell a fidelity apart from training seeds at this size.
+        """
+        checks = self.acceptance[level]
+        return {
+            "accepted": self.accepted(level),
+            "within_seed_noise": all(a.within_seed_noise for a in checks),
+            "supported": supported(checks),
+            "criterion_resolves": all(
+                a.replicate_moved is not None and abs(a.replicate_moved) < a.share * a.half_width
+                for a in checks
+            ),
+        }
+
     def as_json(self) -> dict[str, Any]:
-        """JSON-ready dict (every record as its fields)."""
+        """JSON-ready dict (every record as its fields) with every level's verdict."""
         out = json.loads(json.dumps(dataclasses.asdict(self), default=str))
-        out["verdicts"] = {name: self.accepted(name) for name in self.acceptance}
+        out["verdicts"] = {name: self.verdict(name) for name in self.acceptance}
         return out
+
+
+def supported(checks: tuple[Acceptance, ...]) -> bool:
+    """Every design accepted, or its move within what other training seeds make."""
+    return all(a.passes or a.within_seed_noise for a in checks)
 
 
 def scaled_samples(samples: int, factor: float) -> int:
@@ -180,11 +237,17 @@ def level_figures(
     }
     splits = comparison_splits(data)
     runs = train_runs(
-        comparison, splits, out / level.name, train_workers=train_workers, progress=progress
+        cfg.trained, splits, out / level.name, train_workers=train_workers, progress=progress
     )
     labels = comparison.task_labels(label_tasks(splits["train"].label_specs))
     task = next(iter(labels))
-    block = task_comparison(comparison, runs[task], task_splits(splits, labels[task]))
+    task_data = task_splits(splits, labels[task])
+    n = comparison.seeds
+    block = task_comparison(comparison, {d: rs[:n] for d, rs in runs[task].items()}, task_data)
+    replicate = None
+    if cfg.replicate_seeds:
+        rep = task_comparison(comparison, {d: rs[n:] for d, rs in runs[task].items()}, task_data)
+        replicate = {d.name: DesignFigure.from_block(rep, d.name) for d in comparison.designs}
     figures = LevelFigures(
         level=level.name,
         factor=level.factor,
@@ -193,6 +256,7 @@ def level_figures(
         designs={d.name: DesignFigure.from_block(block, d.name) for d in comparison.designs},
         trivial=float(block["trivial"]["error"]["mean"]),
         noise=None,
+        replicate=replicate,
     )
     return figures, str(block["error_name"])
 
@@ -225,28 +289,31 @@ def render_seconds_per_frame(paths: list[Path]) -> float:
 
 
 def acceptance(
-    level: Mapping[str, DesignFigure], reference: Mapping[str, DesignFigure], share: float
+    level: LevelFigures, reference: Mapping[str, DesignFigure], share: float
 ) -> tuple[Acceptance, ...]:
     """Every design at a level against the reference (module docstring, step 2)."""
     out = []
-    for name, fig in level.items():
+    for name, fig in level.designs.items():
         ref = reference[name]
         half = 0.5 * (fig.ci95[1] - fig.ci95[0])
         moved = fig.error - ref.error
+        rep = None if level.replicate is None else level.replicate[name].error - fig.error
         out.append(
             Acceptance(
                 design=name,
                 moved=moved,
                 half_width=half,
+                share=share,
                 passes=abs(moved) < share * half,
                 paired=Paired.of(fig, ref),
+                replicate_moved=rep,
             )
         )
     return tuple(out)
 
 
 def chosen_level(cfg: TaskFidelityConfig, accepted: Mapping[str, bool]) -> str | None:
-    """The cheapest level with the plan's seeds that passes against the reference (or None)."""
+    """The cheapest level with the plan's seeds that ``accepted`` holds (or None)."""
     plan_seeds = cfg.plan.difference_seeds
     candidates = [
         lv
@@ -288,18 +355,18 @@ def run(
         figures[level.name] = dataclasses.replace(fig, noise=_noise(cfg, level))
     ref = figures[cfg.reference].designs
     checks = {
-        name: acceptance(f.designs, ref, cfg.acceptance_share)
+        name: acceptance(f, ref, cfg.acceptance_share)
         for name, f in figures.items()
         if name != cfg.reference
     }
-    accepted = {name: all(a.passes for a in c) for name, c in checks.items()}
+    held = {name: supported(c) for name, c in checks.items()}
     return TaskFidelityResult(
         config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         task=next(iter(cfg.comparison.tasks), ""),
         error_name=error_name,
         levels=tuple(figures.values()),
         acceptance=checks,
-        chosen=chosen_level(cfg, accepted),
+        chosen=chosen_level(cfg, held),
         versions=package_versions(),
     )
 
