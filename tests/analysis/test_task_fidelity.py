@@ -79,9 +79,9 @@ def test_a_level_passes_when_every_figure_moves_less_than_a_quarter_of_its_half_
     assert not checks["b"].within_seed_noise and not supported(tuple(checks.values()))
 
 
-def test_a_move_within_what_other_training_seeds_make_is_supported():
+def test_a_move_the_seeds_spread_cannot_resolve_is_supported():
     # "b" moves by 0.05 (not accepted: half-width 0.1), its paired interval holds
-    # 0 (seeds spread), and other training seeds on the same renders move it by 0.08
+    # 0 (seeds spread); other training seeds on the same renders move it by 0.08
     ref = {"b": _figure("b", [[2.0, 2.1], [1.8, 1.9]])}
     level = {"b": _figure("b", [[2.2, 2.2], [1.75, 1.85]])}
     replicate = {"b": _figure("b", [[2.1, 2.1], [2.06, 2.06]])}
@@ -90,9 +90,6 @@ def test_a_move_within_what_other_training_seeds_make_is_supported():
     np.testing.assert_allclose([check.moved, check.replicate_moved], [0.05, 0.08], atol=1e-12)
     assert check.paired.ci95[0] <= 0 <= check.paired.ci95[1]
     assert check.within_seed_noise and supported((check,))
-    # the same move with a replicate that moves less is a change the data resolve
-    (tight,) = acceptance(_level(level, level), ref, 0.25)
-    assert not tight.within_seed_noise
 
 
 def test_the_cheapest_accepted_level_with_the_plans_seeds_is_chosen(tmp_path):

@@ -82,6 +82,7 @@ class TaskFidelityConfig:
         default_factory=lambda: ComparisonConfig(
             val_episodes=4,
             test_episodes=3,
+            seeds=8,
             designs=CHECK_DESIGNS,
             tasks=("people_count",),
             train=TrainConfig(gain_range=(1.0, 1.0)),
@@ -91,7 +92,7 @@ class TaskFidelityConfig:
     reference: str = "4x"
     second_reference: str | None = None
     acceptance_share: float = 0.25
-    replicate_seeds: int = 3
+    replicate_seeds: int = 8
     noise_episodes: tuple[str, ...] = ("test-0", "test-1", "test-2")
     background_interval_s: float = 60.0
 
