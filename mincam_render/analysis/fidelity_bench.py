@@ -32,7 +32,11 @@ reference, for masks of two kinds: *random* printable masks (half i.i.d.
 uniform, half sparse binary, as in
 :func:`mincam_render.render.precision.measurement_relative_error`) and *trained-like*
 masks (smooth random fields in the printable range, the look of trained masks).
-Each row reports both RMS errors and ``error`` = the larger. ``effect`` removes
+Each row reports both RMS errors and ``error`` = the larger, all relative to the
+total light; beside them the error relative to the *label signal* (the spread
+over frames of what the labels' state changes, :mod:`mincam_render.render.fidelity.signal`)
+for the random masks and for single-texel box pixels (the finest pixel):
+``error_signal_random`` and ``error_signal_finest_box``. ``effect`` removes
 the base setting's Monte Carlo error in quadrature, ``sqrt(max(e^2 - e_base^2,
 0))``: an estimate of the systematic error the knob itself adds. The reference's
 own Monte Carlo error (from its two independent halves) is reported as
@@ -54,12 +58,13 @@ import math
 import platform
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from mincam_render.core.checks import check_int
 from mincam_render.core.seeds import stream_seed
+from mincam_render.render.precision import printable_masks
 
 if TYPE_CHECKING:
     import os
@@ -68,6 +73,7 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.precision import LabelSignal
     from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
@@ -78,6 +84,9 @@ REFERENCE_DEPTH = 16
 POINT_DETECTOR_SIZE_M = 1e-6
 #: Knobs in the order rows are produced.
 KNOBS = ("spp", "mask_res", "max_depth", "render", "detector", "storage", "paper", "auto")
+#: Background window (s) of the label signal of differential families (a render
+#: request's default).
+SIGNAL_INTERVAL_S = 60.0
 #: An effect whose estimated systematic error stays below this can be left out.
 NEGLIGIBLE_EFFECT = 0.01
 
@@ -100,6 +109,9 @@ class FidelityBenchConfig:
         mask_resolution: override of the camera's mask resolution, or None.
         include_auto: run the automatic fidelity decision and bench its choice.
         seed: family seed (trajectories) and render seeds.
+        signal_seconds: scene time (s) the label signal's frames are spread over
+            (at the family's frame rate): the bench's short sequence holds too few
+            changes of the labels' state to show their spread.
     """
 
     num_frames: int = 2
@@ -114,6 +126,7 @@ class FidelityBenchConfig:
     mask_resolution: int | None = None
     include_auto: bool = True
     seed: int = 0
+    signal_seconds: float = 600.0
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -140,6 +153,8 @@ class FidelityBenchConfig:
             object.__setattr__(self, name, v)
         if self.mask_resolution is not None and not 1 <= self.mask_resolution <= 4096:
             raise bad("mask_resolution", "None or an integer in [1, 4096]")
+        if not 1e-3 <= self.signal_seconds <= 1e6:
+            raise bad("signal_seconds", "a number of seconds in [1e-3, 1e6]")
 
 
 # ---- masks and errors (numpy, float64) ---------------------------------------------------
@@ -167,18 +182,6 @@ def smooth_masks(
         field.std(axis=(-2, -1), keepdims=True) + 1e-12
     )
     return lo + (hi - lo) / (1.0 + np.exp(-2.0 * field))
-
-
-def random_masks(
-    num: int, shape: tuple[int, int, int], transmittance_range: tuple[float, float], seed: int
-) -> np.ndarray:
-    """Random printable masks: half i.i.d. uniform, half binary with 10 % open texels."""
-    lo, hi = transmittance_range
-    rng = np.random.default_rng(seed)
-    half = num // 2
-    uniform = rng.uniform(lo, hi, size=(num - half, *shape))
-    binary = np.where(rng.random((half, *shape)) < 0.1, hi, lo)
-    return np.concatenate([uniform, binary])
 
 
 def block_mean(masks: np.ndarray, res: int) -> np.ndarray:
@@ -232,7 +235,8 @@ def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) 
 
     Returns:
         ``{"family", "rows": [{"family", "knob", "level", "error", "effect",
-        "error_random", "error_trained", "seconds", "seconds_spread", "settings"}],
+        "error_random", "error_trained", "error_signal_random", "error_signal_finest_box",
+        "seconds", "seconds_spread", "settings"}],
         "reference": {...}, "auto": {"settings", "decisions"} or None,
         "statements": [str], "machine": {...}}``. Seconds are per frame.
 
@@ -260,6 +264,7 @@ class _Bench:
     """
 
     cfg: FidelityBenchConfig
+    family_name: str
     family: SceneFamily
     camera: FreeformCamera
     scene: mi.Scene
@@ -270,6 +275,9 @@ class _Bench:
     base_settings: dict[str, Any]
     #: reference measurements of the random and trained-like masks (set by the reference)
     p_ref: tuple[np.ndarray, np.ndarray] | None = None
+    #: the reference itself and the label signal (set by the reference)
+    t_ref: np.ndarray | None = None
+    signal: LabelSignal | None = None
     rows: list[dict[str, Any]] = dataclasses.field(default_factory=list)
 
     @classmethod
@@ -290,12 +298,13 @@ class _Bench:
         lo_hi = camera.transmittance_range
         return cls(
             cfg=cfg,
+            family_name=family_name,
             family=family,
             camera=camera,
             scene=scene,
             frames=sorted({int(round(x)) for x in frames}),
             scene_depth=scene_max_depth(scene),
-            masks_random=random_masks(
+            masks_random=printable_masks(
                 cfg.num_masks, shape, lo_hi, stream_seed(cfg.seed, "fidelity_bench/random_masks")
             ),
             masks_trained=smooth_masks(
@@ -359,6 +368,7 @@ class _Bench:
         ref_seconds = (time.perf_counter() - t0) / len(self.frames)
         ref = 0.5 * (ref_a.astype(np.float64) + ref_b.astype(np.float64))
         self.p_ref = (measurements(ref, self.masks_random), measurements(ref, self.masks_trained))
+        self.t_ref, self.signal = ref, _label_signal(self)
         # halves differ by twice the variance of their mean
         half_r = relative_rms(
             measurements(ref_a, self.masks_random), measurements(ref_b, self.masks_random)
@@ -376,14 +386,38 @@ class _Bench:
             "reference_noise": max(half_r, half_t) / 2.0,
         }
 
-    def errors(self, t: np.ndarray) -> dict[str, float]:
+    def errors(self, t: np.ndarray) -> dict[str, float | None]:
         """Relative RMS errors of ``T`` against the reference, per mask kind and the larger."""
         if self.p_ref is None:
             raise RuntimeError("render the reference first")
         p_ref_r, p_ref_t = self.p_ref
-        er = relative_rms(measurements(t, self.masks_random), p_ref_r)
+        p = measurements(t, self.masks_random)
+        er = relative_rms(p, p_ref_r)
         et = relative_rms(measurements(t, self.masks_trained), p_ref_t)
-        return {"error_random": er, "error_trained": et, "error": max(er, et)}
+        return {
+            "error_random": er,
+            "error_trained": et,
+            "error": max(er, et),
+            **self.signal_errors(t, p),
+        }
+
+    def signal_errors(self, t: np.ndarray, p: np.ndarray) -> dict[str, float | None]:
+        """``t``'s errors relative to the label signal: random masks, single-texel pixels.
+
+        The single texel's is None for a transport at a coarser resolution.
+        """
+        from mincam_render.render.precision import ErrorScale, measurement_relative_error
+
+        assert self.signal is not None and self.p_ref is not None and self.t_ref is not None
+        signal_rms = self.signal.rms(lambda x: measurements(x, self.masks_random))
+        random = float(np.sqrt(np.mean((p - self.p_ref[0]) ** 2))) / signal_rms
+        box = None
+        if t.shape == self.t_ref.shape:
+            lo_hi = self.camera.transmittance_range
+            box = measurement_relative_error(
+                t, self.t_ref, lo_hi, scale=ErrorScale.SIGNAL, signal=self.signal, box_texels=1
+            )["rms"]
+        return {"error_signal_random": random, "error_signal_finest_box": box}
 
     def setting(
         self,
@@ -441,6 +475,29 @@ class _Bench:
         return t
 
 
+def _label_signal(bench: _Bench) -> LabelSignal:
+    """The family's label signal over ``signal_seconds`` (two estimates, full depth)."""
+    from mincam_render.render.fidelity.constants import SIGNAL_FRAMES, SIGNAL_SPP
+    from mincam_render.render.fidelity.signal import render_label_signal
+    from mincam_render.scenes import load_family
+
+    cfg, fps = bench.cfg, float(bench.family.fps)
+    n = max(2, int(round(cfg.signal_seconds * fps)))
+    family = load_family(bench.family_name, seed=cfg.seed, num_frames=n)
+    frames = sorted({int(round(x)) for x in np.linspace(0, n - 1, min(SIGNAL_FRAMES, n))})
+    return render_label_signal(
+        family,
+        family.build_scene(),
+        bench.camera,
+        frames,
+        source=family.label_signal,
+        spp=SIGNAL_SPP,
+        seeds=lambda i, e: stream_seed(cfg.seed, f"fidelity_bench/signal/{e}", i),
+        interval_s=SIGNAL_INTERVAL_S,
+        max_depth=REFERENCE_DEPTH,
+    )
+
+
 def _bench_spp(bench: _Bench) -> float:
     """Rows of the ``spp`` knob; returns the base setting's error."""
     cfg = bench.cfg
@@ -450,7 +507,7 @@ def _bench_spp(bench: _Bench) -> float:
             base_t = t
     if cfg.base_spp not in cfg.spp_levels:
         base_t = bench.setting(bench.camera)()
-    return bench.errors(base_t)["error"]
+    return cast(float, bench.errors(base_t)["error"])  # total-relative: always a number
 
 
 def _bench_knobs(bench: _Bench) -> None:
@@ -689,14 +746,23 @@ def plot_pareto(result: dict[str, Any], path: str | os.PathLike) -> Path:
 
 
 def pareto_table(result: dict) -> str:
-    """The rows as a plain-text table (knob, level, error, effect, seconds)."""
-    lines = [f"{'knob':<10} {'level':<40} {'error':>9} {'effect':>9} {'s/frame':>9}"]
+    """The rows as a plain-text table (knob, level, error, effect, vs signal, seconds)."""
+    lines = [
+        f"{'knob':<10} {'level':<40} {'error':>9} {'effect':>9} {'/signal':>8} "
+        f"{'/texel':>8} {'s/frame':>9}"
+    ]
     for r in result["rows"]:
+        box = r.get("error_signal_finest_box")
         lines.append(
             f"{r['knob']:<10} {str(r['level']):<40} {r['error']:>9.3%} {r['effect']:>9.3%} "
+            f"{r['error_signal_random']:>8.3f} {'' if box is None else f'{box:.3f}':>8} "
             f"{r['seconds']:>9.3f}"
         )
     return "\n".join(lines)
+
+
+def _optional(value: float | None) -> str:
+    return "" if value is None else f"{value:.3f}"
 
 
 def write_fidelity_report(
@@ -732,6 +798,8 @@ def write_fidelity_report(
                 "random masks",
                 "trained-like masks",
                 "effect",
+                "vs label signal (random masks)",
+                "vs label signal (1 texel)",
                 "s / frame",
             ],
             [
@@ -742,6 +810,8 @@ def write_fidelity_report(
                     f"{r['error_random']:.3%}",
                     f"{r['error_trained']:.3%}",
                     f"{r['effect']:.3%}",
+                    f"{r['error_signal_random']:.3f}",
+                    _optional(r["error_signal_finest_box"]),
                     f"{r['seconds']:.3f}",
                 ]
                 for r in res["rows"]

@@ -14,8 +14,9 @@ from typing import Any
 import click
 
 from mincam_render.data.render_job import RenderRequest
+from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity import Fidelity
-from mincam_render.render.precision import DTYPES
+from mincam_render.render.precision import DTYPES, ErrorScale
 
 from .errors import user_error
 from .options import (
@@ -114,7 +115,27 @@ _REQUEST_OPTIONS = [
     ),
     click.option(
         "--target-error", type=FiniteFloat(1e-6, 1.0), default=_default("target_error"),
-        show_default=True, help="Target relative measurement error (chooses spp).",
+        show_default=True,
+        help="Target measurement error relative to the total (chooses spp when the plan is "
+        "made in that scale, see --error-scale).",
+    ),
+    click.option(
+        "--error-scale", type=click.Choice([s.value for s in ErrorScale]),
+        default=_default("error_scale"),
+        help="What the plan's target is relative to: the frame's total, its mean over "
+        "frames, or the label signal (default: the family's).",
+    ),
+    click.option(
+        "--signal-target-error", type=FiniteFloat(1e-6, 100.0),
+        default=_default("signal_target_error"),
+        help="Target measurement error relative to the label signal (default: the "
+        "family's, chosen by the task-level check).",
+    ),
+    click.option(
+        "--difference-seeds", type=click.Choice([s.value for s in DifferenceSeeds]),
+        default=_default("difference_seeds"),
+        help="With --differential: the movers' change shares one seed per background "
+        "window, or has its own per frame (twice its paths; default: the planner's).",
     ),
     click.option(
         "--dtype-error", "dtype_error_bound", type=FiniteFloat(1e-9, 1.0),

@@ -42,6 +42,9 @@ PLANNER_VERSION = 4
 SHIPPED_DIR = SCENES_DIR / "plans"
 #: Environment variable naming the user's plan cache directory.
 CACHE_ENV = "MINCAM_RENDER_PLAN_CACHE"
+#: The planning of every plan before targets relative to the label signal: relative
+#: to each frame's total, ``X - C`` seeded per background window.
+TOTAL_PLANNING = {"error_scale": "frame", "difference_seeds": "window"}
 #: Request fields that do not change a plan (the episode and its storage layout).
 EPISODE_FIELDS = ("family", "seed", "overrides", "shard_frames", "splits")
 
@@ -56,9 +59,9 @@ def cache_dir() -> Path:
 
 
 def plan_fields(
-    identity: dict, family_name: str, renderer: dict[str, str], error_scale: str = "frame"
+    identity: dict, family_name: str, renderer: dict[str, str], planning: dict[str, Any]
 ) -> dict[str, Any]:
-    """What a plan depends on: the request identity less the episode, and the renderer.
+    """What a plan depends on: the request identity less the episode, the renderer, the targets.
 
     Args:
         identity: :meth:`~mincam_render.data.render_job.RenderRequest.identity` (it
@@ -66,14 +69,16 @@ def plan_fields(
             with the same content give the same fields).
         family_name: the scene family's registered name.
         renderer: ``{"variant", "mitsuba", "drjit"}`` versions.
-        error_scale: the family's ``planning_error_scale``. A field only when it
-            is not "frame": version-4 plans were all planned per frame, and
-            their keys stay valid.
+        planning: what the request leaves to the family or the planner, resolved
+            (``{"error_scale", "target_error", "difference_seeds"}``): a family's
+            task-checked target can change without its description changing. A
+            field unless it is :data:`TOTAL_PLANNING` (the only planning before
+            it; those plans' keys stay valid).
     """
     fields = {k: v for k, v in identity.items() if k not in EPISODE_FIELDS}
     fields.update(family_name=family_name, renderer=renderer, planner_version=PLANNER_VERSION)
-    if error_scale != "frame":
-        fields["planning_error_scale"] = error_scale
+    if {k: planning[k] for k in TOTAL_PLANNING} != TOTAL_PLANNING:
+        fields["planning"] = planning
     return json.loads(json.dumps(fields, sort_keys=True))
 
 

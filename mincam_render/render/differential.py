@@ -44,20 +44,25 @@ then acts on the movers' change only, a few per cent of the light, while ``B``
 keeps each detector's exact view; the fidelity module measures the error this
 adds.
 
-All frames of one background share the seed ``s`` (so ``C`` is rendered once),
-which makes the residual noise of ``X - C`` correlated across those frames;
-each frame is still an unbiased estimate. ``\hat T`` can be slightly negative in
+The seed ``s`` is shared by every frame of a background window
+(:attr:`DifferenceSeeds.WINDOW`: ``C`` is rendered once per window), which makes
+the residual noise of ``X - C`` a pattern repeated across those frames; or each
+frame has its own (:attr:`DifferenceSeeds.FRAME`: ``C`` is rendered again with
+every frame, twice the frames' paths) and its noise is new in every frame. Each
+frame is an unbiased estimate either way. ``\hat T`` can be slightly negative in
 texels where noise exceeds the light (it is stored as is: clamping would bias).
 """
 
 from __future__ import annotations
 
+import enum
 import hashlib
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
 
 if TYPE_CHECKING:
@@ -99,6 +104,13 @@ if TYPE_CHECKING:
             """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
 
 
+class DifferenceSeeds(enum.StrEnum):
+    """Which frames share the seed of ``X - C`` (see the module doc)."""
+
+    WINDOW = "window"  # every frame of a background window: C rendered once per window
+    FRAME = "frame"  # each frame its own: C rendered with every frame (twice the paths)
+
+
 @dataclass(frozen=True)
 class BackgroundSettings:
     """How backgrounds are rendered (recorded in a dataset's manifest).
@@ -109,21 +121,28 @@ class BackgroundSettings:
         max_depth: path depth of ``B`` (None: the scene's integrator).
         shared_difference: render ``X`` and ``C`` once, from the board centre,
             for all detectors (``B`` stays per detector).
+        difference_seeds: which frames share the seed of ``X - C``
+            (:class:`DifferenceSeeds`).
     """
 
     interval_s: float
     spp: int
     max_depth: int | None
     shared_difference: bool = False
+    difference_seeds: DifferenceSeeds = DifferenceSeeds.WINDOW
 
     @classmethod
     def from_dict(cls, d: dict) -> BackgroundSettings:
-        """From a manifest's ``job.render.background`` (``max_depth`` 0: the scene's)."""
+        """From a manifest's ``job.render.background`` (``max_depth`` 0: the scene's).
+
+        Manifests without ``difference_seeds`` (format 4 before it) shared the window's.
+        """
         return cls(
             interval_s=float(d["interval_s"]),
             spp=int(d["spp"]),
             max_depth=int(d["max_depth"]) or None,
             shared_difference=bool(d.get("shared_difference", False)),
+            difference_seeds=DifferenceSeeds(d.get("difference_seeds", "window")),
         )
 
     def __post_init__(self) -> None:
@@ -131,6 +150,13 @@ class BackgroundSettings:
             raise ValueError(f"interval_s = {self.interval_s!r}: allowed a number > 0 (s)")
         if not 1 <= self.spp <= 1 << 20:
             raise ValueError(f"spp = {self.spp!r}: allowed an integer in [1, 2^20]")
+        try:
+            object.__setattr__(self, "difference_seeds", DifferenceSeeds(self.difference_seeds))
+        except ValueError:
+            allowed = [v.value for v in DifferenceSeeds]
+            raise ValueError(
+                f"difference_seeds = {self.difference_seeds!r}: allowed one of {allowed}"
+            ) from None
 
 
 @dataclass(frozen=True)
@@ -140,12 +166,15 @@ class Background:
     Args:
         key: the family's background key.
         interval_s: the window the key was made with (s).
-        seed: seed ``s`` shared by ``same_seed_w`` and every frame of this background.
+        seed: seed ``s`` of ``same_seed_w`` (shared by every frame of this
+            background with ``DifferenceSeeds.WINDOW``; each frame's own is
+            :meth:`frame_seed`).
         components: ``{component key: converged render}`` of every component its
             frames use (many samples, full depth, per detector; shared with
             other backgrounds).
         same_seed_w: ``C``, the frames' samples, depth and seed at the window's
             start; ``[1, row, col]`` (board centre) when the difference is shared.
+        difference_seeds: which frames share the seed of ``X - C``.
     """
 
     key: str
@@ -153,6 +182,13 @@ class Background:
     seed: int
     components: dict[str, np.ndarray]
     same_seed_w: np.ndarray
+    difference_seeds: DifferenceSeeds = DifferenceSeeds.WINDOW
+
+    def frame_seed(self, index: int) -> int:
+        """Seed of ``X - C`` of frame ``index``: the window's, or a stream of it per frame."""
+        if self.difference_seeds is DifferenceSeeds.WINDOW:
+            return self.seed
+        return stream_seed(self.seed, "differential/frame", index)
 
     @property
     def shared_difference(self) -> bool:
@@ -308,6 +344,7 @@ def render_background(
         seed=seed,
         components={part: cache[part] for part in parts},
         same_seed_w=same_seed,
+        difference_seeds=settings.difference_seeds,
     )
 
 
@@ -323,21 +360,26 @@ def render_frame(
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """``(B(t) + X - C, labels)`` of frame ``index`` (W, ``[detector, row, col]``).
 
+    ``X`` and ``C`` at :meth:`Background.frame_seed`: ``C`` is the window's
+    (``same_seed_w``) when frames share its seed, else rendered with the frame's.
+
     Raises:
         ValueError: ``background`` is not frame ``index``'s.
     """
     key = family.background_key(index, background.interval_s)
     if key != background.key:
         raise ValueError(f"frame {index} has background {key!r}, not {background.key!r}")
+    diff_cam = camera.rendered_camera(background.shared_difference)
+    seed = background.frame_seed(index)
+    same_seed = background.same_seed_w
+    if background.difference_seeds is DifferenceSeeds.FRAME:
+        family.set_background(scene, index, background.interval_s)
+        same_seed = family.render_transport(
+            scene, diff_cam, spp=spp, seed=seed, max_depth=max_depth
+        )
     labels = family.set_frame_in_window(scene, index, background.interval_s)
-    x = family.render_transport(
-        scene,
-        camera.rendered_camera(background.shared_difference),
-        spp=spp,
-        seed=background.seed,
-        max_depth=max_depth,
-    )
+    x = family.render_transport(scene, diff_cam, spp=spp, seed=seed, max_depth=max_depth)
     # [1, R, C] differences broadcast over the detectors' own backgrounds
     converged = background.converged(family.background_components(index, background.interval_s))
-    estimate = converged + x - background.same_seed_w
+    estimate = converged + x - same_seed
     return estimate.astype(np.float32), labels

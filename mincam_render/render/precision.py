@@ -1,21 +1,124 @@
-"""Storage precision of transport images and the measurement error it causes (numpy).
+"""Storage precision of transport images and the measurement errors of renders (numpy).
 
 Stored values are ``T / scale`` with a per-frame power-of-two ``scale`` (exact in
 binary floating point), so float16 keeps its 11-bit precision for scenes from
 moonlight to sun. The fidelity planner picks the storage dtype from
 :func:`measurement_relative_error`; datasets store with :func:`encode_transport`
 and read with :func:`decode_transport`.
+
+Measurement errors are relative to an :class:`ErrorScale`: the frame's total
+power, its mean over frames, or the *label signal* (:class:`LabelSignal`): the
+spread over frames of what the state the labels are computed from changes in
+each measurement. In the indoor tasks one person changes a measurement by about
+1 % of its total, so an error "within 1 % of the total" can equal the signal
+the camera must read; relative to the signal it reads as what it is.
 """
 
 from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 #: Storage dtypes of transport images.
 DTYPES = ("float16", "float32")
-#: What a measurement error is relative to (:func:`measurement_relative_error`):
-#: each frame's own measurement, or the mean measurement over the frames.
-ERROR_SCALES = ("frame", "mean")
+
+
+class ErrorScale(enum.StrEnum):
+    """What a measurement error is relative to (:func:`measurement_relative_error`)."""
+
+    FRAME = "frame"  # each frame's own measurement |P_ref|
+    MEAN = "mean"  # the mean of |P_ref| over the frames, per detector and mask
+    SIGNAL = "signal"  # the label signal's RMS over frames (LabelSignal)
+
+
+#: The error scales' names (:class:`ErrorScale`).
+ERROR_SCALES = tuple(s.value for s in ErrorScale)
+
+
+@dataclass(frozen=True)
+class LabelSignal:
+    """Transport images of the label signal: what the labels' state changes, over frames.
+
+    Each part is one thing the labels read (the movers; or one switched light
+    each), rendered as two estimates with independent Monte Carlo noise,
+    ``S[estimate, frame, detector, row, col]`` (W, numpy). The signal of a
+    measurement is the spread over frames of the part's measurement about its
+    mean (the static background, constant over frames, drops out); the
+    covariance of the two estimates has no noise term, so the figure is the
+    signal's, not the signal's plus its estimate's noise. With one estimate
+    (``S[1, ...]``) it is the plain spread.
+
+    Args:
+        parts: one array per part, each ``[1 or 2, frame >= 2, detector, row, col]``.
+
+    Raises:
+        ValueError: no part, or a part of another shape.
+    """
+
+    parts: tuple[np.ndarray, ...]
+
+    def __post_init__(self) -> None:
+        if not self.parts:
+            raise ValueError("LabelSignal.parts is empty: give at least one part")
+        for i, part in enumerate(self.parts):
+            if part.ndim != 5 or part.shape[0] not in (1, 2) or part.shape[1] < 2:
+                raise ValueError(
+                    f"LabelSignal.parts[{i}] has shape {part.shape}: expected "
+                    "[1 or 2 estimates, >= 2 frames, detector, row, col]"
+                )
+
+    def rms(self, measure: Callable[[np.ndarray], np.ndarray]) -> float:
+        """The weakest part's RMS over frames of its measurements about their mean (W).
+
+        Args:
+            measure: ``T[frame, detector, row, col] -> P[frame, ...]`` (the masks
+                or box pixels the errors are measured with).
+        """
+        return min(_spread_rms(np.stack([measure(e) for e in part])) for part in self.parts)
+
+
+def _spread_rms(p: np.ndarray) -> float:
+    """RMS over frames (axis 1) about the mean, pooled; ``p[estimate, frame, ...]``."""
+    dev = p - p.mean(axis=1, keepdims=True)
+    power = np.mean(dev[0] * dev[-1])  # two estimates: their noises do not correlate
+    return float(np.sqrt(max(power, 0.0)))
+
+
+def printable_masks(
+    num: int, shape: tuple[int, ...], transmittance_range: tuple[float, float], seed: int
+) -> np.ndarray:
+    """Random printable masks ``M[mask, *shape]``: half i.i.d. uniform, half binary.
+
+    The binary half is at the printable minimum or maximum with 10 % of texels
+    open: they select few texels, the harder case for rounding and noise.
+    """
+    lo, hi = transmittance_range
+    rng = np.random.default_rng(seed)
+    half = num // 2
+    uniform = rng.uniform(lo, hi, size=(num - half, *shape))
+    binary = np.where(rng.random((half, *shape)) < 0.1, hi, lo)
+    return np.concatenate([uniform, binary])
+
+
+def box_measurements(transport_w: np.ndarray, box_texels: int) -> np.ndarray:
+    """Box pixels' measurements ``P[frame, detector, row, col]`` (W): sums of texel blocks.
+
+    A box pixel of ``box_texels`` x ``box_texels`` texels is the pixel of a
+    conventional camera (open block, the rest dark); 1 is a single texel, the
+    finest pixel the rendered texels allow.
+
+    Raises:
+        ValueError: ``box_texels`` does not divide the rows and columns.
+    """
+    t = np.asarray(transport_w, dtype=np.float64)
+    n, k, rows, cols = t.shape
+    b = int(box_texels)
+    if b < 1 or rows % b or cols % b:
+        raise ValueError(f"box_texels = {box_texels!r}: allowed a divisor of {rows} and {cols}")
+    return t.reshape(n, k, rows // b, b, cols // b, b).sum(axis=(3, 5))
 
 
 def frame_scales(transport_w: np.ndarray) -> np.ndarray:
@@ -71,18 +174,28 @@ def measurement_relative_error(
     *,
     num_masks: int = 16,
     seed: int = 0,
-    scale: str = "frame",
+    scale: ErrorScale | str = ErrorScale.FRAME,
+    signal: LabelSignal | None = None,
+    box_texels: int | None = None,
 ) -> dict[str, float]:
-    """Relative error of measurements ``P = sum_uv T M`` for random printable masks.
+    r"""Relative error of measurements ``P = sum_uv T M`` for random printable masks.
 
-    Half of the masks have i.i.d. uniform transmittance in the printable range,
-    half are binary (printable minimum or maximum, 10 % open), which selects few
-    texels and so is the harder case for rounding and noise.
+    The masks are :func:`printable_masks`, or with ``box_texels`` the box pixels
+    of that size (:func:`box_measurements`).
 
     ``scale="frame"`` divides each error by its own frame's ``|P_ref|`` (frames
     without light are left out); ``scale="mean"`` divides it by the mean of
     ``|P_ref|`` over the frames (per detector and mask), so a frame ten times
-    dimmer than the others weighs by its absolute error, not ten times more.
+    dimmer than the others weighs by its absolute error, not ten times more;
+    ``scale="signal"`` divides every error by the label signal's RMS for the
+    same masks (:meth:`LabelSignal.rms`, pooled over detectors and masks).
+
+    .. math::
+
+        e_\text{signal} = \frac{\sqrt{\langle (P - P_\text{ref})^2 \rangle}}
+            {\sqrt{\langle (S - \bar S)^2 \rangle}}
+
+    with ``S`` a measurement of the label signal and ``\bar S`` its mean over frames.
 
     Args:
         transport_w: ``T[frame, detector, row, col]`` under test (W).
@@ -90,15 +203,17 @@ def measurement_relative_error(
         transmittance_range: printable ``(lo, hi)``.
         num_masks: masks per detector.
         seed: seed of the masks.
-        scale: ``"frame"`` or ``"mean"`` (:data:`ERROR_SCALES`).
+        scale: an :class:`ErrorScale` (or its value).
+        signal: the label signal; required with ``scale="signal"``.
+        box_texels: measure box pixels of this many texels per side instead.
 
     Returns:
         ``{"rms": ..., "max": ...}``: RMS over frames, detectors and masks of
-        ``|P - P_ref| / |P_ref|`` (``|P_ref|`` per frame or its mean over frames),
-        and the maximum.
+        the relative error, and its maximum.
 
     Raises:
-        ValueError: shapes differ or are not 4-D; unknown ``scale``.
+        ValueError: shapes differ or are not 4-D; unknown ``scale``; ``"signal"``
+            without a signal; a box size that does not divide the texels.
     """
     t = np.asarray(transport_w, dtype=np.float64)
     ref = np.asarray(reference_w, dtype=np.float64)
@@ -106,20 +221,44 @@ def measurement_relative_error(
         raise ValueError(f"shapes {t.shape} and {ref.shape}: expected equal [N, K, R, C]")
     if scale not in ERROR_SCALES:
         raise ValueError(f"scale = {scale!r}: allowed {', '.join(ERROR_SCALES)}")
-    lo, hi = transmittance_range
-    rng = np.random.default_rng(seed)
-    _, k, rows, cols = t.shape
-    half = num_masks // 2
-    uniform = rng.uniform(lo, hi, size=(num_masks - half, k, rows, cols))
-    binary = np.where(rng.random((half, k, rows, cols)) < 0.1, hi, lo)
-    masks = np.concatenate([uniform, binary])
-    p = np.einsum("nkrc,mkrc->nmk", t, masks)
-    p_ref = np.einsum("nkrc,mkrc->nmk", ref, masks)
+    scale = ErrorScale(scale)
+    if scale is ErrorScale.SIGNAL and signal is None:
+        raise ValueError("scale = 'signal' needs the label signal (signal=LabelSignal)")
+    measure = measurements_of(
+        t.shape[1:], transmittance_range, num_masks=num_masks, seed=seed, box_texels=box_texels
+    )
+    p, p_ref = measure(t), measure(ref)
     denom = np.abs(p_ref)
-    if scale == "mean":
+    if scale is ErrorScale.MEAN:
         denom = np.broadcast_to(denom.mean(axis=0), denom.shape)
+    elif scale is ErrorScale.SIGNAL:
+        assert signal is not None  # checked above
+        denom = np.full(p.shape, signal.rms(measure))
     ok = denom > 0
     if not np.any(ok):
         return {"rms": 0.0, "max": 0.0}
     rel = np.abs(p - p_ref)[ok] / denom[ok]
     return {"rms": float(np.sqrt(np.mean(rel**2))), "max": float(rel.max())}
+
+
+def measurements_of(
+    shape: tuple[int, ...],
+    transmittance_range: tuple[float, float],
+    *,
+    num_masks: int = 16,
+    seed: int = 0,
+    box_texels: int | None = None,
+) -> Callable[[np.ndarray], np.ndarray]:
+    """``T[frame, detector, row, col] -> P[frame, ...]`` (W) of the errors' masks.
+
+    Args:
+        shape: ``(detector, row, col)`` of the transport images.
+        transmittance_range: printable ``(lo, hi)``.
+        num_masks: random printable masks per detector (:func:`printable_masks`).
+        seed: their seed.
+        box_texels: box pixels of this size (:func:`box_measurements`) instead.
+    """
+    if box_texels is not None:
+        return lambda t: box_measurements(t, box_texels)
+    masks = printable_masks(num_masks, shape, transmittance_range, seed)
+    return lambda t: np.einsum("nkrc,mkrc->nmk", np.asarray(t, np.float64), masks)

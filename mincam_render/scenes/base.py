@@ -21,6 +21,8 @@ from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelSpec
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.photodiode import DiodeResponse
+from mincam_render.render.fidelity.signal import SignalSource
+from mincam_render.render.precision import ErrorScale
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,11 +81,22 @@ class SceneFamily(abc.ABC):
     config_type: ClassVar[type]
     #: True when the task needs a time history (traffic speed from 30 frames).
     needs_history: ClassVar[bool] = False
-    #: What the fidelity planner's target error is relative to
-    #: (:data:`mincam_render.render.precision.ERROR_SCALES`): each probe frame's
-    #: own measurement ("frame"), or the mean over the probe frames ("mean") for a
+    #: What errors relative to the total are relative to
+    #: (:class:`~mincam_render.render.precision.ErrorScale`): each probe frame's
+    #: own measurement (FRAME), or the mean over the probe frames (MEAN) for a
     #: family whose light level is itself the label and varies tenfold by frame.
-    planning_error_scale: ClassVar[str] = "frame"
+    #: The bounds of the biases (path depth, float16) are in this scale.
+    total_error_scale: ClassVar[ErrorScale] = ErrorScale.FRAME
+    #: What the fidelity planner's Monte Carlo target is relative to: the total
+    #: (``total_error_scale``, target ``--target-error``) or the label signal
+    #: (SIGNAL, target :attr:`signal_target_error`).
+    planning_error_scale: ClassVar[ErrorScale] = ErrorScale.FRAME
+    #: The target relative to the label signal that the task-level check chose
+    #: (``benchmarks/bench_task_fidelity.py``); None where none was checked.
+    signal_target_error: ClassVar[float | None] = None
+    #: Where the labels live in the frames: what the label signal is
+    #: (:class:`~mincam_render.render.fidelity.signal.SignalSource`).
+    label_signal: ClassVar[SignalSource] = SignalSource.FRAMES
 
     def __init__(self, config: Any, *, seed: int, num_frames: int) -> None:
         check_int("seed", seed, 0)

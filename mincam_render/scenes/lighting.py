@@ -28,6 +28,8 @@ import numpy as np
 
 from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.render.fidelity.signal import SignalSource
+from mincam_render.render.precision import ErrorScale
 from mincam_render.scenes.base import CameraMount
 from mincam_render.scenes.indoor import (
     DoorConfig,
@@ -168,7 +170,10 @@ class LightingFamily(IndoorFamily):
     # 15 spp at one episode length, 783 spp at another (Monte Carlo error 0.03
     # vs 0.10 at 4 spp). Relative to the mean over the probes, a dim frame
     # counts by its absolute error, which is what separates light states.
-    planning_error_scale = "mean"
+    total_error_scale = ErrorScale.MEAN
+    planning_error_scale = ErrorScale.MEAN
+    # the lights are the labels: each light's own light is the signal
+    label_signal = SignalSource.LIGHTS
 
     @property
     def floor_lamps(self) -> tuple:

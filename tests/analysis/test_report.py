@@ -114,6 +114,7 @@ def test_fidelity_rows_tiny(variant, tmp_path):
         num_masks=2,
         mask_resolution=8,
         include_auto=True,
+        signal_seconds=1.0,
     )
     res = bench_fidelity("patches", cfg)
     assert {r["knob"] for r in res["rows"]} == set(KNOBS)
@@ -121,6 +122,9 @@ def test_fidelity_rows_tiny(variant, tmp_path):
         for key in ("error", "error_random", "error_trained", "effect", "seconds"):
             assert math.isfinite(r[key]) and r[key] >= 0, (r["knob"], r["level"], key)
         assert r["family"] == "patches"
+        # beside them, relative to the label signal (no single texel at a coarser resolution)
+        assert math.isfinite(r["error_signal_random"]) and r["error_signal_random"] >= 0
+        assert (r["error_signal_finest_box"] is None) == (r["knob"] == "mask_res")
     # float16 adds at most its rounding (2^-11 relative) to the base render
     base = next(r for r in res["rows"] if r["knob"] == "spp" and r["level"] == 2)
     f16 = next(r for r in res["rows"] if r["knob"] == "storage")

@@ -216,7 +216,7 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
 @pytest.mark.parametrize(
     ("names", "args", "config", "count"),
     [
-        (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 18),
+        (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 21),
         (("train",), [], TrainConfig, 12),
         (("sweep",), [], TrainConfig, 11),
         (("prune",), ["--run", "r"], TrainConfig, 11),

@@ -56,9 +56,11 @@ def test_other_frame_counts_and_targets_are_planned_apart(variant):
     family_name = "patches"
     renderer = {"variant": variant, "mitsuba": "3.9.1", "drjit": "1.5.0"}
 
+    planning = {"error_scale": "frame", "target_error": 0.01, "difference_seeds": "window"}
+
     def key(request):
         return plan_cache.plan_key(
-            plan_cache.plan_fields(request.identity(description), family_name, renderer)
+            plan_cache.plan_fields(request.identity(description), family_name, renderer, planning)
         )
 
     assert key(AUTO) == key(dataclasses.replace(AUTO, seed=9, splits=(0.5, 0.25, 0.25)))
@@ -67,17 +69,36 @@ def test_other_frame_counts_and_targets_are_planned_apart(variant):
     assert key(AUTO) != key(dataclasses.replace(AUTO, spp=4))
 
 
-def test_only_a_mean_scaled_family_adds_its_error_scale_to_the_plan_key():
+def test_the_resolved_targets_are_part_of_the_plan_key():
+    # a family's task-checked target can change without its description
+    # changing: the plan key holds what the planner resolved, not the request's None
     renderer = {"variant": "llvm_ad_mono", "mitsuba": "3.9.1", "drjit": "1.5.0"}
-    identity = {"family": "lighting", "num_frames": 100, "seed": 4}
-    per_frame = plan_cache.plan_fields(identity, "lighting", renderer)
-    mean = plan_cache.plan_fields(identity, "lighting", renderer, "mean")
-    # version-4 plans (every shipped one) were per frame: their keys are unchanged
-    assert "planning_error_scale" not in per_frame
-    assert mean["planning_error_scale"] == "mean"
-    assert plan_cache.plan_key(per_frame) != plan_cache.plan_key(mean)
-    assert load_family("lighting", seed=0, num_frames=2).planning_error_scale == "mean"
-    assert load_family("workspace", seed=0, num_frames=2).planning_error_scale == "frame"
+    identity = {"family": "workspace", "num_frames": 100, "seed": 4}
+    planning = {"error_scale": "signal", "target_error": 0.5, "difference_seeds": "window"}
+    keys = {
+        plan_cache.plan_key(plan_cache.plan_fields(identity, "workspace", renderer, changed))
+        for changed in (
+            planning,
+            planning | {"target_error": 1.0},
+            planning | {"error_scale": "frame"},
+            planning | {"difference_seeds": "frame"},
+        )
+    }
+    assert len(keys) == 4
+    # the planning of format-4 plans adds no field: their keys stay valid
+    total = {"error_scale": "frame", "target_error": 0.01, "difference_seeds": "window"}
+    assert "planning" not in plan_cache.plan_fields(identity, "workspace", renderer, total)
+    assert load_family("lighting", seed=0, num_frames=2).total_error_scale == "mean"
+    assert load_family("workspace", seed=0, num_frames=2).total_error_scale == "frame"
+
+
+def test_requests_without_the_later_fields_keep_their_format_4_identity():
+    # datasets rendered before error_scale, signal_target_error and
+    # difference_seeds existed resume: those fields stay out while None
+    identity = AUTO.identity({})
+    assert not {"error_scale", "signal_target_error", "difference_seeds"} & set(identity)
+    given = dataclasses.replace(AUTO, error_scale="signal", difference_seeds="frame").identity({})
+    assert given["error_scale"] == "signal" and given["difference_seeds"] == "frame"
 
 
 def test_a_damaged_kept_plan_is_ignored_and_measured_again(tmp_path, own_cache, variant, caplog):

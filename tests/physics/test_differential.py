@@ -10,7 +10,9 @@ import pytest
 from mincam_render.data import dataset as ds
 from mincam_render.render import precision
 from mincam_render.render.differential import (
+    Background,
     BackgroundSettings,
+    DifferenceSeeds,
     background_seed,
     render_background,
     render_frame,
@@ -271,6 +273,7 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
         "spp": 8,
         "max_depth": 3,
         "shared_difference": True,
+        "difference_seeds": "window",
     }
     fam = load_family("workspace", seed=0, num_frames=24, overrides=request.overrides)
     keys = [fam.background_key(i, 10.0) for i in range(24)]
@@ -360,9 +363,15 @@ def test_auto_fidelity_measures_and_records_the_differential_choice(variant):
         assert settings["background"]["spp"] == d["background_spp"]
         assert settings["spp"] == d["frame_spp"] == decisions["spp"]["value"]
         assert settings["max_depth"] == d["frame_max_depth"]
+        assert settings["background"]["difference_seeds"] == d["difference_seeds"]["value"]
         assert "error_vs_reference" in d
     else:
         assert settings["background"] is None
+    # every plan reports its error relative to the total and to the label signal
+    figures = decisions["achieved"]["against_reference"]
+    assert set(figures) >= {"total_relative", "signal_relative", "signal_relative_finest_box"}
+    signal = decisions["achieved"]["label_signal_rms"]
+    assert 0 < signal["random_masks_w"] and 0 < signal["finest_box_w"]
 
 
 def test_ray_renders_differential_datasets_byte_identically(differential_dataset, tmp_path):
@@ -437,3 +446,57 @@ def test_converged_backgrounds_need_a_differential_dataset(tmp_path, variant):
     render_dataset(request, tmp_path / "ds", workers=0)
     with pytest.raises(ds.DatasetError, match="not rendered differentially"):
         converged_backgrounds(tmp_path / "ds")
+
+
+class _SeedEcho:
+    """A stand-in family whose renders are their seed plus its state: 0 background, 1 frame."""
+
+    def __init__(self) -> None:
+        self.state = -1
+
+    def background_key(self, index, interval_s):
+        return "only"
+
+    def background_components(self, index, interval_s):
+        return {"light": 1.0}
+
+    def set_background(self, scene, index, interval_s, *, at=0.0):
+        self.state = 0
+
+    def set_frame_in_window(self, scene, index, interval_s):
+        self.state = 1
+        return {"index": np.array([index], np.float32)}
+
+    def render_transport(self, scene, camera, *, spp, seed, max_depth=None, parallax=True):
+        return np.full((1, 2, 2), float(seed % 1000) + 100.0 * self.state)
+
+
+@pytest.mark.parametrize("seeds", list(DifferenceSeeds))
+def test_frames_share_the_windows_seed_or_have_their_own(seeds):
+    from mincam_render.optics.camera import FreeformCamera
+
+    fam = _SeedEcho()
+    window_c = np.full((1, 2, 2), 7.0)  # C of the window: seed 7, background state
+    bg = Background(
+        key="only",
+        interval_s=60.0,
+        seed=7,
+        components={"light": np.full((1, 2, 2), 1000.0)},
+        same_seed_w=window_c,
+        difference_seeds=seeds,
+    )
+    camera = FreeformCamera()
+    frames = [render_frame(fam, None, camera, i, bg, spp=1, max_depth=None)[0] for i in range(4)]
+    frame_seeds = [bg.frame_seed(i) for i in range(4)]
+    for frame in frames:
+        # B + X - C with one seed: the seeds cancel, the movers' change (100) remains
+        np.testing.assert_array_equal(frame, np.full((1, 2, 2), 1100.0))
+    if seeds is DifferenceSeeds.WINDOW:
+        assert frame_seeds == [7] * 4
+    else:
+        assert len(set(frame_seeds)) == 4 and 7 not in frame_seeds
+
+
+def test_unknown_difference_seeds_are_refused():
+    with pytest.raises(ValueError, match="difference_seeds"):
+        BackgroundSettings(interval_s=1.0, spp=4, max_depth=None, difference_seeds="episode")

@@ -257,6 +257,7 @@ def load_backgrounds(out: Path, manifest: dict, keys: Iterable[str]) -> dict[str
             seed=int(rec["seed"]),
             components={part: loaded[part] for part in rec["components"]},
             same_seed_w=np.load(out / rec["file"]),
+            difference_seeds=settings.difference_seeds,
         )
     return out_map
 

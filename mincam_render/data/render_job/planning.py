@@ -235,14 +235,23 @@ def _fidelity_plan(
     """The fidelity plan of a request: kept, or measured on the planning episode."""
     from mincam_render.data import plan_cache
     from mincam_render.render import backend
+    from mincam_render.render.differential import DifferenceSeeds
     from mincam_render.render.fidelity import decide_fidelity
+    from mincam_render.render.fidelity.constants import DIFFERENCE_SEEDS
+    from mincam_render.render.fidelity.probes import planning_targets
     from mincam_render.scenes.registry import family_class
 
     info = backend.describe()
     versions = package_versions()
     renderer = {"variant": info["variant"], **{k: versions[k] for k in ("mitsuba", "drjit")}}
-    error_scale = family_class(family_name).planning_error_scale
-    fields = plan_cache.plan_fields(identity, family_name, renderer, error_scale)
+    cls = family_class(family_name)
+    scale, target = planning_targets(cls.planning_error_scale, cls.signal_target_error, request)
+    planning = {
+        "error_scale": scale.value,
+        "target_error": target,
+        "difference_seeds": DifferenceSeeds(request.difference_seeds or DIFFERENCE_SEEDS).value,
+    }
+    fields = plan_cache.plan_fields(identity, family_name, renderer, planning)
     found = plan_cache.find_plan(fields) if use_cache else None
     if found is not None:
         plan, where = found

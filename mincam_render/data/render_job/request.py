@@ -9,7 +9,11 @@ from dataclasses import dataclass
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.data import dataset as ds
 from mincam_render.render import precision
+from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity import Fidelity
+
+#: Fields added after dataset format 4: left out of the identity while None.
+_LATER_FIELDS = ("error_scale", "signal_target_error", "difference_seeds")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -31,7 +35,15 @@ class RenderRequest:
         shared_render: one render for all detectors, or None to decide.
         mask_res: mask texels per side, or None for the family camera's.
         dtype: ``"float16"``/``"float32"`` storage, or None to decide.
-        target_error: target relative measurement error (Monte Carlo) for spp.
+        target_error: target Monte Carlo measurement error relative to the total
+            (the frame's or its mean, as the family says), when the plan is made
+            in that scale.
+        error_scale: what the plan's target is relative to
+            (:class:`~mincam_render.render.precision.ErrorScale`: the frame's total,
+            its mean over frames, or the label signal); None: the family's.
+        signal_target_error: the target relative to the label signal, when the
+            plan is made in that scale; None: the family's (chosen by the
+            task-level check, ``benchmarks/bench_task_fidelity.py``).
         dtype_error_bound: largest relative measurement error float16 may add.
         indirect_fraction: drop indirect light when it changes measurements less.
         parallax_fraction: share one render when parallax is below this many texels.
@@ -42,6 +54,9 @@ class RenderRequest:
         background_spp: samples per texel of the backgrounds, or None to decide.
         shared_difference: render the movers' change once from the board centre
             for all detectors, or None to decide (differential rendering).
+        difference_seeds: which frames share the seed of the movers' change
+            (:class:`~mincam_render.render.differential.DifferenceSeeds`), or None:
+            the planner's default.
     """
 
     family: str
@@ -57,6 +72,8 @@ class RenderRequest:
     mask_res: int | None = None
     dtype: str | None = None
     target_error: float = 0.01
+    error_scale: precision.ErrorScale | None = None
+    signal_target_error: float | None = None
     dtype_error_bound: float = 1e-3
     indirect_fraction: float = 0.005
     parallax_fraction: float = 0.25
@@ -64,6 +81,7 @@ class RenderRequest:
     background_interval_s: float = 60.0
     background_spp: int | None = None
     shared_difference: bool | None = None
+    difference_seeds: DifferenceSeeds | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -91,6 +109,17 @@ class RenderRequest:
                 raise bad(name, "None, True or False")
         if self.dtype is not None and self.dtype not in precision.DTYPES:
             raise bad("dtype", f"None or one of {', '.join(precision.DTYPES)}")
+        for name, kind in (
+            ("error_scale", precision.ErrorScale),
+            ("difference_seeds", DifferenceSeeds),
+        ):
+            value = getattr(self, name)
+            if value is not None and value not in [v.value for v in kind]:
+                raise bad(name, f"None or one of {', '.join(v.value for v in kind)}")
+            if value is not None:
+                object.__setattr__(self, name, kind(value))
+        if self.signal_target_error is not None:
+            check_number("RenderRequest.signal_target_error", self.signal_target_error, 1e-6, 100.0)
         for name, lo, hi in (
             ("target_error", 1e-6, 1.0),
             ("dtype_error_bound", 1e-9, 1.0),
@@ -105,8 +134,14 @@ class RenderRequest:
 
         Two renders into one directory must have equal identities; the resolved
         description (not the file name) makes an edited TOML count as different.
+        Fields added after dataset format 4 are left out while None (their
+        default), so datasets rendered before them still resume.
         """
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        d = {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if not (f.name in _LATER_FIELDS and getattr(self, f.name) is None)
+        }
         d["family"] = str(self.family)
         d["fidelity"] = self.fidelity.value
         d["splits"] = list(self.splits)

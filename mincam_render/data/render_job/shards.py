@@ -185,7 +185,7 @@ def _render_frame(
         t, lab = render_frame(
             family, scene, render_cam, i, background, spp=r["spp"], max_depth=max_depth
         )
-        return t, lab, background.seed
+        return t, lab, background.frame_seed(i)
     lab = family.set_frame(scene, i)
     seed = frame_seed(job["seed"], i)
     t = family.render_transport(scene, render_cam, spp=r["spp"], seed=seed, max_depth=max_depth)

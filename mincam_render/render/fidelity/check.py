@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -26,9 +26,6 @@ from mincam_render.render.fidelity.constants import (
     REFERENCE_SPP_FACTOR,
 )
 from mincam_render.render.fidelity.probes import Probes
-
-if TYPE_CHECKING:
-    from mincam_render.render.fidelity.probes import PlanRequest
 
 log = logging.getLogger(__name__)
 
@@ -117,8 +114,10 @@ def check_against_reference(
     if draft.background is not None:
         chosen = _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen)
     (decisions["differential"] if draft.background is not None else decisions["spp"]).update(check)
-    decisions["achieved"] = achieved(check, ref_noise, decisions, p.request, draft.spp)
+    decisions["achieved"] = achieved(check, ref_noise, decisions, p, draft.spp)
     decisions["achieved"]["per_detector_error_rms"] = _per_detector_error(p, chosen, ref, ref_noise)
+    decisions["achieved"]["against_reference"] = p.figures(chosen, ref)
+    decisions["achieved"]["label_signal_rms"] = p.signal_rms()
     return chosen
 
 
@@ -132,9 +131,7 @@ def _reference_settings(p: Probes, draft: Draft) -> tuple[int, int]:
     ref_spp = (
         MAX_REFERENCE_SPP
         if draft.e_pilot is None
-        else spp_for(
-            draft.e_pilot, REFERENCE_NOISE_SHARE * p.request.target_error, MAX_REFERENCE_SPP
-        )
+        else spp_for(draft.e_pilot, REFERENCE_NOISE_SHARE * p.target_error, MAX_REFERENCE_SPP)
     )
     return ref_spp, draft.background["max_depth"]
 
@@ -156,9 +153,9 @@ def _raise_differential_spp(
     error = check["error_vs_reference"]
     for _ in range(MAX_SPP_RAISES if any(own_spp) else 0):
         found = math.sqrt(max(error["rms"] ** 2 - ref_noise**2, 0.0))
-        if found <= request.target_error:
+        if found <= p.target_error:
             break
-        factor = (found / (PLAN_ERROR_SHARE * request.target_error)) ** 2
+        factor = (found / (PLAN_ERROR_SHARE * p.target_error)) ** 2
         if own_spp[0]:
             draft.spp = round_up_spp(draft.spp * factor, MAX_AUTO_SPP)
         if own_spp[1]:
@@ -194,50 +191,57 @@ def _per_detector_error(
 
 
 def achieved(
-    check: dict[str, Any],
-    ref_noise: float,
-    decisions: dict[str, Any],
-    request: PlanRequest,
-    spp: int,
+    check: dict[str, Any], ref_noise: float, decisions: dict[str, Any], p: Probes, spp: int
 ) -> dict[str, Any]:
     """The plan's error against the reference vs the target; a warning naming the knob if missed.
 
-    The reference's own Monte Carlo error is taken out in quadrature. The
-    advice names every knob whose part of the error exceeds the target (else
-    the largest): the measured biases of sharing and path depth, and the
-    Monte Carlo rest with the spp that brings it to the target.
+    In the planning scale (``p.scale``). The reference's own Monte Carlo error
+    is taken out in quadrature. The advice names every knob whose part of the
+    error exceeds the target (else the largest): the measured biases of sharing
+    and (in the same scale) path depth, and the Monte Carlo rest with the spp
+    that brings it to the target.
     """
     found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
-    record: dict[str, Any] = {"error_rms": found, "target_error": request.target_error}
-    record["met"] = found <= request.target_error
+    target, request = p.target_error, p.request
+    record: dict[str, Any] = {
+        "error_rms": found,
+        "target_error": target,
+        "error_scale": p.scale.value,
+        "met": found <= target,
+    }
     if record["met"]:
         return record
-    knobs = _knobs_to_turn(found, decisions, request, spp)
+    knobs = _knobs_to_turn(found, decisions, target, spp, depth_in_scale=p.scale is p.total_scale)
     record["advice"] = "pass " + " and ".join(f"{k} (now {v:.3g} rms of it)" for k, v in knobs)
     if request.spp is not None and any(k.startswith("--spp") for k, _ in knobs):
         record["advice"] += "; or drop --spp to let auto fidelity choose"
     log.warning(
-        "fidelity: measurements are %.3g rms off the reference, target %g: %s",
+        "fidelity: measurements are %.3g rms off the reference, target %g (%s-relative): %s",
         found,
-        request.target_error,
+        target,
+        p.scale.value,
         record["advice"],
     )
     return record
 
 
 def _knobs_to_turn(
-    found: float, decisions: dict[str, Any], request: PlanRequest, spp: int
+    found: float, decisions: dict[str, Any], target: float, spp: int, *, depth_in_scale: bool
 ) -> list[tuple[str, float]]:
-    """``[(flag, its part of the error)]``: those above the target, else the largest."""
+    """``[(flag, its part of the error)]``: those above the target, else the largest.
+
+    The path depth's change is measured relative to the total; it is a part of
+    the error only when the target is too (``depth_in_scale``).
+    """
     shared = decisions["shared_render"]
     parts = {}
     if shared["value"] and "error_shared_vs_per_detector" in shared:
         parts["--per-detector"] = shared["error_shared_vs_per_detector"]["rms"]
     depth = decisions["max_depth"]
     kept = depth.get("change_vs_reference", {}).get(str(depth.get("plain_value", depth["value"])))
-    if kept is not None:
+    if kept is not None and depth_in_scale:
         parts[f"--max-depth {int(depth['value']) + 1}"] = kept["rms"]
     noise = math.sqrt(max(found**2 - sum(b * b for b in parts.values()), 0.0))
-    parts[f"--spp {round_up_spp(spp * (noise / request.target_error) ** 2, 1 << 24)}"] = noise
+    parts[f"--spp {round_up_spp(spp * (noise / target) ** 2, 1 << 24)}"] = noise
     ranked = sorted(parts.items(), key=lambda kv: -kv[1])
-    return [kv for kv in ranked if kv[1] > request.target_error] or ranked[:1]
+    return [kv for kv in ranked if kv[1] > target] or ranked[:1]

@@ -1,5 +1,7 @@
 """Bounds, pilot sample counts and shares of the fidelity planner (one place to tune them)."""
 
+from mincam_render.render.differential import DifferenceSeeds
+
 #: Probe frames rendered for the measurements.
 PROBE_FRAMES = 3
 #: Samples per texel of the pilot renders.
@@ -47,3 +49,18 @@ SHARED_DIFFERENCE_SPP = 128
 #: spp cap of the renders that measure the daylight interpolation of backgrounds
 #: (common random numbers: the drift's change, not noise, dominates).
 INTERPOLATION_SPP = 256
+#: Frames of the planning episode the label signal is rendered on (spread over it):
+#: its spread over frames needs more states than the probes' three.
+SIGNAL_FRAMES = 24
+#: spp of each of the label signal's two estimates (their covariance has no noise
+#: term, so a few samples suffice).
+SIGNAL_SPP = 16
+#: Box pixel (texels per side) whose signal-relative error is reported beside the
+#: random masks': a single texel, the finest pixel the rendered texels allow.
+FINEST_BOX_TEXELS = 1
+#: Target relative to the label signal of a family without one of its own (its
+#: noise as large as its signal: about 1 % of the total in the indoor tasks).
+DEFAULT_SIGNAL_TARGET_ERROR = 1.0
+#: Seeds of ``X - C`` when the request leaves them open (chosen by measurement:
+#: benchmarks/results/task_fidelity.json).
+DIFFERENCE_SEEDS = DifferenceSeeds.WINDOW

@@ -16,11 +16,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed, stream_seed
+from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
 from mincam_render.render.fidelity.constants import (
     BACKGROUND_PILOT_SPP,
     DIFFERENCE_BASE_SPP,
     DIFFERENCE_PILOT_SPP,
+    DIFFERENCE_SEEDS,
     INTERPOLATION_SPP,
     MAX_AUTO_SPP,
     MAX_BACKGROUND_SPP,
@@ -30,6 +32,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.fidelity.signal import difference_pair
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -53,6 +56,7 @@ def decide_differential(
     components = {c for part in parts.values() for c in part}
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
+    record["difference_seeds"] = _difference_seeds(p)
     pilots = _pilots(p, render_cam, max_depth or None, record)
     record.update(_settings_and_cost(p, pilots, len(parts), len(components), plain_spp))
     if p.request.differential:
@@ -89,19 +93,32 @@ def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str,
     return None
 
 
+def _difference_seeds(p: Probes) -> dict[str, Any]:
+    """Which frames share the seed of ``X - C``: the request's, else :data:`DIFFERENCE_SEEDS`."""
+    if p.request.difference_seeds is not None:
+        value = DifferenceSeeds(p.request.difference_seeds)
+        return {"value": value.value, "source": "flag", "reason": "set by --difference-seeds"}
+    reason = (
+        "chosen by measurement: the task figures trained and tested on episodes with "
+        "per-window and per-frame seeds (benchmarks/results/task_fidelity.json)"
+    )
+    return {"value": DIFFERENCE_SEEDS.value, "source": "auto", "reason": reason}
+
+
 def _difference_pair(
     p: Probes, depth: int | None, seed_offset: int, spp: int, camera: FreeformCamera
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(X, C)`` per probe with one seed each (common random numbers)."""
+
+    def render(seed: int) -> np.ndarray:
+        return p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth)
+
     interval = p.request.background_interval_s
-    xs, cs = [], []
-    for i in p.indices:
-        seed = p.seed(i, seed_offset + 11)
-        p.family.set_frame_in_window(p.scene, i, interval)
-        xs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
-        p.family.set_background(p.scene, i, interval)
-        cs.append(p.family.render_transport(p.scene, camera, spp=spp, seed=seed, max_depth=depth))
-    return np.stack(xs), np.stack(cs)
+    pairs = [
+        difference_pair(p.family, p.scene, render, i, p.seed(i, seed_offset + 11), interval)
+        for i in p.indices
+    ]
+    return np.stack([x for x, _ in pairs]), np.stack([c for _, c in pairs])
 
 
 def _pilots(
@@ -178,7 +195,7 @@ def _shared_difference(
     e_shared = p.error(xa + (xc - cc) - (xa - ca), xa)["rms"]
     e_noise = p.error(xa + (xb - cb) - (xa - ca), xa)["rms"]
     parallax_error = math.sqrt(max(e_shared**2 - e_noise**2, 0.0))
-    bound = SHARED_ERROR_SHARE * p.request.target_error
+    bound = SHARED_ERROR_SHARE * p.target_error
     record["shared_difference"] = {
         "value": parallax_error < bound,
         "source": "auto",
@@ -261,13 +278,17 @@ def _settings_and_cost(
     """
     # detectors rendered: 1 when the plain render is shared from the board centre
     request, k, frames = p.request, pilots["rendered_detectors"], p.family.num_frames
+    # per-frame seeds render C again with every frame: twice the frames' paths
+    per_frame = DifferenceSeeds(p.request.difference_seeds or DIFFERENCE_SEEDS)
+    seed_factor = 2 if per_frame is DifferenceSeeds.FRAME else 1
     biases = {
         "shared_difference_parallax": pilots["parallax"],
         "daylight_interpolation": pilots["interpolation"]["error"]["rms"],
     }
-    e_diff, e_bg, frame_paths = pilots["difference"], pilots["background"], pilots["frame_paths"]
+    e_diff, e_bg = pilots["difference"], pilots["background"]
+    frame_paths = seed_factor * pilots["frame_paths"]
     background_paths = k * components / frames
-    planned_error = PLAN_ERROR_SHARE * request.target_error
+    planned_error = PLAN_ERROR_SHARE * p.target_error
     budget = split_noise_budget(
         planned_error,
         biases,
@@ -292,7 +313,10 @@ def _settings_and_cost(
         else spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
     )
     frame_cost = frame_spp * frame_paths
-    background_cost = components * background_spp * k + backgrounds * frame_cost
+    # every window's own C at the frames' samples (rendered with either seeds)
+    background_cost = (
+        components * background_spp * k + backgrounds * frame_spp * pilots["frame_paths"]
+    )
     deep = pilots["deep"]
     return {
         "frame_max_depth": 0 if deep is None else deep,

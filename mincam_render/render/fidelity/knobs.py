@@ -23,7 +23,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
-from mincam_render.render.precision import decode_transport, encode_transport
+from mincam_render.render.precision import ErrorScale, decode_transport, encode_transport
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -81,7 +81,7 @@ def _sharing_change(p: Probes) -> dict[str, Any]:
         "error_shared_vs_per_detector": p.error(no_parallax, per_det),
         "noise_floor_two_seeds": p.error(other, per_det),
         "probe_spp": PILOT_SPP,
-        "error_bound": SHARED_ERROR_SHARE * p.request.target_error,
+        "error_bound": SHARED_ERROR_SHARE * p.target_error,
     }
 
 
@@ -112,7 +112,11 @@ def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tu
 def decide_max_depth(
     p: Probes, auto: bool, render_cam: FreeformCamera, shared: bool
 ) -> dict[str, Any]:
-    """The shallowest path depth whose missing bounces change measurements < the bound."""
+    """The shallowest path depth whose missing bounces change measurements < the bound.
+
+    Relative to the total (``p.total_scale``): the bounces left out are light of
+    the whole room, scaling with its lamps and daylight, not of the labels.
+    """
     from mincam_render.render.transport import scene_max_depth
 
     request = p.request
@@ -165,13 +169,13 @@ def _depth_changes(
     max_depth = DEEP_REFERENCE_DEPTH
     for depth in CANDIDATE_DEPTHS:
         trial = p.render(render_cam, spp=PILOT_SPP, max_depth=depth, shared=shared)
-        changes[depth] = p.error(trial, deep)
+        changes[depth] = p.error(trial, deep, p.total_scale)
         if changes[depth]["rms"] < bound:
             max_depth = depth
             break
     if scene_depth is not None and scene_depth > 0 and scene_depth not in changes:
         trial = p.render(render_cam, spp=PILOT_SPP, max_depth=scene_depth, shared=shared)
-        changes[scene_depth] = p.error(trial, deep)
+        changes[scene_depth] = p.error(trial, deep, p.total_scale)
     return max_depth, changes
 
 
@@ -185,7 +189,8 @@ def decide_spp(
         (None unless auto), from two renders with different seeds.
     """
     request = p.request
-    measured: dict[str, Any] = {"target_error": request.target_error}
+    target = p.target_error
+    measured: dict[str, Any] = {"target_error": target, "error_scale": p.scale.value}
     e_pilot = None
     if auto:
         a = p.render(render_cam, spp=PILOT_SPP, max_depth=max_depth, shared=shared)
@@ -199,12 +204,12 @@ def decide_spp(
         reason = f"full fidelity default {FULL_SPP} spp"
         decision = {"value": FULL_SPP, "source": "full", "reason": reason}
     else:
-        spp = spp_for(e_pilot, request.target_error, MAX_AUTO_SPP)
+        spp = spp_for(e_pilot, target, MAX_AUTO_SPP)
         predicted = measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
         verdict = (
-            f"{spp} spp meets target {request.target_error:g}"
-            if predicted <= request.target_error
-            else f"capped at {spp} spp: predicted {predicted:.3g} > target {request.target_error:g}"
+            f"{spp} spp meets target {target:g}"
+            if predicted <= target
+            else f"capped at {spp} spp: predicted {predicted:.3g} > target {target:g}"
         )
         reason = (
             f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); {verdict}"
@@ -214,11 +219,20 @@ def decide_spp(
 
 
 def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
-    """float16 storage when the error it adds to ``chosen``'s measurements stays < the bound."""
+    """float16 storage when the error it adds to ``chosen``'s measurements stays < the bound.
+
+    The bound is relative to the total (``p.total_scale``), like float16's own
+    precision; the error relative to the label signal is recorded beside it.
+    """
     request = p.request
     stored, scales = encode_transport(chosen, "float16")
-    f16_err = p.error(decode_transport(stored, scales), chosen)
-    measured = {"float16_error": f16_err, "bound": request.dtype_error_bound}
+    decoded = decode_transport(stored, scales)
+    f16_err = p.error(decoded, chosen, p.total_scale)
+    measured = {
+        "float16_error": f16_err,
+        "float16_error_signal_relative": p.error(decoded, chosen, ErrorScale.SIGNAL),
+        "bound": request.dtype_error_bound,
+    }
     if request.dtype is not None:
         dtype, source, reason = request.dtype, "flag", "set by --dtype"
     elif not auto:

@@ -44,10 +44,29 @@ decided from:
 
 Errors are relative errors of measurements ``P = sum T M`` for random printable
 masks (:func:`mincam_render.render.precision.measurement_relative_error`), RMS and max
-over probe frames, detectors and masks. Every decision records its value, its
-source (``flag``, ``auto`` or ``full``), the bound and the measured figures.
-The plan is then checked against a high-spp reference (:mod:`.check`) and
-returned as a frozen :class:`FidelityPlan`.
+over probe frames, detectors and masks, relative to one of two things
+(:class:`~mincam_render.render.precision.ErrorScale`):
+
+- the **total**: each frame's own measurement (or their mean over frames), as
+  before; the bounds of the biases (path depth, float16) stay in this scale;
+- the **label signal**: the RMS over frames of the part of each measurement
+  that the state the labels are computed from changes (:mod:`.signal`: what
+  movers and doors change, ``X - C``; what each switched light adds; or the
+  frames themselves less their mean), rendered on ``SIGNAL_FRAMES`` frames of
+  the planning episode as two estimates whose covariance has no noise term.
+  One person changes a workspace measurement by about 1 % of its total, so
+  "1 % of the total" can be as large as what the camera must read.
+
+The Monte Carlo target (spp of frames and backgrounds, the noise budget, the
+check) is in the family's ``planning_error_scale`` with its task-checked
+``signal_target_error`` (``benchmarks/bench_task_fidelity.py``), unless the
+request names a scale or a target. Every plan records its error against the
+reference in both, for random masks and single-texel box pixels
+(``decisions["achieved"]["against_reference"]``), and the label signal's RMS.
+Every decision records its value, its source (``flag``, ``auto`` or
+``full``), the bound and the measured figures. The plan is then checked
+against a high-spp reference (:mod:`.check`) and returned as a frozen
+:class:`FidelityPlan`.
 """
 
 from __future__ import annotations
@@ -151,7 +170,22 @@ def decide_fidelity(
     *,
     progress: bool = False,
 ) -> FidelityPlan:
-    """Choose render settings for ``family`` seen by ``camera`` (see the module doc).
+    r"""Choose render settings for ``family`` seen by ``camera`` (see the module doc).
+
+    The Monte Carlo error is planned relative to the request's scale (else the
+    family's ``planning_error_scale``): relative to the total, or to the label
+    signal,
+
+    .. math::
+
+        e = \frac{\sqrt{\langle (P - P_\text{ref})^2 \rangle}}
+                 {\sqrt{\langle (S - \bar S)^2 \rangle_\text{frames}}}
+
+    where ``S`` is a measurement of what the labels' state changes in a frame
+    (movers and doors: the frame less its static background; switched lights:
+    each light's own light, the weakest light's; otherwise the frame less its
+    mean over frames), ``P`` the plan's measurement and ``P_ref`` the reference's,
+    pooled over probe frames, detectors and random printable masks.
 
     Args:
         family: a :class:`~mincam_render.scenes.base.SceneFamily`.
@@ -217,6 +251,7 @@ def _adopt_differential(decisions: dict[str, Any], draft: Draft, request: PlanRe
         "spp": diff["background_spp"],
         "max_depth": draft.max_depth,
         "shared_difference": diff.get("shared_difference", {}).get("value", False),
+        "difference_seeds": diff["difference_seeds"]["value"],
     }
     for name, value, in_background in (
         ("spp", diff["frame_spp"], diff["background_spp"]),

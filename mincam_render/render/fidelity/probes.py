@@ -8,14 +8,28 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed, stream_seed
-from mincam_render.render.fidelity.constants import DEPTH_GRID, PROBE_FRAMES
-from mincam_render.render.precision import measurement_relative_error
+from mincam_render.render.fidelity.constants import (
+    DEEP_REFERENCE_DEPTH,
+    DEFAULT_SIGNAL_TARGET_ERROR,
+    DEPTH_GRID,
+    FINEST_BOX_TEXELS,
+    PROBE_FRAMES,
+    SIGNAL_FRAMES,
+    SIGNAL_SPP,
+)
+from mincam_render.render.fidelity.signal import SignalSource, render_label_signal
+from mincam_render.render.precision import (
+    ErrorScale,
+    LabelSignal,
+    measurement_relative_error,
+    measurements_of,
+)
 
 if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.differential import BackgroundFamily
+    from mincam_render.render.differential import BackgroundFamily, DifferenceSeeds
 
     # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
     # and does not import them.
@@ -25,8 +39,20 @@ if TYPE_CHECKING:
         num_frames: int
 
         @property
-        def planning_error_scale(self) -> str:
-            """What measurement errors are relative to (a class variable of the family)."""
+        def planning_error_scale(self) -> ErrorScale:
+            """What the planning target is relative to (a class variable of the family)."""
+
+        @property
+        def signal_target_error(self) -> float | None:
+            """The target relative to the label signal, chosen by the task-level check."""
+
+        @property
+        def total_error_scale(self) -> ErrorScale:
+            """What errors relative to the total are relative to: frame or mean."""
+
+        @property
+        def label_signal(self) -> SignalSource:
+            """Where the family's labels live in its frames."""
 
         @property
         def name(self) -> str:
@@ -71,7 +97,15 @@ if TYPE_CHECKING:
 
         @property
         def target_error(self) -> float:
-            """Target relative measurement error (Monte Carlo)."""
+            """Target Monte Carlo measurement error relative to the total."""
+
+        @property
+        def error_scale(self) -> ErrorScale | None:
+            """What the plan's target is relative to, or None: the family's planning scale."""
+
+        @property
+        def signal_target_error(self) -> float | None:
+            """Target relative to the label signal, or None: the family's."""
 
         @property
         def dtype_error_bound(self) -> float:
@@ -101,6 +135,29 @@ if TYPE_CHECKING:
         def shared_difference(self) -> bool | None:
             """Render ``X - C`` once from the board centre, or None to decide."""
 
+        @property
+        def difference_seeds(self) -> DifferenceSeeds | None:
+            """Which frames share the seed of ``X - C``, or None: the planner's default."""
+
+
+def planning_targets(
+    family_scale: ErrorScale, family_signal_target: float | None, request: PlanRequest
+) -> tuple[ErrorScale, float]:
+    """``(scale, target)`` the Monte Carlo error is planned for.
+
+    The request's scale, else the family's (``planning_error_scale``). Relative
+    to the total (frame or mean) the target is ``request.target_error``;
+    relative to the label signal it is ``request.signal_target_error``, else the
+    family's (``signal_target_error``), else :data:`DEFAULT_SIGNAL_TARGET_ERROR`.
+    """
+    scale = ErrorScale(request.error_scale or family_scale)
+    if scale is not ErrorScale.SIGNAL:
+        return scale, float(request.target_error)
+    for target in (request.signal_target_error, family_signal_target):
+        if target is not None:
+            return scale, float(target)
+    return scale, DEFAULT_SIGNAL_TARGET_ERROR
+
 
 def probe_indices(num_frames: int) -> list[int]:
     """``PROBE_FRAMES`` frame indices spread evenly over the sequence."""
@@ -117,6 +174,10 @@ class Probes:
         request: the render request (seed, bounds, explicit settings).
         indices: the probe frames.
         lo_hi: printable transmittance range of the masks errors are measured with.
+        scale: what the Monte Carlo target is relative to (:func:`planning_targets`).
+        target_error: the Monte Carlo target in ``scale``.
+        total_scale: what the bounds of the biases (path depth, float16) are
+            relative to: the family's total (frame or mean), whatever ``scale``.
     """
 
     def __init__(self, family: ProbedFamily, camera: FreeformCamera, request: PlanRequest) -> None:
@@ -125,7 +186,12 @@ class Probes:
         self.indices = probe_indices(family.num_frames)
         self.k = camera.num_detectors
         self.lo_hi = camera.transmittance_range
+        self.scale, self.target_error = planning_targets(
+            family.planning_error_scale, family.signal_target_error, request
+        )
+        self.total_scale = ErrorScale(family.total_error_scale)
         self._renders: dict[tuple, np.ndarray] = {}
+        self._signal: LabelSignal | None = None
 
     def seed(self, index: int, offset: int) -> int:
         """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own).
@@ -184,13 +250,77 @@ class Probes:
             out.append(np.repeat(t, self.k, axis=0) if shared else t)
         return np.stack(out)
 
-    def error(self, a: np.ndarray, b: np.ndarray) -> dict[str, float]:
+    def error(
+        self,
+        a: np.ndarray,
+        b: np.ndarray,
+        scale: ErrorScale | None = None,
+        box_texels: int | None = None,
+    ) -> dict[str, float]:
         """Relative measurement error of ``a`` against ``b`` for random printable masks.
 
-        Relative to each frame's measurement or their mean, as the family's
-        ``planning_error_scale`` says.
+        Relative to ``scale`` (default :attr:`scale`, the planning target's);
+        with ``box_texels``, of box pixels of that size instead of random masks.
         """
-        return measurement_relative_error(a, b, self.lo_hi, scale=self.family.planning_error_scale)
+        scale = self.scale if scale is None else scale
+        signal = self.label_signal() if scale is ErrorScale.SIGNAL else None
+        return measurement_relative_error(
+            a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
+        )
+
+    def figures(self, a: np.ndarray, b: np.ndarray) -> dict[str, Any]:
+        """``a`` against ``b`` in every metric: relative to the total and to the label signal.
+
+        Returns:
+            ``{"total_relative": {rms, max}, "signal_relative": {rms, max},
+            "signal_relative_finest_box": {rms, max}, "total_scale"}``: random
+            printable masks and, for the box, single-texel pixels.
+        """
+        return {
+            "total_relative": self.error(a, b, self.total_scale),
+            "total_scale": self.total_scale.value,
+            "signal_relative": self.error(a, b, ErrorScale.SIGNAL),
+            "signal_relative_finest_box": self.error(
+                a, b, ErrorScale.SIGNAL, box_texels=FINEST_BOX_TEXELS
+            ),
+        }
+
+    def label_signal(self) -> LabelSignal:
+        """The label signal of the planning episode (rendered once, then kept).
+
+        On ``SIGNAL_FRAMES`` frames spread over the episode, at ``SIGNAL_SPP``
+        and the deep reference's path depth, every detector rendered.
+        """
+        if self._signal is None:
+            n = min(SIGNAL_FRAMES, self.family.num_frames)
+            frames = sorted({int(round(x)) for x in np.linspace(0, self.family.num_frames - 1, n)})
+            if len(frames) < 2:
+                raise ValueError(
+                    f"a {self.family.num_frames}-frame episode has no spread over frames: "
+                    "the label signal needs at least 2 frames"
+                )
+            self._signal = render_label_signal(
+                self.family,
+                self.scene,
+                self.camera,
+                frames,
+                source=SignalSource(self.family.label_signal),
+                spp=SIGNAL_SPP,
+                seeds=lambda i, e: stream_seed(self.request.seed, f"fidelity/signal/{e}", i),
+                interval_s=self.request.background_interval_s,
+                max_depth=DEEP_REFERENCE_DEPTH,
+            )
+        return self._signal
+
+    def signal_rms(self) -> dict[str, float]:
+        """The label signal's RMS (W) for the random masks and the finest box pixels."""
+        signal, shape = self.label_signal(), (self.k, *self.camera.mask_resolution)
+        return {
+            "random_masks_w": signal.rms(measurements_of(shape, self.lo_hi)),
+            "finest_box_w": signal.rms(
+                measurements_of(shape, self.lo_hi, box_texels=FINEST_BOX_TEXELS)
+            ),
+        }
 
     def depth_range_m(self) -> dict[str, Any]:
         """Nearest and farthest depth (m) seen from the board centre over the probe frames."""

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.render.fidelity.signal import SignalSource
 from mincam_render.scenes.base import SceneFamily
 from mincam_render.scenes.indoor.config import FurnitureKind
 from mincam_render.scenes.indoor.motion import (
@@ -119,6 +120,8 @@ class IndoorFamily(SceneFamily):
         return self.apply_state(scene, self.state(index))
 
     has_background = True
+    # people and the door carry the labels (lighting, whose lights do, says so)
+    label_signal = SignalSource.MOVERS
 
     def _window_start_s(self, index: int, interval_s: float) -> float:
         if not interval_s > 0:

@@ -1,0 +1,194 @@
+"""The label signal of a family's frames, and how render noise repeats over frames (numpy, W).
+
+Render error matters against what the camera must read: the *label signal*,
+the part of each measurement that the state the labels are computed from
+changes (:class:`~mincam_render.render.precision.LabelSignal`). A family says
+where that state lives (:class:`SignalSource`); :func:`render_label_signal`
+renders it on frames spread over an episode, two estimates with independent
+seeds so that its spread over frames is measured without their noise.
+
+:func:`noise_autocorrelation` measures how render noise repeats from frame to
+frame: noise that a head sees again in the next frame (or for a whole
+background window) is a pattern it can learn, unlike noise that is new in
+every frame.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from mincam_render.render.precision import LabelSignal
+
+if TYPE_CHECKING:
+    import mitsuba as mi
+
+    from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.differential import BackgroundFamily
+    from mincam_render.render.fidelity.probes import ProbedFamily
+
+
+class SignalSource(enum.StrEnum):
+    """Where a family's labels live in its frames: what the label signal is."""
+
+    #: What movers and doors change: ``X - C`` of differential rendering (the
+    #: frame against its static background, same samples), e.g. people counting.
+    MOVERS = "movers"
+    #: What each switched light of the static background changes (its converged
+    #: component times its on/off state); the weakest light sets the signal.
+    LIGHTS = "lights"
+    #: The frames themselves: their static background is their mean over frames
+    #: (families without a separated background: patches, traffic).
+    FRAMES = "frames"
+
+
+#: A render of the family's scene as it is set: ``seed -> T[detector, row, col]`` (W).
+FrameRender = Callable[[int], np.ndarray]
+
+
+def render_label_signal(
+    family: ProbedFamily,
+    scene: mi.Scene,
+    camera: FreeformCamera,
+    frames: Sequence[int],
+    *,
+    source: SignalSource,
+    spp: int,
+    seeds: Callable[[int, int], int],
+    interval_s: float,
+    max_depth: int | None = None,
+) -> LabelSignal:
+    """The label signal of ``frames``: two estimates per part with independent seeds.
+
+    Args:
+        family: the scene family (a ``SceneFamily``; MOVERS and LIGHTS need its
+            static background).
+        scene: its built Mitsuba scene (left at the last state rendered).
+        camera: the camera (every detector is rendered).
+        frames: frame indices, at least 2, spread over the episode.
+        source: where the labels live (:class:`SignalSource`).
+        spp: samples per texel of each estimate.
+        seeds: ``(frame, estimate) -> render seed`` (estimate 0 or 1).
+        interval_s: background window (s) of MOVERS and LIGHTS.
+        max_depth: path depth (None: the scene's integrator).
+
+    Raises:
+        ValueError: fewer than 2 frames; a source the family cannot give.
+    """
+    if len(frames) < 2:
+        raise ValueError(f"frames = {list(frames)}: the signal's spread needs at least 2")
+    has_background = bool(getattr(family, "has_background", False))
+    if source is not SignalSource.FRAMES and not has_background:
+        raise ValueError(f"signal source {source.value!r} needs a family with a static background")
+
+    def render(seed: int) -> np.ndarray:
+        return family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
+
+    if source is SignalSource.LIGHTS:
+        return _lights_signal(family, scene, render, frames, seeds, interval_s)
+    estimates = []
+    for e in (0, 1):
+        per_frame = []
+        for i in frames:
+            if source is SignalSource.MOVERS:
+                x, c = difference_pair(family, scene, render, i, seeds(i, e), interval_s)
+                per_frame.append(x - c)
+            else:
+                family.set_frame(scene, i)
+                per_frame.append(render(seeds(i, e)))
+        estimates.append(np.stack(per_frame))
+    return LabelSignal(parts=(np.stack(estimates),))
+
+
+def difference_pair(
+    family: BackgroundFamily,
+    scene: mi.Scene,
+    render: FrameRender,
+    index: int,
+    seed: int,
+    interval_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(X, C)`` of frame ``index`` with one seed (common random numbers, W).
+
+    ``X`` is the frame lit by its window's slow light, ``C`` its static
+    background at the window's start: paths that miss every mover cancel in
+    ``X - C``, which is what the movers change.
+    """
+    family.set_frame_in_window(scene, index, interval_s)
+    x = render(seed)
+    family.set_background(scene, index, interval_s)
+    return x, render(seed)
+
+
+def _lights_signal(
+    family: BackgroundFamily,
+    scene: mi.Scene,
+    render: FrameRender,
+    frames: Sequence[int],
+    seeds: Callable[[int, int], int],
+    interval_s: float,
+) -> LabelSignal:
+    """One part per switched component: its render times its weight in each frame.
+
+    A component is switched when its weight changes over ``frames`` (a light
+    turned on or off); components of constant weight are background.
+    """
+    weights = [family.background_components(i, interval_s) for i in frames]
+    keys = sorted({k for w in weights for k in w})
+    parts = []
+    for key in keys:
+        w = np.array([frame.get(key, 0.0) for frame in weights])
+        if np.all(w == w[0]):
+            continue
+        family.set_background_component(scene, key)
+        estimates = [render(seeds(frames[0], e)) for e in (0, 1)]
+        parts.append(np.stack([w[:, None, None, None] * r[None] for r in estimates]))
+    if not parts:
+        raise ValueError(
+            f"no light switches within frames {list(frames)}: the lights' signal is unmeasured"
+        )
+    return LabelSignal(parts=tuple(parts))
+
+
+def noise_autocorrelation(noise: np.ndarray, lags: Sequence[int]) -> dict[int, float]:
+    r"""Autocorrelation over frames of render noise, pooled over measurements.
+
+    .. math::
+
+        \rho(L) = \frac{\sum_{f,m} n_{f,m}\, n_{f+L,m}}{\sum_{f,m} n_{f,m}^2}
+            \cdot \frac{F}{F - L},
+        \qquad n_{f,m} = e_{f,m} - \bar e_{m}
+
+    with ``e[frame, measurement]`` the error of each measurement against a
+    reference and its mean over frames removed (a constant offset is not noise
+    that moves). Independent noise gives 0 at every lag; noise shared by every
+    frame of a window of ``W`` frames gives ``(W - L) / W``.
+
+    Args:
+        noise: ``e[frame, ...]`` (any trailing axes are measurements), >= 2 frames.
+        lags: lags in frames, each in [1, frames - 1].
+
+    Returns:
+        ``{lag: rho}``.
+
+    Raises:
+        ValueError: fewer than 2 frames, a lag out of range, or noise of zero power.
+    """
+    e = np.asarray(noise, dtype=np.float64)
+    frames = e.shape[0] if e.ndim else 0
+    if frames < 2:
+        raise ValueError(f"noise has {frames} frame(s): need at least 2")
+    n = e.reshape(frames, -1)
+    n = n - n.mean(axis=0)
+    power = float(np.mean(n * n))
+    if power <= 0.0:
+        raise ValueError("noise is constant over frames: its autocorrelation is undefined")
+    out = {}
+    for lag in lags:
+        if not 1 <= int(lag) < frames:
+            raise ValueError(f"lag = {lag!r}: allowed an integer in [1, {frames - 1}]")
+        out[int(lag)] = float(np.mean(n[:-lag] * n[lag:]) / power)
+    return out

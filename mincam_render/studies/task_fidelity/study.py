@@ -1,0 +1,388 @@
+"""The task-level check of a fidelity plan: do the task figures move with more samples?
+
+A plan's render error is judged where it matters, in task units. The plan's
+episodes (train, validation and test: the same scene seeds) are rendered again
+at other fidelities (:class:`~.config.SampleLevel`: a factor on the plan's
+samples of frames and backgrounds, the full path depth, per-window or per-frame
+seeds of ``X - C``); at every level the same designs are trained *and* tested
+with the same seeds (noise in training data can be learned, so testing alone
+on better renders does not settle it):
+
+1. **Figures per level** (:func:`level_figures`): each design's test figure
+   with its 95 % interval over seeds and test episodes, render seconds per
+   frame (the Pareto in task units), and the level's render error against the
+   reference beside the label signal (:mod:`.noise`), with its autocorrelation
+   at lags of one frame and one background window.
+2. **Acceptance** (:func:`acceptance`): a level is *accepted* against the
+   reference when every design's figure moves by less than ``acceptance_share``
+   of the half-width of its own 95 % interval; the paired difference on the
+   same test episodes (training seeds resampled) is reported beside it, and a
+   *replicate* (the same renders, other training seeds) measures how far
+   training seeds alone move a figure: where the replicate itself would not be
+   accepted, the quarter-interval criterion cannot tell fidelities apart at
+   this size. A design's move is *within seed noise* when its paired interval
+   holds 0; a level is *supported* when every design is accepted or within
+   seed noise (:meth:`TaskFidelityResult.verdict`).
+3. **The target** (:func:`chosen_level`): the cheapest supported level with the
+   plan's seeds; its error relative to the label signal (random masks) is the
+   loosest target the task check supports.
+
+Everything resumes: training runs are kept on disk.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import json
+from collections.abc import Callable, Mapping
+from contextlib import AbstractContextManager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
+from mincam_render.studies.task_fidelity.config import SampleLevel, TaskFidelityConfig
+from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figures
+
+
+@dataclass(frozen=True)
+class LevelFigures:
+    """One level's task figures, render cost and render error.
+
+    ``designs`` are trained with the comparison's seeds, ``replicate`` with the
+    replicate's (None without): the same renders, other training seeds.
+    """
+
+    level: str
+    factor: float
+    difference_seeds: str
+    render_s_per_frame: float
+    designs: Mapping[str, DesignFigure]
+    trivial: float
+    noise: NoiseFigures | None
+    replicate: Mapping[str, DesignFigure] | None = None
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """One design at one level against the reference: how far its figure moved.
+
+    Args:
+        design: the design.
+        moved: its figure at the level less at the reference.
+        half_width: half the width of its 95 % interval at the level.
+        share: the acceptance share of ``half_width``.
+        passes: ``|moved|`` below ``share`` of ``half_width``.
+        paired: the paired difference (level - reference) on the same test
+            episodes, training seeds resampled on both sides.
+        replicate_moved: at the level, the replicate's figure less the
+            design's: how far other training seeds alone move it (None without).
+    """
+
+    design: str
+    moved: float
+    half_width: float
+    share: float
+    passes: bool
+    paired: Paired
+    replicate_moved: float | None = None
+
+    @property
+    def within_seed_noise(self) -> bool:
+        """No change the data resolve: the paired interval (seeds resampled) holds 0."""
+        lo, hi = self.paired.ci95
+        return lo <= 0.0 <= hi
+
+
+@dataclass(frozen=True)
+class TaskFidelityResult:
+    """The check's figures (:mod:`~mincam_render.studies.task_fidelity.study`)."""
+
+    config: Mapping[str, Any]
+    task: str
+    error_name: str
+    levels: tuple[LevelFigures, ...]
+    acceptance: Mapping[str, tuple[Acceptance, ...]]
+    chosen: str | None
+    versions: Mapping[str, str]
+
+    def accepted(self, level: str) -> bool:
+        """Every design's figure at ``level`` within the share of its interval."""
+        return all(a.passes for a in self.acceptance[level])
+
+    def verdict(self, level: str) -> dict[str, bool]:
+        """``accepted``, ``within_seed_noise`` (every design), ``supported`` (each either).
+
+        Also ``criterion_resolves``: the replicate (other training seeds, same
+        renders) would itself be accepted; where it is not, the quarter-interval
+        criterion cannot tell a fidelity apart from training seeds at this size.
+        """
+        checks = self.acceptance[level]
+        return {
+            "accepted": self.accepted(level),
+            "within_seed_noise": all(a.within_seed_noise for a in checks),
+            "supported": supported(checks),
+            "criterion_resolves": all(
+                a.replicate_moved is not None and abs(a.replicate_moved) < a.share * a.half_width
+                for a in checks
+            ),
+        }
+
+    def as_json(self) -> dict[str, Any]:
+        """JSON-ready dict (every record as its fields) with every level's verdict."""
+        out = json.loads(json.dumps(dataclasses.asdict(self), default=str))
+        out["verdicts"] = {name: self.verdict(name) for name in self.acceptance}
+        return out
+
+
+def supported(checks: tuple[Acceptance, ...]) -> bool:
+    """Every design accepted, or its move within what other training seeds make."""
+    return all(a.passes or a.within_seed_noise for a in checks)
+
+
+def scaled_samples(samples: int, factor: float) -> int:
+    """``samples`` times ``factor``, rounded, at least 1."""
+    return max(1, int(samples * factor + 0.5))
+
+
+def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, Any]:
+    """``{episode: RenderRequest}`` of a level: the plan's, or its samples times the factor.
+
+    A level other than the plan renders with full fidelity and explicit
+    settings: the plan's (as the plan's episode was rendered, else looked up or
+    measured) with frames' and backgrounds' samples scaled, the level's depth
+    and seeds (per-window seeds leave the request's field open).
+    """
+    from mincam_render.analysis.comparison import episode_requests
+    from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
+    from mincam_render.data.render_job import plan_render
+    from mincam_render.render.differential import DifferenceSeeds
+    from mincam_render.render.fidelity import Fidelity
+
+    requests = episode_requests(cfg.comparison)
+    if level.planned:
+        return dict(requests)
+    out = {}
+    for name, request in requests.items():
+        rendered = cfg.plan.episodes / name
+        manifest = (
+            read_manifest(rendered)
+            if (rendered / MANIFEST_NAME).is_file()
+            else plan_render(request)
+        )
+        plan = manifest["job"]["render"]
+        background = plan["background"]
+        changes: dict[str, Any] = {
+            "fidelity": Fidelity.FULL,
+            "spp": scaled_samples(plan["spp"], level.factor),
+            "max_depth": level.max_depth if level.max_depth is not None else plan["max_depth"],
+            "shared_render": plan["shared_render"],
+            "dtype": plan["dtype"],
+            "differential": background is not None,
+        }
+        if background is not None:
+            changes["background_spp"] = scaled_samples(background["spp"], level.factor)
+            changes["shared_difference"] = background["shared_difference"]
+            if level.difference_seeds is DifferenceSeeds.FRAME:
+                changes["difference_seeds"] = level.difference_seeds
+        out[name] = dataclasses.replace(request, **changes)
+    return out
+
+
+def render_level(
+    cfg: TaskFidelityConfig,
+    level: SampleLevel,
+    *,
+    hold: Callable[[], AbstractContextManager[Any]] = contextlib.nullcontext,
+    workers: int = 2,
+) -> None:
+    """Render (or resume) a level's episodes, one at a time, each inside ``hold()``.
+
+    ``hold``: e.g. a lock on the machine's CPUs, so other jobs interleave.
+    """
+    from mincam_render.data.render_job import render_dataset
+
+    for name, request in level_requests(cfg, level).items():
+        with hold():
+            render_dataset(request, level.episodes / name, workers=workers, progress=False)
+
+
+def level_figures(
+    cfg: TaskFidelityConfig,
+    level: SampleLevel,
+    out: Path,
+    *,
+    train_workers: int = 1,
+    progress: bool = False,
+) -> tuple[LevelFigures, str]:
+    """Train and test every design on a level's episodes; its figures and the error's name.
+
+    Runs go to ``out/<level>/runs`` (kept: a second call reads them back).
+    """
+    from mincam_render.analysis.comparison import comparison_splits, task_comparison
+    from mincam_render.analysis.mask_structure import view_and_label_map
+    from mincam_render.analysis.run_dispatch import task_splits, train_runs
+    from mincam_render.core.labels import label_tasks
+    from mincam_render.data.dataset import open_dataset
+    from mincam_render.learn.train import TrainingData
+
+    comparison = cfg.comparison
+    names = episode_names(cfg)
+    data = {
+        n: TrainingData.from_dataset(open_dataset(level.episodes / n), n.split("-")[0])
+        for n in names
+    }
+    splits = comparison_splits(data)
+    runs = train_runs(
+        cfg.trained, splits, out / level.name, train_workers=train_workers, progress=progress
+    )
+    labels = comparison.task_labels(label_tasks(splits["train"].label_specs))
+    task = next(iter(labels))
+    task_data = task_splits(splits, labels[task])
+    view_map = view_and_label_map(task_data["train"])
+    n = comparison.seeds
+    seeds = {d: rs[:n] for d, rs in runs[task].items()}
+    block = task_comparison(comparison, seeds, task_data, view_map)
+    replicate = None
+    if cfg.replicate_seeds:
+        others = {d: rs[n:] for d, rs in runs[task].items()}
+        rep = task_comparison(comparison, others, task_data, view_map)
+        replicate = {d.name: DesignFigure.from_block(rep, d.name) for d in comparison.designs}
+    figures = LevelFigures(
+        level=level.name,
+        factor=level.factor,
+        difference_seeds=level.difference_seeds.value,
+        render_s_per_frame=render_seconds_per_frame([level.episodes / n for n in names]),
+        designs={d.name: DesignFigure.from_block(block, d.name) for d in comparison.designs},
+        trivial=float(block["trivial"]["error"]["mean"]),
+        noise=None,
+        replicate=replicate,
+    )
+    return figures, str(block["error_name"])
+
+
+def episode_names(cfg: TaskFidelityConfig) -> list[str]:
+    """The episodes of the check (``train-*``, ``val-*``, ``test-*``)."""
+    from mincam_render.analysis.comparison import episode_requests
+
+    return list(episode_requests(cfg.comparison))
+
+
+def render_seconds_per_frame(paths: list[Path]) -> float:
+    """Render wall time per frame of episodes: backgrounds and frames, planning left out.
+
+    From each episode's ``render_log.jsonl``: the wall time of every attempt that
+    rendered shards (it holds the backgrounds too) less the planning's.
+    """
+    from mincam_render.data.dataset import LOG_NAME, read_manifest
+
+    seconds, frames = 0.0, 0
+    for path in paths:
+        frames += int(read_manifest(path)["num_frames"])
+        for line in (path / LOG_NAME).read_text().splitlines():
+            event = json.loads(line)
+            if event["event"] == "end" and event.get("rendered"):
+                seconds += float(event["seconds"])
+            elif event["event"] == "planned":
+                seconds -= float(event["seconds"])
+    return seconds / max(frames, 1)
+
+
+def acceptance(
+    level: LevelFigures, reference: Mapping[str, DesignFigure], share: float
+) -> tuple[Acceptance, ...]:
+    """Every design at a level against the reference (module docstring, step 2)."""
+    out = []
+    for name, fig in level.designs.items():
+        ref = reference[name]
+        half = 0.5 * (fig.ci95[1] - fig.ci95[0])
+        moved = fig.error - ref.error
+        rep = None if level.replicate is None else level.replicate[name].error - fig.error
+        out.append(
+            Acceptance(
+                design=name,
+                moved=moved,
+                half_width=half,
+                share=share,
+                passes=abs(moved) < share * half,
+                paired=Paired.of(fig, ref),
+                replicate_moved=rep,
+            )
+        )
+    return tuple(out)
+
+
+def chosen_level(cfg: TaskFidelityConfig, accepted: Mapping[str, bool]) -> str | None:
+    """The cheapest level with the plan's seeds that ``accepted`` holds (or None)."""
+    plan_seeds = cfg.plan.difference_seeds
+    candidates = [
+        lv
+        for lv in cfg.levels
+        if lv.name != cfg.reference
+        and lv.difference_seeds is plan_seeds
+        and accepted.get(lv.name, False)
+    ]
+    return min(candidates, key=lambda lv: lv.factor).name if candidates else None
+
+
+def run(
+    cfg: TaskFidelityConfig,
+    out: str | Path,
+    *,
+    train_workers: int = 1,
+    hold: Callable[[], AbstractContextManager[Any]] = contextlib.nullcontext,
+    progress: bool = False,
+) -> TaskFidelityResult:
+    """Train, test and measure every level (episodes rendered already); the check's figures.
+
+    Args:
+        cfg: the check.
+        out: directory of every level's runs (``out/<level>/runs``).
+        train_workers: local worker processes per level's training.
+        hold: a context held around each level's training (a CPU lock).
+        progress: progress bars.
+    """
+    from mincam_render.data.render_job import package_versions
+
+    out = Path(out)
+    figures: dict[str, LevelFigures] = {}
+    error_name = ""
+    for level in cfg.levels:
+        with hold():
+            fig, error_name = level_figures(
+                cfg, level, out, train_workers=train_workers, progress=progress
+            )
+        figures[level.name] = dataclasses.replace(fig, noise=_noise(cfg, level))
+    ref = figures[cfg.reference].designs
+    checks = {
+        name: acceptance(f, ref, cfg.acceptance_share)
+        for name, f in figures.items()
+        if name != cfg.reference
+    }
+    held = {name: supported(c) for name, c in checks.items()}
+    return TaskFidelityResult(
+        config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
+        task=next(iter(cfg.comparison.tasks), ""),
+        error_name=error_name,
+        levels=tuple(figures.values()),
+        acceptance=checks,
+        chosen=chosen_level(cfg, held),
+        versions=package_versions(),
+    )
+
+
+def _noise(cfg: TaskFidelityConfig, level: SampleLevel) -> NoiseFigures | None:
+    """The level's render error on the noise episodes against the reference (None for it)."""
+    if level.name == cfg.reference:
+        return None
+    ref = cfg.level(cfg.reference)
+    second = None
+    if cfg.second_reference is not None and cfg.second_reference != level.name:
+        second = [cfg.level(cfg.second_reference).episodes / n for n in cfg.noise_episodes]
+    return noise_figures(
+        ([level.episodes / n for n in cfg.noise_episodes], level.factor),
+        ([ref.episodes / n for n in cfg.noise_episodes], ref.factor, ref.name),
+        second,
+        window_frames=cfg.window_frames,
+    )
