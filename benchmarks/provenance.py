@@ -16,6 +16,8 @@ from typing import Any
 from mincam_render.core import strict_json
 
 REPO = Path(__file__).resolve().parents[1]
+#: The benchmarks' results, relative to the repository (not part of the code's state).
+RESULTS_DIR = "benchmarks/results"
 
 
 def git(*args: str) -> str:
@@ -28,7 +30,11 @@ def git(*args: str) -> str:
 
 
 def machine() -> dict[str, Any]:
-    """Platform, cores, load, Python (and torch, if the script imported it), git revision."""
+    """Platform, cores, load, Python (and torch, if the script imported it), git revision.
+
+    ``git_dirty``: files other than the benchmarks' results differ from the revision
+    (a benchmark writes its results before it records the machine).
+    """
     info: dict[str, Any] = {
         "platform": platform.platform(),
         "processor": platform.processor(),
@@ -42,7 +48,9 @@ def machine() -> dict[str, Any]:
     revision = git("rev-parse", "HEAD")
     return info | {
         "git_revision": revision or "unknown",
-        "git_dirty": bool(git("status", "--porcelain")) if revision else False,
+        "git_dirty": bool(git("status", "--porcelain", "--", ".", f":!{RESULTS_DIR}"))
+        if revision
+        else False,
     }
 
 
