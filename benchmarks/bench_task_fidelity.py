@@ -10,15 +10,31 @@ Usage::
 2 fps, 4 validation and 3 test episodes of 600 frames, the people count) at every
 level of :data:`LEVELS` (samples of frames and backgrounds times a factor, path
 depth 16; per-window or per-frame seeds of ``X - C``), count-only cameras
-(mincam 2 and 8 px, baselines 8x8 and 32x32, 3 seeds, no gain augmentation)
-trained *and* tested at each level; every level against the reference (16x):
-accepted when every design's test RMSE moves by less than a quarter of its 95 %
-half-width; each level's render error against the label signal on the test
-episodes and its autocorrelation at lags of one frame and one window.
+(mincam 2 and 8 px, baselines 8x8 and 32x32, 8 seeds and a replicate of 8 other
+seeds, no gain augmentation) trained *and* tested at each level; every level
+against the reference (16x): accepted when every design's test RMSE moves by
+less than a quarter of its 95 % half-width; each level's render error against
+the label signal on the test episodes and its autocorrelation at lags of one
+frame and one window.
 ``render`` renders the levels' episodes first (``WORK/ws-<level>``, one episode
-per acquisition of ``--lock``; the plan's own episodes are copied from
-``--one-x`` when given). ``plans``: each family's plan measured by the planner
-(every figure relative to the total and to the label signal).
+per acquisition of ``--lock``; the check's episodes of the plan are copied from
+``--one-x`` when given, which is only read). ``plans``: each family's plan
+measured by the planner (every figure relative to the total and to the label
+signal).
+
+The level with the most samples is the reference, the next the label signal's
+second estimate. A *reduced* check, e.g. ``--levels 1x,0.25x`` on a machine
+that cannot afford 16x, has the plan itself as the reference: its verdict says
+whether the cheaper level moves the task figures from the plan's (so whether the
+plan could be cheaper), not whether the plan has converged; the plan's own
+noise is then measured against the cheaper level, its share of their
+difference's power taken by samples (1/samples). The JSON's
+``workspace.check_scope`` records the levels, reference, episodes and seeds, and
+says so. Run so far (``benchmarks/results/task_fidelity.json``)::
+
+    python benchmarks/bench_task_fidelity.py --work /work/tf38 \
+        --sections render,check --levels 1x,0.25x --one-x /work/episodes/ws8 \
+        --lock /tmp/mincam-cpu.lock
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
 render noise at the plan for random masks and the finest box pixel, their
@@ -95,10 +111,44 @@ def config(work: Path, names: list[str]) -> TaskFidelityConfig:
                 planned=name == "1x",
             )
         )
-    kept = [lv.name for lv in levels]
-    reference = "16x" if "16x" in kept else "4x"
-    second = "4x" if reference == "16x" and "4x" in kept else None
-    return TaskFidelityConfig(levels=tuple(levels), reference=reference, second_reference=second)
+    # the most samples judge the rest; the next most give the signal's second estimate
+    ranked = sorted(
+        (lv for lv in levels if lv.difference_seeds is DifferenceSeeds.WINDOW),
+        key=lambda lv: -lv.factor,
+    )
+    second = ranked[1].name if len(ranked) > 1 else None
+    return TaskFidelityConfig(
+        levels=tuple(levels), reference=ranked[0].name, second_reference=second
+    )
+
+
+def scope(cfg: TaskFidelityConfig) -> dict[str, Any]:
+    """What the check ran, and what its verdicts can say (a reduced check says so)."""
+    full = {name for name, *_ in LEVELS} <= {lv.name for lv in cfg.levels}
+    c = cfg.comparison
+    out: dict[str, Any] = {
+        "full": full,
+        "levels": [lv.name for lv in cfg.levels],
+        "reference": cfg.reference,
+        "second_reference": cfg.second_reference,
+        "episodes": {
+            "train": [c.train_episodes, c.train_frames],
+            "val": [c.val_episodes, c.val_frames],
+            "test": [c.test_episodes, c.test_frames],
+        },
+        "seeds": c.seeds,
+        "replicate_seeds": cfg.replicate_seeds,
+        "designs": [d.name for d in c.designs],
+    }
+    if cfg.reference == cfg.plan.name:
+        out["reduced"] = (
+            f"no level above the plan: every level is judged against the plan "
+            f"({cfg.reference}), so a verdict says whether that level moves the task "
+            f"figures from the plan's, not whether the plan has converged; the plan's "
+            f"render noise is measured against {cfg.second_reference}, its share of "
+            f"their difference's power taken by samples (1/samples)"
+        )
+    return out
 
 
 @contextlib.contextmanager
@@ -116,14 +166,19 @@ def holding(lock: Path | None) -> Iterator[None]:
 
 
 def render(cfg: TaskFidelityConfig, one_x: Path | None, lock: Path | None) -> None:
-    """Copy the plan's episodes from ``one_x`` (if given), render every other level."""
+    """Copy the check's episodes of the plan from ``one_x`` (if given), render the rest.
+
+    ``one_x`` is only read: its episodes are copied (those the check uses)
+    before they are resumed, so nothing is written there.
+    """
+    from mincam_render.studies.task_fidelity.study import episode_names
+
     for level in cfg.levels:
         if level.planned and one_x is not None:
-            for name in ("train", "val", "test"):
-                for src in sorted(one_x.glob(f"{name}-*")):
-                    dst = level.episodes / src.name
-                    if src.is_dir() and not dst.exists():
-                        shutil.copytree(src, dst)
+            for name in episode_names(cfg):
+                src, dst = one_x / name, level.episodes / name
+                if src.is_dir() and not dst.exists():
+                    shutil.copytree(src, dst)
         render_level(cfg, level, hold=lambda: holding(lock))
 
 
@@ -198,12 +253,14 @@ def main() -> None:
         print(paths["md"].read_text())
         entry = result.as_json()
         merged.setdefault("workspace", {})
-        merged["workspace"] |= {"check": entry, **summary(entry, cfg)}
+        merged["workspace"] |= {"check": entry, "check_scope": scope(cfg), **summary(entry, cfg)}
     if "plans" in sections:
         for name, record in plans(args.families.split(","), args.lock).items():
             merged.setdefault(name, {})["plan"] = record
     merged["machine"] = machine()
     merged["command"] = " ".join(["python", *sys.argv])
+    # sections and families run one at a time merge here: keep every run's command
+    merged["commands"] = list(dict.fromkeys([*merged.get("commands", []), merged["command"]]))
     write_result(args.out, merged)
 
 
