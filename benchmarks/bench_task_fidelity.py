@@ -5,6 +5,7 @@ Usage::
     python benchmarks/bench_task_fidelity.py --work /data/fidelity \
         [--sections render,check,plans] [--levels 1x,0.25x,4x,16x] [--lock /tmp/mincam-cpu.lock]
         [--one-x /data/episodes/ws8] [--families workspace,lighting,patches,traffic]
+        [--seeds 8] [--replicate-seeds 8] [--episodes 2,4,3]
 
 ``check`` (workspace): the plan's episodes (2 training episodes of 1,200 frames at
 2 fps, 4 validation and 3 test episodes of 600 frames, the people count) at every
@@ -30,11 +31,18 @@ plan could be cheaper), not whether the plan has converged; the plan's own
 noise is then measured against the cheaper level, its share of their
 difference's power taken by samples (1/samples). The JSON's
 ``workspace.check_scope`` records the levels, reference, episodes and seeds, and
-says so. Run so far (``benchmarks/results/task_fidelity.json``)::
+says so. ``--seeds``, ``--replicate-seeds`` and ``--episodes`` cut it further.
+The reduced check sized for a 2-core machine (3 and 3 seeds, 2 training episodes
+of 1,200 frames, 2 validation and 2 test episodes of 600; the 0.25x episodes
+rendered, the plan's copied from a workspace job's at 1x) is::
 
     python benchmarks/bench_task_fidelity.py --work /work/tf38 \
         --sections render,check --levels 1x,0.25x --one-x /work/episodes/ws8 \
-        --lock /tmp/mincam-cpu.lock
+        --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
+
+It has not been run yet (the CPU lock was held by a full pipeline), and no
+``check`` section has: ``benchmarks/results/task_fidelity.json`` holds the
+``plans`` section alone, so it gives no task verdict and no chosen target.
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
 render noise at the plan for random masks and the finest box pixel, their
@@ -48,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import fcntl
 import json
 import logging
@@ -95,10 +104,22 @@ PLAN_REQUESTS: dict[str, dict[str, Any]] = {
 }
 
 
-def config(work: Path, names: list[str]) -> TaskFidelityConfig:
-    """The workspace check over the named levels (``1x`` always), episodes under ``work``."""
+def config(
+    work: Path,
+    names: list[str],
+    seeds: int | None = None,
+    replicate_seeds: int | None = None,
+    episodes: tuple[int, int, int] | None = None,
+) -> TaskFidelityConfig:
+    """The workspace check over the named levels (``1x`` always), episodes under ``work``.
+
+    ``seeds`` and ``replicate_seeds``: training seeds per design and of the
+    replicate; ``episodes``: ``(train, val, test)`` episode counts, render noise
+    measured on the first three test episodes (None: :class:`TaskFidelityConfig`'s:
+    8 and 8 seeds, 2, 4 and 3 episodes).
+    """
     levels = []
-    for name, factor, depth, seeds in LEVELS:
+    for name, factor, depth, difference_seeds in LEVELS:
         if name != "1x" and name not in names:
             continue
         levels.append(
@@ -107,7 +128,7 @@ def config(work: Path, names: list[str]) -> TaskFidelityConfig:
                 factor=factor,
                 episodes=work / f"ws-{name}",
                 max_depth=depth,
-                difference_seeds=seeds,
+                difference_seeds=difference_seeds,
                 planned=name == "1x",
             )
         )
@@ -117,9 +138,24 @@ def config(work: Path, names: list[str]) -> TaskFidelityConfig:
         key=lambda lv: -lv.factor,
     )
     second = ranked[1].name if len(ranked) > 1 else None
-    return TaskFidelityConfig(
+    cfg = TaskFidelityConfig(
         levels=tuple(levels), reference=ranked[0].name, second_reference=second
     )
+    if seeds is not None:
+        cfg = dataclasses.replace(cfg, comparison=dataclasses.replace(cfg.comparison, seeds=seeds))
+    if replicate_seeds is not None:
+        cfg = dataclasses.replace(cfg, replicate_seeds=replicate_seeds)
+    if episodes is not None:
+        train, val, test = episodes
+        comparison = dataclasses.replace(
+            cfg.comparison, train_episodes=train, val_episodes=val, test_episodes=test
+        )
+        cfg = dataclasses.replace(
+            cfg,
+            comparison=comparison,
+            noise_episodes=tuple(f"test-{i}" for i in range(min(test, 3))),
+        )
+    return cfg
 
 
 def scope(cfg: TaskFidelityConfig) -> dict[str, Any]:
@@ -168,8 +204,8 @@ def holding(lock: Path | None) -> Iterator[None]:
 def render(cfg: TaskFidelityConfig, one_x: Path | None, lock: Path | None) -> None:
     """Copy the check's episodes of the plan from ``one_x`` (if given), render the rest.
 
-    ``one_x`` is only read: its episodes are copied (those the check uses)
-    before they are resumed, so nothing is written there.
+    ``one_x`` is only read: the episodes the check uses are copied and taken as
+    rendered (the check verifies them as it reads them), so nothing is written there.
     """
     from mincam_render.studies.task_fidelity.study import episode_names
 
@@ -177,8 +213,11 @@ def render(cfg: TaskFidelityConfig, one_x: Path | None, lock: Path | None) -> No
         if level.planned and one_x is not None:
             for name in episode_names(cfg):
                 src, dst = one_x / name, level.episodes / name
-                if src.is_dir() and not dst.exists():
+                if not src.is_dir():
+                    raise FileNotFoundError(f"--one-x {one_x}: no episode {name} to copy")
+                if not dst.exists():
                     shutil.copytree(src, dst)
+            continue
         render_level(cfg, level, hold=lambda: holding(lock))
 
 
@@ -238,11 +277,15 @@ def main() -> None:
     ap.add_argument("--lock", type=Path, default=None, help="a CPU lock held per episode")
     ap.add_argument("--families", default=",".join(PLAN_REQUESTS))
     ap.add_argument("--train-workers", type=int, default=1)
+    ap.add_argument("--seeds", type=int, default=None, help="training seeds per design (8)")
+    ap.add_argument("--replicate-seeds", type=int, default=None, help="the replicate's (8)")
+    ap.add_argument("--episodes", default=None, help="TRAIN,VAL,TEST episode counts (2,4,3)")
     ap.add_argument("--out", type=Path, default=RESULTS / "task_fidelity.json")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
-    cfg = config(args.work, args.levels.split(","))
+    episodes = None if args.episodes is None else tuple(map(int, args.episodes.split(",")))
+    cfg = config(args.work, args.levels.split(","), args.seeds, args.replicate_seeds, episodes)
     merged = json.loads(args.out.read_text()) if args.out.is_file() else {}
     if "render" in sections:
         render(cfg, args.one_x, args.lock)
