@@ -5,20 +5,44 @@ Usage::
     python benchmarks/bench_task_fidelity.py --work /data/fidelity \
         [--sections render,check,plans] [--levels 1x,0.25x,4x,16x] [--lock /tmp/mincam-cpu.lock]
         [--one-x /data/episodes/ws8] [--families workspace,lighting,patches,traffic]
+        [--seeds 8] [--replicate-seeds 8] [--episodes 2,4,3]
 
 ``check`` (workspace): the plan's episodes (2 training episodes of 1,200 frames at
 2 fps, 4 validation and 3 test episodes of 600 frames, the people count) at every
 level of :data:`LEVELS` (samples of frames and backgrounds times a factor, path
 depth 16; per-window or per-frame seeds of ``X - C``), count-only cameras
-(mincam 2 and 8 px, baselines 8x8 and 32x32, 3 seeds, no gain augmentation)
-trained *and* tested at each level; every level against the reference (16x):
-accepted when every design's test RMSE moves by less than a quarter of its 95 %
-half-width; each level's render error against the label signal on the test
-episodes and its autocorrelation at lags of one frame and one window.
+(mincam 2 and 8 px, baselines 8x8 and 32x32, 8 seeds and a replicate of 8 other
+seeds, no gain augmentation) trained *and* tested at each level; every level
+against the reference (16x): accepted when every design's test RMSE moves by
+less than a quarter of its 95 % half-width; each level's render error against
+the label signal on the test episodes and its autocorrelation at lags of one
+frame and one window.
 ``render`` renders the levels' episodes first (``WORK/ws-<level>``, one episode
-per acquisition of ``--lock``; the plan's own episodes are copied from
-``--one-x`` when given). ``plans``: each family's plan measured by the planner
-(every figure relative to the total and to the label signal).
+per acquisition of ``--lock``; the check's episodes of the plan are copied from
+``--one-x`` when given, which is only read). ``plans``: each family's plan
+measured by the planner (every figure relative to the total and to the label
+signal).
+
+The level with the most samples is the reference, the next the label signal's
+second estimate. A *reduced* check, e.g. ``--levels 1x,0.25x`` on a machine
+that cannot afford 16x, has the plan itself as the reference: its verdict says
+whether the cheaper level moves the task figures from the plan's (so whether the
+plan could be cheaper), not whether the plan has converged; the plan's own
+noise is then measured against the cheaper level, its share of their
+difference's power taken by samples (1/samples). The JSON's
+``workspace.check_scope`` records the levels, reference, episodes and seeds, and
+says so. ``--seeds``, ``--replicate-seeds`` and ``--episodes`` cut it further.
+The reduced check sized for a 2-core machine (3 and 3 seeds, 2 training episodes
+of 1,200 frames, 2 validation and 2 test episodes of 600; the 0.25x episodes
+rendered, the plan's copied from a workspace job's at 1x) is::
+
+    python benchmarks/bench_task_fidelity.py --work /work/tf38 \
+        --sections render,check --levels 1x,0.25x --one-x /work/episodes/ws8 \
+        --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
+
+It has not been run yet (the CPU lock was held by a full pipeline), and no
+``check`` section has: ``benchmarks/results/task_fidelity.json`` holds the
+``plans`` section alone, so it gives no task verdict and no chosen target.
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
 render noise at the plan for random masks and the finest box pixel, their
@@ -32,6 +56,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import fcntl
 import json
 import logging
@@ -79,10 +104,22 @@ PLAN_REQUESTS: dict[str, dict[str, Any]] = {
 }
 
 
-def config(work: Path, names: list[str]) -> TaskFidelityConfig:
-    """The workspace check over the named levels (``1x`` always), episodes under ``work``."""
+def config(
+    work: Path,
+    names: list[str],
+    seeds: int | None = None,
+    replicate_seeds: int | None = None,
+    episodes: tuple[int, int, int] | None = None,
+) -> TaskFidelityConfig:
+    """The workspace check over the named levels (``1x`` always), episodes under ``work``.
+
+    ``seeds`` and ``replicate_seeds``: training seeds per design and of the
+    replicate; ``episodes``: ``(train, val, test)`` episode counts, render noise
+    measured on the first three test episodes (None: :class:`TaskFidelityConfig`'s:
+    8 and 8 seeds, 2, 4 and 3 episodes).
+    """
     levels = []
-    for name, factor, depth, seeds in LEVELS:
+    for name, factor, depth, difference_seeds in LEVELS:
         if name != "1x" and name not in names:
             continue
         levels.append(
@@ -91,14 +128,63 @@ def config(work: Path, names: list[str]) -> TaskFidelityConfig:
                 factor=factor,
                 episodes=work / f"ws-{name}",
                 max_depth=depth,
-                difference_seeds=seeds,
+                difference_seeds=difference_seeds,
                 planned=name == "1x",
             )
         )
-    kept = [lv.name for lv in levels]
-    reference = "16x" if "16x" in kept else "4x"
-    second = "4x" if reference == "16x" and "4x" in kept else None
-    return TaskFidelityConfig(levels=tuple(levels), reference=reference, second_reference=second)
+    # the most samples judge the rest; the next most give the signal's second estimate
+    ranked = sorted(
+        (lv for lv in levels if lv.difference_seeds is DifferenceSeeds.WINDOW),
+        key=lambda lv: -lv.factor,
+    )
+    second = ranked[1].name if len(ranked) > 1 else None
+    cfg = TaskFidelityConfig(
+        levels=tuple(levels), reference=ranked[0].name, second_reference=second
+    )
+    if seeds is not None:
+        cfg = dataclasses.replace(cfg, comparison=dataclasses.replace(cfg.comparison, seeds=seeds))
+    if replicate_seeds is not None:
+        cfg = dataclasses.replace(cfg, replicate_seeds=replicate_seeds)
+    if episodes is not None:
+        train, val, test = episodes
+        comparison = dataclasses.replace(
+            cfg.comparison, train_episodes=train, val_episodes=val, test_episodes=test
+        )
+        cfg = dataclasses.replace(
+            cfg,
+            comparison=comparison,
+            noise_episodes=tuple(f"test-{i}" for i in range(min(test, 3))),
+        )
+    return cfg
+
+
+def scope(cfg: TaskFidelityConfig) -> dict[str, Any]:
+    """What the check ran, and what its verdicts can say (a reduced check says so)."""
+    full = {name for name, *_ in LEVELS} <= {lv.name for lv in cfg.levels}
+    c = cfg.comparison
+    out: dict[str, Any] = {
+        "full": full,
+        "levels": [lv.name for lv in cfg.levels],
+        "reference": cfg.reference,
+        "second_reference": cfg.second_reference,
+        "episodes": {
+            "train": [c.train_episodes, c.train_frames],
+            "val": [c.val_episodes, c.val_frames],
+            "test": [c.test_episodes, c.test_frames],
+        },
+        "seeds": c.seeds,
+        "replicate_seeds": cfg.replicate_seeds,
+        "designs": [d.name for d in c.designs],
+    }
+    if cfg.reference == cfg.plan.name:
+        out["reduced"] = (
+            f"no level above the plan: every level is judged against the plan "
+            f"({cfg.reference}), so a verdict says whether that level moves the task "
+            f"figures from the plan's, not whether the plan has converged; the plan's "
+            f"render noise is measured against {cfg.second_reference}, its share of "
+            f"their difference's power taken by samples (1/samples)"
+        )
+    return out
 
 
 @contextlib.contextmanager
@@ -116,14 +202,22 @@ def holding(lock: Path | None) -> Iterator[None]:
 
 
 def render(cfg: TaskFidelityConfig, one_x: Path | None, lock: Path | None) -> None:
-    """Copy the plan's episodes from ``one_x`` (if given), render every other level."""
+    """Copy the check's episodes of the plan from ``one_x`` (if given), render the rest.
+
+    ``one_x`` is only read: the episodes the check uses are copied and taken as
+    rendered (the check verifies them as it reads them), so nothing is written there.
+    """
+    from mincam_render.studies.task_fidelity.study import episode_names
+
     for level in cfg.levels:
         if level.planned and one_x is not None:
-            for name in ("train", "val", "test"):
-                for src in sorted(one_x.glob(f"{name}-*")):
-                    dst = level.episodes / src.name
-                    if src.is_dir() and not dst.exists():
-                        shutil.copytree(src, dst)
+            for name in episode_names(cfg):
+                src, dst = one_x / name, level.episodes / name
+                if not src.is_dir():
+                    raise FileNotFoundError(f"--one-x {one_x}: no episode {name} to copy")
+                if not dst.exists():
+                    shutil.copytree(src, dst)
+            continue
         render_level(cfg, level, hold=lambda: holding(lock))
 
 
@@ -183,11 +277,15 @@ def main() -> None:
     ap.add_argument("--lock", type=Path, default=None, help="a CPU lock held per episode")
     ap.add_argument("--families", default=",".join(PLAN_REQUESTS))
     ap.add_argument("--train-workers", type=int, default=1)
+    ap.add_argument("--seeds", type=int, default=None, help="training seeds per design (8)")
+    ap.add_argument("--replicate-seeds", type=int, default=None, help="the replicate's (8)")
+    ap.add_argument("--episodes", default=None, help="TRAIN,VAL,TEST episode counts (2,4,3)")
     ap.add_argument("--out", type=Path, default=RESULTS / "task_fidelity.json")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
-    cfg = config(args.work, args.levels.split(","))
+    episodes = None if args.episodes is None else tuple(map(int, args.episodes.split(",")))
+    cfg = config(args.work, args.levels.split(","), args.seeds, args.replicate_seeds, episodes)
     merged = json.loads(args.out.read_text()) if args.out.is_file() else {}
     if "render" in sections:
         render(cfg, args.one_x, args.lock)
@@ -198,12 +296,14 @@ def main() -> None:
         print(paths["md"].read_text())
         entry = result.as_json()
         merged.setdefault("workspace", {})
-        merged["workspace"] |= {"check": entry, **summary(entry, cfg)}
+        merged["workspace"] |= {"check": entry, "check_scope": scope(cfg), **summary(entry, cfg)}
     if "plans" in sections:
         for name, record in plans(args.families.split(","), args.lock).items():
             merged.setdefault(name, {})["plan"] = record
     merged["machine"] = machine()
     merged["command"] = " ".join(["python", *sys.argv])
+    # sections and families run one at a time merge here: keep every run's command
+    merged["commands"] = list(dict.fromkeys([*merged.get("commands", []), merged["command"]]))
     write_result(args.out, merged)
 
 

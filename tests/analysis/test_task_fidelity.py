@@ -179,3 +179,55 @@ def test_levels_take_the_plans_seeds_unless_told(tmp_path):
     level = SampleLevel(name="4x", factor=4, episodes=str(tmp_path))
     assert level.difference_seeds is DifferenceSeeds.WINDOW
     assert isinstance(level.episodes, Path)
+
+
+def _three_levels(tmp_path: Path, reference: str, second: str | None) -> TaskFidelityConfig:
+    levels = tuple(
+        SampleLevel(name=n, factor=f, episodes=tmp_path / n, max_depth=None if n == "1x" else 16,
+                    planned=n == "1x")
+        for n, f in (("1x", 1.0), ("0.25x", 0.25), ("4x", 4.0))
+    )  # fmt: skip
+    return TaskFidelityConfig(levels=levels, reference=reference, second_reference=second)
+
+
+def _noise_arguments(monkeypatch, cfg: TaskFidelityConfig, level: str) -> dict:
+    from mincam_render.studies.task_fidelity import study
+
+    seen: dict = {}
+    monkeypatch.setattr(
+        study, "noise_figures", lambda lv, ref, sec, **kw: seen.update(lv=lv, ref=ref, sec=sec)
+    )
+    study._noise(cfg, cfg.level(level))
+    return seen
+
+
+@pytest.mark.parametrize(
+    ("reference", "second", "level", "against", "estimate"),
+    [
+        # the most samples judge; the next most give the signal's second estimate
+        ("4x", "1x", "0.25x", "4x", "1x"),
+        ("4x", "1x", "1x", "4x", "1x"),
+        # a reduced check judged by the plan: the plan's noise against the cheaper level
+        ("1x", "0.25x", "1x", "0.25x", "1x"),
+        ("1x", "0.25x", "0.25x", "1x", "0.25x"),
+    ],
+)
+def test_noise_is_taken_against_the_reference_or_the_plans_against_the_second(
+    tmp_path, monkeypatch, reference, second, level, against, estimate
+):
+    cfg = _three_levels(tmp_path, reference, second)
+    seen = _noise_arguments(monkeypatch, cfg, level)
+    names = cfg.noise_episodes
+    assert seen["lv"] == ([tmp_path / level / n for n in names], cfg.level(level).factor)
+    assert seen["ref"] == (
+        [tmp_path / against / n for n in names],
+        cfg.level(against).factor,
+        against,
+    )
+    assert seen["sec"] == [tmp_path / estimate / n for n in names]
+
+
+@pytest.mark.parametrize(("reference", "second"), [("4x", "1x"), ("1x", None)])
+def test_a_reference_has_no_noise_of_its_own_to_measure(tmp_path, monkeypatch, reference, second):
+    cfg = _three_levels(tmp_path, reference, second)
+    assert _noise_arguments(monkeypatch, cfg, reference) == {}

@@ -69,7 +69,9 @@ class TaskFidelityConfig:
         levels: the fidelities, one of them the plan (``planned``).
         reference: the level the others are judged against (the most samples).
         second_reference: a level whose episodes give the label signal's second
-            estimate (None: the reference's alone).
+            estimate (None: the reference's alone); when the reference is the
+            plan (a reduced check), the level the plan's own noise is measured
+            against.
         acceptance_share: share of a design's 95 % half-width its figure may move.
         replicate_seeds: training seeds of a replicate at every level (seeds
             after the comparison's): how far a figure moves when only the

@@ -373,13 +373,25 @@ def run(
 
 
 def _noise(cfg: TaskFidelityConfig, level: SampleLevel) -> NoiseFigures | None:
-    """The level's render error on the noise episodes against the reference (None for it)."""
-    if level.name == cfg.reference:
-        return None
+    """The level's render error on the noise episodes against the reference.
+
+    The reference has none of its own (None), unless it is the plan (a reduced
+    check without a level above it): then the plan is measured against the
+    second reference, a cheaper level, its share of the difference's power
+    taken by samples (:func:`.noise.noise_figures`). The label signal's second
+    estimate is the second reference's render, or the level's own when the
+    level is the second reference: the two renders' noises are independent, so
+    their covariance leaves them out.
+    """
     ref = cfg.level(cfg.reference)
+    if level.name == cfg.reference:
+        if not level.planned or cfg.second_reference is None:
+            return None
+        ref = cfg.level(cfg.second_reference)
     second = None
-    if cfg.second_reference is not None and cfg.second_reference != level.name:
-        second = [cfg.level(cfg.second_reference).episodes / n for n in cfg.noise_episodes]
+    if cfg.second_reference is not None:
+        other = level if cfg.second_reference == ref.name else cfg.level(cfg.second_reference)
+        second = [other.episodes / n for n in cfg.noise_episodes]
     return noise_figures(
         ([level.episodes / n for n in cfg.noise_episodes], level.factor),
         ([ref.episodes / n for n in cfg.noise_episodes], ref.factor, ref.name),
