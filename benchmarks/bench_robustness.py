@@ -63,6 +63,7 @@ from mincam_render.analysis.robustness import (  # noqa: E402
     robustness_curves,
 )
 from mincam_render.analysis.robustness_report import write_robustness_report  # noqa: E402
+from mincam_render.core.package_data import shipped_path  # noqa: E402
 from mincam_render.core.seeds import stream_seed  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationModel  # noqa: E402
@@ -77,9 +78,7 @@ KINDS = ("nominal", "robust")
 #: episodes of 1 minute each.
 TASKS: dict[str, dict[str, Any]] = {
     "workspace": {"family": "workspace"},
-    "lighting": {
-        "family": str(Path(__file__).resolve().parents[1] / "scenes" / "lighting_toggling.toml")
-    },
+    "lighting": {"family": str(shipped_path("lighting_toggling.toml"))},
     "traffic": {
         "family": "traffic",
         "fps": 30.0,

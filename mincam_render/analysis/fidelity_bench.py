@@ -223,24 +223,6 @@ def _median_time(fn: Callable[..., np.ndarray], repeats: int) -> tuple[Any, floa
     return result, float(np.median(times)), float(np.max(times) - np.min(times))
 
 
-def _git_revision() -> str:
-    import subprocess
-    from pathlib import Path
-
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            timeout=10,
-            check=False,
-        )
-        return out.stdout.strip() or "unknown"
-    except OSError:
-        return "unknown"
-
-
 def bench_fidelity(family_name: str, config: FidelityBenchConfig | None = None) -> dict[str, Any]:
     """Measure error against run time of every fidelity knob for one family.
 
@@ -542,6 +524,7 @@ def _bench_auto(bench: _Bench, family_name: str) -> dict[str, Any]:
 
 def _result(bench: _Bench, reference: dict, base_error: float, auto: dict | None) -> dict[str, Any]:
     """The JSON-ready result: rows with their ``effect``, base, reference, statements, machine."""
+    from mincam_render.data.render_job.planning import git_revision
     from mincam_render.render import backend
 
     rows_out, camera = bench.rows, bench.camera
@@ -571,7 +554,7 @@ def _result(bench: _Bench, reference: dict, base_error: float, auto: dict | None
             "platform": platform.platform(),
             "processor": platform.processor() or platform.machine(),
             "variant": backend.describe()["variant"],
-            "git_revision": _git_revision(),
+            "git_revision": git_revision()[:7],
         },
     }
 

@@ -9,10 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from mincam_render.core.config import ConfigError, merge, parse
+from mincam_render.core.package_data import shipped_path
 from mincam_render.scenes.base import SceneFamily
-
-#: The shipped descriptions (``scenes/`` at the repository root).
-SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 
 #: family name -> "module:Class"
 _FAMILIES = {
@@ -49,7 +47,7 @@ def load_family(
     """
     path = Path(name_or_path)
     if str(name_or_path) in _FAMILIES:
-        path = SCENES_DIR / f"{name_or_path}.toml"
+        path = shipped_path(f"{name_or_path}.toml")
     if not path.is_file():
         raise ConfigError(
             f"{path}: scene description not found (give a family name: "

@@ -20,9 +20,10 @@ from pathlib import Path
 
 from mincam_render.core.checks import check_number
 from mincam_render.core.config import ConfigError, load_toml, spec
+from mincam_render.core.package_data import shipped_path
 
-#: The shipped description (``scenes/energy.toml`` at the repository root).
-ENERGY_TOML = Path(__file__).resolve().parents[3] / "scenes" / "energy.toml"
+#: The shipped description's file name among the package data (``scenes/`` in a clone).
+ENERGY_TOML = "energy.toml"
 
 
 def check_ranges(obj: object) -> None:
@@ -379,7 +380,7 @@ def load_energy_config(
         ConfigError: missing file, bad TOML, unknown key, wrong type or range; the
             message names the file and the field.
     """
-    path = Path(path) if path is not None else ENERGY_TOML
+    path = Path(path) if path is not None else shipped_path(ENERGY_TOML)
     if not path.is_file():
         raise ConfigError(f"{path}: energy description not found")
     return load_toml(EnergyConfig, path, overrides)

@@ -30,7 +30,6 @@ log = logging.getLogger(__name__)
 def package_versions() -> dict[str, str]:
     """Versions of the packages that determine the output, and the git revision."""
     import importlib.metadata as md
-    import subprocess
 
     out = {}
     for name in ("mitsuba", "drjit", "torch", "numpy", "mincam_render"):
@@ -38,19 +37,30 @@ def package_versions() -> dict[str, str]:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
             out[name] = "not installed"
+    out["git_revision"] = git_revision()
+    return out
+
+
+def git_revision() -> str:
+    """The commit of the checkout this package runs from, or "unknown" (an installed wheel).
+
+    Only a checkout whose root holds this package counts: a wheel installed into
+    some other project's repository must not report that project's commit.
+    """
+    import subprocess
+
+    package = Path(__file__).resolve().parents[2]
     try:
-        repo = Path(__file__).resolve().parents[2]
-        rev = subprocess.run(
-            ["git", "-C", str(repo), "rev-parse", "HEAD"],
+        top, rev = subprocess.run(
+            ["git", "-C", str(package), "rev-parse", "--show-toplevel", "HEAD"],
             capture_output=True,
             text=True,
             timeout=10,
             check=True,
-        ).stdout.strip()
-        out["git_revision"] = rev or "unknown"
-    except (OSError, subprocess.SubprocessError):
-        out["git_revision"] = "unknown"
-    return out
+        ).stdout.split()
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return "unknown"
+    return rev if Path(top).resolve() == package.parent else "unknown"
 
 
 def _describe_family(request: RenderRequest) -> tuple[SceneFamily, dict[str, Any], bool]:
@@ -245,7 +255,7 @@ def _fidelity_plan(
     log.info("fidelity planned in %.1f s", seconds)
     if use_cache or ship:
         try:
-            plan_cache.store_plan(fields, plan, seconds, plan_cache.SHIPPED_DIR if ship else None)
+            plan_cache.store_plan(fields, plan, seconds, plan_cache.shipped_dir() if ship else None)
         except OSError as err:
             log.warning("could not keep the fidelity plan in %s: %s", plan_cache.cache_dir(), err)
     return FidelityPlan.from_dict(plan["settings"], plan["decisions"])
