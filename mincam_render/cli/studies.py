@@ -40,7 +40,8 @@ if TYPE_CHECKING:
 #: --set camera.detectors=N).
 episode_options = apply_options([
     click.option("--family", default=C.family, show_default=True,
-                 help="Scene family name or scene description (.toml)."),
+                 help="Scene family name, family class (module:Class) or scene description "
+                 "(.toml)."),
     click.option("--set", "overrides", multiple=True, callback=scene_settings,
                  metavar="KEY=VALUE",
                  help="Override a scene description value in every episode (TOML syntax), "

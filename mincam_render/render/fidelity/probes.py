@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
     # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
     # and does not import them.
-    class ProbedFamily(BackgroundFamily, Protocol):
+    class ProbedFamily(Protocol):
         """What the planner needs of a scene family (``SceneFamily`` has it)."""
 
         num_frames: int
@@ -32,15 +32,23 @@ if TYPE_CHECKING:
         def name(self) -> str:
             """The family's name."""
 
-        @property
-        def needs_history(self) -> bool:
-            """Whether the family's labels need earlier frames."""
-
         def build_scene(self) -> mi.Scene:
             """The family's Mitsuba scene."""
 
         def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
             """Set ``scene`` to frame ``index``; return its labels."""
+
+        def render_transport(
+            self,
+            scene: mi.Scene,
+            camera: FreeformCamera,
+            *,
+            spp: int,
+            seed: int,
+            max_depth: int | None = None,
+            parallax: bool = True,
+        ) -> np.ndarray:
+            """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
 
     class PlanRequest(Protocol):
         """What the planner reads of a render request (``RenderRequest`` has it)."""
@@ -126,6 +134,13 @@ class Probes:
         self.k = camera.num_detectors
         self.lo_hi = camera.transmittance_range
         self._renders: dict[tuple, np.ndarray] = {}
+
+    @property
+    def background(self) -> BackgroundFamily:
+        """The family as one with a differential background; ValueError if it has none."""
+        from mincam_render.render.differential import background_family
+
+        return background_family(self.family)
 
     def seed(self, index: int, offset: int) -> int:
         """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own).
