@@ -170,7 +170,10 @@ def load_family(
     config: Any = parse(
         cls.config_type, merge(table, overrides or {}), source=source, base_dir=base_dir
     )
-    return cls(config, seed=seed, num_frames=num_frames)
+    try:
+        return cls(config, seed=seed, num_frames=num_frames)
+    except ConfigError as err:  # a check that needs the scene, e.g. an id it lacks
+        raise ConfigError(f"{source}: {err}") from None
 
 
 def _description(name_or_path: str | os.PathLike) -> tuple[str, dict, Path | None]:
