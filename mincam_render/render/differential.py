@@ -64,8 +64,8 @@ from mincam_render.render.capabilities import DifferentialBackground
 if TYPE_CHECKING:
     import mitsuba as mi
 
-    class BackgroundFamily(DifferentialBackground, Protocol):
-        """What differential rendering needs of a scene family: its background and estimator.
+    class EstimatorFamily(Protocol):
+        """A scene family's estimator, which every render of a dataset goes through.
 
         Structural: ``render`` sits below ``scenes`` in the layers and does not import it.
         """
@@ -81,6 +81,9 @@ if TYPE_CHECKING:
             parallax: bool = True,
         ) -> np.ndarray:
             """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
+
+    class BackgroundFamily(DifferentialBackground, EstimatorFamily, Protocol):
+        """What differential rendering needs of a scene family: its background and estimator."""
 
 
 def background_family(family: object) -> BackgroundFamily:

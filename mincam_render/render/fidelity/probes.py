@@ -15,11 +15,11 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.differential import BackgroundFamily
+    from mincam_render.render.differential import BackgroundFamily, EstimatorFamily
 
     # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
     # and does not import them.
-    class ProbedFamily(Protocol):
+    class ProbedFamily(EstimatorFamily, Protocol):
         """What the planner needs of a scene family (``SceneFamily`` has it)."""
 
         num_frames: int
@@ -37,18 +37,6 @@ if TYPE_CHECKING:
 
         def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
             """Set ``scene`` to frame ``index``; return its labels."""
-
-        def render_transport(
-            self,
-            scene: mi.Scene,
-            camera: FreeformCamera,
-            *,
-            spp: int,
-            seed: int,
-            max_depth: int | None = None,
-            parallax: bool = True,
-        ) -> np.ndarray:
-            """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
 
     class PlanRequest(Protocol):
         """What the planner reads of a render request (``RenderRequest`` has it)."""

@@ -111,8 +111,6 @@ class MitsubaFamily(SceneFamily, DifferentialBackground, PeopleRemoval, Temporal
             ),
         }
 
-    # ---- capabilities -------------------------------------------------------------
-
     def background_key(self, index: int, interval_s: float) -> str:
         bits = "".join("1" if on else "0" for on in self.switches[index])
         return f"emitters={bits}" if bits else STATIC
@@ -162,8 +160,6 @@ class MitsubaFamily(SceneFamily, DifferentialBackground, PeopleRemoval, Temporal
         reach = float(np.linalg.norm(hi - lo))
         eye = np.asarray(cam.position) + reach * (0.6 * up - 0.4 * forward)
         return View(tuple(eye), tuple((lo + hi) / 2), tuple(up), 60.0)
-
-    # ---- state ------------------------------------------------------------------
 
     def _switched_on(self, index: int) -> tuple[bool, ...]:
         self.check_index(index)
