@@ -110,7 +110,9 @@ def day_family(family: str, config: EnergyConfig) -> IndoorFamily:
     from mincam_render.scenes.indoor import IndoorFamily
     from mincam_render.scenes.registry import FAMILY_NAMES, family_class, load_family
 
-    name = family if family in FAMILY_NAMES else _family_key(Path(family))
+    path = Path(family)
+    # a shipped name, a description file (naming its family), a registered name or module:Class
+    name = family if family in FAMILY_NAMES or not path.is_file() else _family_key(path)
     if not issubclass(family_class(name), IndoorFamily):
         raise ValueError(
             f"family {name!r} is not an indoor scene (no lights or window to schedule): "
