@@ -31,7 +31,7 @@ detectors = 2
 mask_resolution = 8
 [[movers]]
 id = "ball"
-path = [[-0.3, -0.2, 0.81], [0.3, -0.2, 0.81], [0.3, 0.2, 0.81], [-0.3, 0.2, 0.81]]
+path = [[-0.3, -0.2, 0.85], [0.3, -0.2, 0.85], [0.3, 0.2, 0.85], [-0.3, 0.2, 0.85]]
 speed_m_s = [0.2, 0.2]
 [[emitters]]
 id = "desk_lamp"
@@ -172,10 +172,10 @@ BAD = {
     ),
     "a region outside the scene": (
         (
-            "min_m = [-0.38, -0.26, 0.785], max_m = [0.38, 0.26, 0.785]",
-            "min_m = [4.6, -0.26, 0.785], max_m = [5.4, 0.26, 0.785]",
+            "min_m = [-0.35, -0.24, 0.785], max_m = [0.35, 0.24, 0.785]",
+            "min_m = [4.6, -0.24, 0.785], max_m = [5.4, 0.24, 0.785]",
         ),
-        r"movers\[0\]\.region = \{min_m = \[4.6, -0.26, 0.785\], max_m = \[5.4, 0.26, 0.785\]\}: "
+        r"movers\[0\]\.region = \{min_m = \[4.6, -0.24, 0.785\], max_m = \[5.4, 0.24, 0.785\]\}: "
         r"outside the scene, whose bounding box spans \[-2.0, -2.0, 0.0\] to \[2.0, 2.0, 2.6\] m",
     ),
     "a label's region outside the scene": (
@@ -187,8 +187,8 @@ BAD = {
         r"outside the scene",
     ),
     "a box whose min exceeds its max": (
-        ("min_m = [-0.38, -0.26, 0.785]", "min_m = [-0.38, -0.26, 7.85]"),
-        r"movers\[0\]\.region: min_m = \[-0.38, -0.26, 7.85\], max_m = .*min must not exceed",
+        ("min_m = [-0.35, -0.24, 0.785]", "min_m = [-0.35, -0.24, 7.85]"),
+        r"movers\[0\]\.region: min_m = \[-0.35, -0.24, 7.85\], max_m = .*min must not exceed",
     ),
     "a label of a kind that does not exist": (
         ('kind = "count_in_region"', 'kind = "count_on_table"'),
@@ -197,7 +197,7 @@ BAD = {
     ),
     "a mover that never enters the view": (
         (
-            "position = [0.0, 0.0, 2.2]\nlook_at = [0.0, 0.0, 0.77]",
+            "position = [0.0, 0.0, 1.77]\nlook_at = [0.0, 0.0, 0.77]",
             "position = [1.9, 1.9, 0.3]\nlook_at = [1.9, 1.9, 0.0]",
         ),
         r"movers\[0\] \('book'\): never enters the camera's view",
