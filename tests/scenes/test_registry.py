@@ -205,12 +205,13 @@ def test_the_renderer_decides_from_what_a_family_declares(outside, tmp_path, var
     from mincam_render.analysis.preview import _view_sensors
     from mincam_render.data.dataset import open_dataset
     from mincam_render.data.render_job import RenderRequest, render_dataset
+    from mincam_render.learn.training_data import TrainingData
 
     ask = RenderRequest(family="blink", num_frames=4, spp=1, differential=True)
     with pytest.raises(ValueError, match="'blink' has no static background"):
         render_dataset(ask, tmp_path / "a", workers=0)
-    request = RenderRequest(family="blinkpkg.family:TemporalBlink", num_frames=4, spp=1,
-                            shard_frames=2)  # fmt: skip
+    request = RenderRequest(family="blinkpkg.family:TemporalBlink", num_frames=12, spp=1,
+                            shard_frames=4)  # fmt: skip
     render_dataset(request, tmp_path / "b", workers=0)
     data = open_dataset(tmp_path / "b")
     family = data.manifest["family"]
@@ -221,8 +222,9 @@ def test_the_renderer_decides_from_what_a_family_declares(outside, tmp_path, var
     )
     assert data.manifest["job"]["family"]["name"] == "blinkpkg.family:TemporalBlink"
     assert not data.manifest["fidelity"]["differential"]["value"]
-    on = np.asarray(data.labels((0, 4))["on"])[:, 0]
-    power = data.transport((0, 4)).sum(axis=(1, 2, 3))
+    assert TrainingData.from_dataset(data, "train").history == 5  # what training reads
+    on = np.asarray(data.labels((0, 12))["on"])[:, 0]
+    power = data.transport((0, 12)).sum(axis=(1, 2, 3))
     assert np.all((power > 0) == (on > 0.5))  # the lamp's state is what the camera sees
     sensors = _view_sensors(load_family("blink", seed=0, num_frames=2), 8)
     assert list(sensors) == ["camera view"]
