@@ -65,7 +65,7 @@ def test_the_wheel_lists_every_package_and_maps_the_scene_folder():
 
 def test_ruff_finds_nothing():
     run = subprocess.run(
-        [_tool("ruff"), "check", "mincam_render", "tests", "benchmarks", "scripts"],
+        [_tool("ruff"), "check", "mincam_render", "tests", "benchmarks", "scripts", "examples"],
         cwd=REPO,
         capture_output=True,
         text=True,
