@@ -142,6 +142,8 @@ def _compare(
     from mincam_render.render.mitsuba_scene import SceneError
 
     t0 = time.perf_counter()
+    # a bad description fails here, on one line, before anything is printed or written
+    _family_detectors({"family": episode["family"], "overrides": overrides, "detectors": detectors})
     quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
     try:
         cfg = C(
