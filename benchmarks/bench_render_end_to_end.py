@@ -45,18 +45,18 @@ def time_planning(item: str) -> dict:
 
     family, _, frames = item.partition(":")
     request = RenderRequest(family=family, num_frames=int(frames))
-    before, shipped = os.environ.get(plan_cache.CACHE_ENV), plan_cache.SHIPPED_DIR
+    before, shipped = os.environ.get(plan_cache.CACHE_ENV), plan_cache.shipped_dir
     with tempfile.TemporaryDirectory() as cache:
         # no plan is found (shipped plans hidden, empty cache): measured, then kept here
         os.environ[plan_cache.CACHE_ENV] = cache
-        plan_cache.SHIPPED_DIR = Path(cache) / "no-shipped-plans"
+        plan_cache.shipped_dir = lambda: Path(cache) / "no-shipped-plans"  # type: ignore
         t0 = time.perf_counter()
         manifest = plan_render(request)
         measured_s = time.perf_counter() - t0
         t0 = time.perf_counter()
         again = plan_render(request)
         kept_s = time.perf_counter() - t0
-    plan_cache.SHIPPED_DIR = shipped
+    plan_cache.shipped_dir = shipped  # type: ignore
     if before is None:
         os.environ.pop(plan_cache.CACHE_ENV)
     else:

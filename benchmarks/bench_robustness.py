@@ -64,6 +64,7 @@ from mincam_render.analysis.robustness import (  # noqa: E402
 )
 from mincam_render.analysis.robustness_report import write_robustness_report  # noqa: E402
 from mincam_render.core import strict_json
+from mincam_render.core.package_data import shipped_path  # noqa: E402
 from mincam_render.core.seeds import stream_seed  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20  # noqa: E402
@@ -87,9 +88,7 @@ AS_MEASURED: dict[str, Any] = {
 }
 TASKS: dict[str, dict[str, Any]] = {
     "workspace": {"family": "workspace"},
-    "lighting": {
-        "family": str(Path(__file__).resolve().parents[1] / "scenes" / "lighting_toggling.toml")
-    },
+    "lighting": {"family": str(shipped_path("lighting_toggling.toml"))},
     "traffic": {
         "family": "traffic",
         "fps": 30.0,

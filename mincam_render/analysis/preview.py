@@ -5,10 +5,12 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.capabilities import Preview
 from mincam_render.scenes.base import SceneFamily
 
 log = logging.getLogger(__name__)
@@ -33,6 +35,20 @@ def _format_labels(family: SceneFamily, labels: dict[str, np.ndarray]) -> str:
     return "\n".join(parts)
 
 
+def _view_sensors(family: SceneFamily, width: int) -> dict[str, Any]:
+    """The perspective sensors of a preview, ``{title: Mitsuba sensor}``.
+
+    The camera's view, and a bird's-eye view when the family has one
+    (:class:`~mincam_render.render.capabilities.Preview`).
+    """
+    camera = family.camera()
+    poses = {"camera view": (camera.position, camera.look_at, camera.up, camera.fov_deg)}
+    if isinstance(family, Preview):
+        bird = family.birdseye_view()
+        poses["bird's-eye view"] = (bird.position, bird.look_at, bird.up, bird.fov_deg)
+    return {title: ms.perspective_sensor(*pose, width, width) for title, pose in poses.items()}
+
+
 def render_preview(
     family: SceneFamily,
     frames: list[int],
@@ -43,7 +59,7 @@ def render_preview(
     transport_spp: int = 16,
     progress: bool = False,
 ) -> Path:
-    """Save a PNG with, per frame: camera view, bird's-eye view, detector 0's T, labels.
+    """Save a PNG with, per frame: camera view, bird's-eye view (if any), detector 0's T, labels.
 
     Args:
         family: the scene family (its default camera is used).
@@ -62,35 +78,29 @@ def render_preview(
 
     camera = family.camera()
     scene = family.build_scene()
-    cam_sensor = ms.perspective_sensor(
-        camera.position, camera.look_at, camera.up, camera.fov_deg, width, width
-    )
-    bird = family.birdseye_view()
-    bird_sensor = ms.perspective_sensor(
-        bird.position, bird.look_at, bird.up, bird.fov_deg, width, width
-    )
+    sensors = _view_sensors(family, width)
     from tqdm import tqdm
 
     rendered = []
     bar = tqdm(frames, desc=f"preview {family.name}", unit="frame", disable=not progress)
     for index in bar:
-        bar.set_postfix_str("camera view, bird's-eye view, transport")
+        bar.set_postfix_str(", ".join(sensors) + ", transport")
         labels = family.set_frame(scene, index)
         views = [
-            np.asarray(mi.render(scene, sensor=cam_sensor, spp=spp, seed=index))[..., 0],
-            np.asarray(mi.render(scene, sensor=bird_sensor, spp=spp, seed=index))[..., 0],
-            family.render_transport(scene, camera, spp=transport_spp, seed=index)[0],
+            np.asarray(mi.render(scene, sensor=sensor, spp=spp, seed=index))[..., 0]
+            for sensor in sensors.values()
         ]
+        views.append(family.render_transport(scene, camera, spp=transport_spp, seed=index)[0])
         rendered.append((index, labels, views))
     # one exposure per column for all frames, so brightness changes stay visible
-    scales = [max(float(np.percentile(r[2][c], 99.0)) for r in rendered) for c in range(3)]
-    fig, axes = plt.subplots(len(frames), 3, figsize=(10.5, 3.6 * len(frames)), squeeze=False)
+    columns = len(sensors) + 1
+    scales = [max(float(np.percentile(r[2][c], 99.0)) for r in rendered) for c in range(columns)]
+    fig, axes = plt.subplots(
+        len(frames), columns, figsize=(3.5 * columns, 3.6 * len(frames)), squeeze=False
+    )
     for row, (index, labels, views) in enumerate(rendered):
-        titles = [
-            f"frame {index} (t = {family.time_s(index):.2f} s): camera view",
-            "bird's-eye view",
-            "detector 0 transport T (mask open)",
-        ]
+        titles = [*sensors, "detector 0 transport T (mask open)"]
+        titles[0] = f"frame {index} (t = {family.time_s(index):.2f} s): {titles[0]}"
         for ax, img, title, scale in zip(axes[row], views, titles, scales, strict=True):
             ax.imshow(_tonemap(img, scale), cmap="gray", vmin=0, vmax=1, interpolation="nearest")
             ax.set_title(title, fontsize=8)

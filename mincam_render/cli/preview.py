@@ -42,10 +42,12 @@ def preview_cmd(
 ) -> None:
     """Render a few frames of a scene family with their labels drawn on.
 
-    SCENE is a family name (patches, workspace, lighting, traffic) or a path to
-    a scene description (.toml). Writes preview_<family>.png into --out: per
-    frame the training camera's view, a bird's-eye view and detector 0's
-    transport image, with the frame's labels.
+    SCENE is a family name (patches, workspace, lighting, traffic, or one an
+    installed package registers), a family class (module:Class) or a path to a
+    scene description (.toml; docs/your_own_task.md). Writes
+    preview_<family>.png into --out: per frame the training camera's view, a
+    bird's-eye view (when the family has one) and detector 0's transport image,
+    with the frame's labels.
 
     \b
     Example:

@@ -187,8 +187,9 @@ def render_cmd(
 ) -> None:
     """Render a dataset of transport images T[frame, detector, row, col] with labels.
 
-    FAMILY is a scene family name (patches, workspace, lighting, traffic) or a
-    scene TOML file. The same command after an interruption resumes and gives
+    FAMILY is a scene family name (patches, workspace, lighting, traffic, or one
+    an installed package registers), a family class (module:Class) or a scene
+    TOML file (docs/your_own_task.md). The same command after an interruption resumes and gives
     the same bytes as an uninterrupted run; a different configuration into a
     non-empty --out is refused. The fidelity plan is measured once per
     description, camera, targets and frame count (on the seed-0 episode, so every

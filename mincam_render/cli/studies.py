@@ -41,7 +41,8 @@ if TYPE_CHECKING:
 #: --set camera.detectors=N).
 episode_options = apply_options([
     click.option("--family", default=C.family, show_default=True,
-                 help="Scene family name or scene description (.toml)."),
+                 help="Scene family name, family class (module:Class) or scene description "
+                 "(.toml)."),
     click.option("--set", "overrides", multiple=True, callback=scene_settings,
                  metavar="KEY=VALUE",
                  help="Override a scene description value in every episode (TOML syntax), "
@@ -164,6 +165,8 @@ def _compare(
     from mincam_render.render.mitsuba_scene import SceneError
 
     t0 = time.perf_counter()
+    # a bad description fails here, on one line, before anything is printed or written
+    _family_detectors({"family": episode["family"], "overrides": overrides, "detectors": detectors})
     quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
     try:
         cfg = C(

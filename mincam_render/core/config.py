@@ -63,7 +63,9 @@ def _check_range(source: str, path: str, value: Any, md: Mapping[str, Any]) -> N
             raise _fail(source, path, value, f"allowed range [{lo}, {hi}] {unit}".rstrip())
 
 
-def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
+def _convert(
+    source: str, path: str, tp: Any, value: Any, md: dict, base_dir: Path | None = None
+) -> Any:
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
@@ -74,25 +76,26 @@ def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
             if a is type(None):
                 continue
             try:
-                return _convert(source, path, a, value, md)
+                return _convert(source, path, a, value, md, base_dir)
             except ConfigError as err:
                 errors.append(err)
         raise errors[-1] if len(errors) == 1 else _fail(source, path, value, "no allowed type fits")
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         if not isinstance(value, dict):
             raise _fail(source, path, value, f"expected a table of {tp.__name__} fields")
-        return parse(tp, value, source=source, path=path)
+        return parse(tp, value, source=source, path=path, base_dir=base_dir)
     if origin is tuple:
         if not isinstance(value, list | tuple):
             raise _fail(source, path, value, "expected an array")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(
-                _convert(source, f"{path}[{i}]", args[0], v, md) for i, v in enumerate(value)
+                _convert(source, f"{path}[{i}]", args[0], v, md, base_dir)
+                for i, v in enumerate(value)
             )
         if len(value) != len(args):
             raise _fail(source, path, value, f"expected an array of {len(args)} values")
         return tuple(
-            _convert(source, f"{path}[{i}]", a, v, md)
+            _convert(source, f"{path}[{i}]", a, v, md, base_dir)
             for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if tp is float:
@@ -115,6 +118,11 @@ def _convert(source: str, path: str, tp: Any, value: Any, md: dict) -> Any:
         if not isinstance(value, str):
             raise _fail(source, path, value, "expected a string")
         return value
+    if tp is Path:
+        if not isinstance(value, str | Path) or not str(value):
+            raise _fail(source, path, value, "expected a file path (a string)")
+        # relative to the description's folder, so a description and its files move together
+        return Path(value) if base_dir is None else (base_dir / value).resolve()
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         try:
             return tp(value)
@@ -128,8 +136,18 @@ def _unit(md: dict) -> str:
     return f" in {md['unit']}" if md.get("unit") else ""
 
 
-def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") -> T:
+def parse(
+    cls: type[T],
+    table: dict,
+    *,
+    source: str = "<dict>",
+    path: str = "",
+    base_dir: Path | None = None,
+) -> T:
     """Build ``cls`` from a TOML table, validating keys, types and ranges.
+
+    ``base_dir``: the folder relative file paths (fields typed ``Path``) are
+    resolved against, the description file's; None keeps them as given.
 
     Raises:
         ConfigError: unknown key, missing required key, wrong type or range, or
@@ -155,7 +173,9 @@ def parse(cls: type[T], table: dict, *, source: str = "<dict>", path: str = "") 
         if isinstance(value, dict) and _is_instance(default):
             # a partial table overlays the field's default: [camera] detectors = 16
             value = merge(_as_table(default), value)
-        kwargs[name] = _convert(source, f"{prefix}{name}", hints[name], value, dict(f.metadata))
+        kwargs[name] = _convert(
+            source, f"{prefix}{name}", hints[name], value, dict(f.metadata), base_dir
+        )
     try:
         return cls(**kwargs)
     except ConfigError:
@@ -196,7 +216,7 @@ def load_toml(cls: type[T], path: str | os.PathLike, overrides: dict | None = No
         raise ConfigError(f"{path}: not valid TOML: {err}") from None
     if overrides:
         table = merge(table, overrides)
-    return parse(cls, table, source=str(path))
+    return parse(cls, table, source=str(path), base_dir=path.parent)
 
 
 def merge(base: dict, over: dict) -> dict:
@@ -225,4 +245,6 @@ def to_dict(obj: Any) -> Any:
         return [to_dict(v) for v in obj]
     if isinstance(obj, __import__("enum").Enum):
         return obj.value
+    if isinstance(obj, Path):
+        return str(obj)
     return obj

@@ -9,8 +9,8 @@ measured on the *planning episode* (the description's sequence at seed
 share one plan, and a cached plan is exactly the plan that would be measured.
 
 Plans are looked up by the sha256 of :func:`plan_fields`, first among the plans
-shipped with the repository (``scenes/plans/``, written by ``mincam-render plan
---ship``), then in the user's cache directory (``$MINCAM_RENDER_PLAN_CACHE``, else
+shipped with the package (package data, ``scenes/plans/`` in a clone, written by
+``scripts/ship_plans.py``), then in the user's cache directory (``$MINCAM_RENDER_PLAN_CACHE``, else
 the platform's user cache directory, via ``platformdirs``). A file that does not
 parse or whose fields do not hash to its name is ignored with a warning (and
 planned again). Bump :data:`PLANNER_VERSION` when the planner changes what it
@@ -28,7 +28,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from mincam_render.scenes.registry import SCENES_DIR
+from mincam_render.core.package_data import shipped_path
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +38,6 @@ PLAN_SEED = 0
 #: from ``core.seeds.stream_seed``, pvlib daylight, paths by networkx and the
 #: S9119-01 diode of the families' cameras (dataset format 4).
 PLANNER_VERSION = 4
-#: Plans shipped with the repository.
-SHIPPED_DIR = SCENES_DIR / "plans"
 #: Environment variable naming the user's plan cache directory.
 CACHE_ENV = "MINCAM_RENDER_PLAN_CACHE"
 #: The planning of every plan before targets relative to the label signal: relative
@@ -56,6 +54,11 @@ def cache_dir() -> Path:
     import platformdirs
 
     return Path(platformdirs.user_cache_dir("mincam_render")) / "plans"
+
+
+def shipped_dir() -> Path:
+    """The folder of the plans shipped with the package (``scenes/plans/`` in a clone)."""
+    return shipped_path("plans")
 
 
 def plan_fields(
@@ -94,7 +97,7 @@ def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
     """
     key = plan_key(fields)
     shipped_plans_missing()
-    for where, folder in (("shipped", SHIPPED_DIR), ("cache", cache_dir())):
+    for where, folder in (("shipped", shipped_dir()), ("cache", cache_dir())):
         path = folder / f"{key}.json"
         if not path.is_file():
             continue
@@ -115,12 +118,12 @@ def shipped_plans_missing() -> bool:
     A package installed without its plans still works, but measures every plan
     again (minutes per description): said once per process, never silently.
     """
-    missing = not SHIPPED_DIR.is_dir()
+    missing = not shipped_dir().is_dir()
     if missing:
         log.warning(
             "the shipped fidelity plans are missing (no folder %s): every plan is measured "
             "again and kept in %s",
-            SHIPPED_DIR,
+            shipped_dir(),
             cache_dir(),
         )
     return missing
@@ -135,7 +138,7 @@ def store_plan(
         fields: :func:`plan_fields` of the plan.
         plan: ``{"settings", "decisions"}``, JSON-ready.
         seconds: wall time the planning took (kept for reports).
-        folder: where to write; ``SHIPPED_DIR`` to ship it with the repository.
+        folder: where to write; :func:`shipped_dir` to ship it with the package.
     """
     folder = cache_dir() if folder is None else Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

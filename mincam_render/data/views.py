@@ -30,6 +30,7 @@ import numpy as np
 
 from mincam_render.core.checks import check_int
 from mincam_render.data import dataset as ds
+from mincam_render.render.capabilities import PeopleRemoval
 
 log = logging.getLogger(__name__)
 
@@ -111,7 +112,8 @@ def _render_all(data: Any, width: int, spp: int, progress: bool, people: bool) -
     from mincam_render.render import mitsuba_scene as ms
 
     family = _load_family(data.manifest["job"])
-    if not (people or family.removes_people):
+    remover = family if isinstance(family, PeopleRemoval) else None
+    if not (people or remover):
         raise ValueError(f"family {family.name!r} cannot remove its people: no backgrounds")
     camera = data.camera
     scene = family.build_scene()
@@ -121,10 +123,10 @@ def _render_all(data: Any, width: int, spp: int, progress: bool, people: bool) -
     views = np.empty((data.num_frames, width, width), np.float32)
     desc = "views" if people else "backgrounds"
     for i in tqdm(range(data.num_frames), desc=desc, unit="frame", disable=not progress):
-        if people:
+        if remover is None or people:
             family.set_frame(scene, i)
         else:
-            family.set_frame_without_people(scene, i)
+            remover.set_frame_without_people(scene, i)
         # the frame's seed for both: untouched paths give bit-identical pixels
         views[i] = np.asarray(mi.render(scene, sensor=sensor, spp=spp, seed=i))[..., 0]
     return views

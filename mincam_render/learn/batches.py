@@ -13,6 +13,7 @@ import torch
 
 from mincam_render.learn.training_data import Batch, GatherBuffer, TrainingData, render_frames
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.render.capabilities import history_frames
 
 
 class DatasetBatches:
@@ -85,7 +86,7 @@ class RenderedBatches:
         self.spp = spp
         self.seed = seed
         self.next_frame = start_frame
-        self.history = 30 if family.needs_history else 1
+        self.history = history_frames(family)
         self._scene: Any = None
 
     def next(self, generator: torch.Generator) -> Batch:

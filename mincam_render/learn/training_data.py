@@ -24,6 +24,7 @@ import torch
 from mincam_render.core.labels import LabelSpec
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.render.capabilities import history_frames
 
 #: Float16 transport is widened once to float32 in RAM up to this size (bytes of
 #: the float32 copy, 2 GiB): 10,000 frames of 8 detectors at 64x64 take 1.3 GB.
@@ -138,16 +139,18 @@ class TrainingData:
             check()
         family = getattr(ds, "family", None)
         name = family if isinstance(family, str) else getattr(family, "name", "")
-        if isinstance(family, str):
+        recorded = getattr(ds, "manifest", {}).get("family", {}).get("history_frames")
+        if isinstance(recorded, int):  # what the family declared when it was rendered
+            history = recorded
+        elif isinstance(family, str):
             from mincam_render.scenes.registry import family_class
 
             try:
-                needs = family_class(family).needs_history
+                history = history_frames(family_class(family))
             except Exception:  # unknown or not yet importable family: a static task
-                needs = False
+                history = 1
         else:
-            needs = getattr(family, "needs_history", False)
-        history = 30 if needs else 1
+            history = history_frames(family)
         labels = {k: np.asarray(v, np.float32) for k, v in ds.labels(split).items()}
         stored, scales = ds.stored_transport(split)
         return cls(
@@ -190,7 +193,7 @@ class TrainingData:
             label_specs=tuple(family.labels),
             camera=cam,
             fps=float(family.fps),
-            history=30 if family.needs_history else 1,
+            history=history_frames(family),
             source={
                 "family": family.name,
                 "seed": family.seed,

@@ -58,38 +58,22 @@ from __future__ import annotations
 import enum
 import hashlib
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Protocol, cast
 
 import numpy as np
 
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
+from mincam_render.render.capabilities import DifferentialBackground
 
 if TYPE_CHECKING:
     import mitsuba as mi
 
-    class BackgroundFamily(Protocol):
-        """What differential rendering needs of a scene family (``SceneFamily`` has it).
+    class EstimatorFamily(Protocol):
+        """A scene family's estimator, which every render of a dataset goes through.
 
         Structural: ``render`` sits below ``scenes`` in the layers and does not import it.
         """
-
-        def background_key(self, index: int, interval_s: float) -> str:
-            """Identity of frame ``index``'s static background."""
-
-        def background_components(self, index: int, interval_s: float) -> dict[str, float]:
-            """``{component key: weight}`` of frame ``index``'s background."""
-
-        def set_background(
-            self, scene: mi.Scene, index: int, interval_s: float, *, at: float = 0.0
-        ) -> None:
-            """Set ``scene`` to frame ``index``'s static background (movers removed)."""
-
-        def set_background_component(self, scene: mi.Scene, key: str) -> None:
-            """Set ``scene`` to one static component."""
-
-        def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
-            """Set ``scene`` to frame ``index`` lit by its window's slow light; return labels."""
 
         def render_transport(
             self,
@@ -102,6 +86,25 @@ if TYPE_CHECKING:
             parallax: bool = True,
         ) -> np.ndarray:
             """Transport images ``[detector, row, col]`` (W, numpy) with the family's estimator."""
+
+    class BackgroundFamily(DifferentialBackground, EstimatorFamily, Protocol):
+        """What differential rendering needs of a scene family: its background and estimator."""
+
+
+def background_family(family: object) -> BackgroundFamily:
+    """``family`` as a family with a differential background, checked.
+
+    Raises:
+        ValueError: it declares none (:class:`DifferentialBackground`), e.g. a
+            dataset planned with backgrounds whose family's code has changed since.
+    """
+    if not isinstance(family, DifferentialBackground):
+        name = getattr(family, "name", type(family).__name__)
+        raise ValueError(
+            f"family {name!r} has no static background (DifferentialBackground): "
+            "differential rendering is unavailable"
+        )
+    return cast("BackgroundFamily", family)
 
 
 class DifferenceSeeds(enum.StrEnum):
@@ -307,7 +310,7 @@ def render_background(
     Leaves ``scene`` at the background's start.
 
     Args:
-        family: a family with ``has_background``.
+        family: a family with a differential background.
         scene: the family's scene (Mitsuba), updated in place.
         camera: the dataset's camera (components are rendered per detector).
         index: any frame of the background.

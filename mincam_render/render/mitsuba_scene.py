@@ -30,8 +30,11 @@ class SceneError(ValueError):
     """A scene could not be loaded or described."""
 
 
-def load_scene(scene: SceneInput) -> mi.Scene:
+def load_scene(scene: SceneInput, *, optimize: bool = True) -> mi.Scene:
     """Return an ``mi.Scene`` from a scene dict, an XML file path, or a loaded scene.
+
+    ``optimize=False`` keeps every shape of an XML file as it is: Mitsuba's
+    optimizations merge meshes that share a BSDF, ids and all.
 
     Raises:
         SceneError: the file is missing or unreadable, or Mitsuba rejects the scene.
@@ -55,7 +58,7 @@ def load_scene(scene: SceneInput) -> mi.Scene:
         if not path.is_file():
             raise SceneError(f"scene file {str(path)!r} does not exist or is not a file")
         try:
-            return mi.load_file(str(path))
+            return mi.load_file(str(path), optimize=optimize)
         except Exception as err:
             raise SceneError(f"Mitsuba could not load {str(path)!r}: {_first_line(err)}") from err
     raise SceneError(

@@ -21,6 +21,7 @@ from mincam_render.core.config import spec
 from mincam_render.core.labels import LabelSpec
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.photodiode import DiodeResponse
+from mincam_render.render.capabilities import SunlitWindow
 from mincam_render.render.fidelity.signal import SignalSource
 from mincam_render.render.precision import ErrorScale
 
@@ -60,27 +61,21 @@ class CameraMount:
         )
 
 
-@dataclass(frozen=True)
-class View:
-    """A perspective view for previews: pose (m), up, and horizontal field of view (deg)."""
-
-    position: tuple[float, float, float]
-    look_at: tuple[float, float, float]
-    up: tuple[float, float, float]
-    fov_deg: float
-
-
 class SceneFamily(abc.ABC):
     """A procedural scene family: description + seed -> frames with labels.
 
-    Subclasses set ``name``, ``config_type`` and ``labels`` and implement the
-    abstract methods. ``set_frame`` must be a pure function of the frame index.
+    What every family provides: subclasses set ``name`` and ``config_type`` (a
+    frozen dataclass read from the description, every field with a ``spec``) and
+    implement the abstract methods; ``set_frame`` must be a pure function of the
+    frame index. What a family may add -- a differential background, people
+    removal, temporal labels, a sunlit window, a bird's-eye preview -- it
+    declares by having the members of the protocols in
+    :mod:`mincam_render.render.capabilities` (re-exported by
+    :mod:`mincam_render.scenes`); the renderer checks for them.
     """
 
     name: ClassVar[str]
     config_type: ClassVar[type]
-    #: True when the task needs a time history (traffic speed from 30 frames).
-    needs_history: ClassVar[bool] = False
     #: What errors relative to the total are relative to
     #: (:class:`~mincam_render.render.precision.ErrorScale`): each probe frame's
     #: own measurement (FRAME), or the mean over the probe frames (MEAN) for a
@@ -135,69 +130,6 @@ class SceneFamily(abc.ABC):
     def frame_state(self, index: int) -> dict[str, Any]:
         """A JSON-ready summary of frame ``index``'s state (for metadata)."""
 
-    @abc.abstractmethod
-    def birdseye_view(self) -> View:
-        """A view from above covering the scene, for previews."""
-
-    #: True when the family separates a static background from moving objects
-    #: (:meth:`background_key`, :meth:`set_background`), for differential rendering.
-    has_background: ClassVar[bool] = False
-
-    def background_key(self, index: int, interval_s: float) -> str:
-        """Identity of frame ``index``'s static background (its scene without movers).
-
-        Frames with equal keys share one background: the lights of the frame and
-        the slowly changing light (daylight) of the start of its ``interval_s``
-        window. See :mod:`mincam_render.render.differential`.
-        """
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
-    def set_background(
-        self, scene: mi.Scene, index: int, interval_s: float, *, at: float = 0.0
-    ) -> None:
-        """Set ``scene`` to the static background of frame ``index`` (movers removed).
-
-        ``at``: with the daylight at this position in the frame's window (0 its
-        start, the ``C`` of differential rendering; 1 its end).
-        """
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
-    def background_components(self, index: int, interval_s: float) -> dict[str, float]:
-        """``{component key: weight}``: frame ``index``'s background as a weighted sum.
-
-        Light transport is linear in the emitters, so the converged background
-        is a sum of renders of static components (each light alone, the
-        daylight at the ends of the frame's window), each rendered once per
-        dataset and shared by every frame that uses it.
-        """
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
-    def set_background_component(self, scene: mi.Scene, key: str) -> None:
-        """Set ``scene`` to one static component (see :meth:`background_components`)."""
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
-    #: True when the family can render a frame with its people removed
-    #: (:meth:`set_frame_without_people`), for the privacy audit's backgrounds.
-    removes_people: ClassVar[bool] = False
-
-    def set_frame_without_people(self, scene: mi.Scene, index: int) -> None:
-        """Set ``scene`` to frame ``index`` with its people removed, all else as in the frame.
-
-        Unlike :meth:`set_background` the door, lights and daylight stay the
-        frame's own: the frame's view minus this one's is what the people add
-        (themselves, their shadows, their light on the room). For the privacy
-        audit's backgrounds (:mod:`mincam_render.data.views`).
-        """
-        raise NotImplementedError(f"family {self.name!r} cannot remove its people")
-
-    def set_frame_in_window(self, scene: mi.Scene, index: int, interval_s: float) -> dict:
-        """Set ``scene`` to frame ``index`` lit by its background's slow light; return labels.
-
-        The movers, door and lights of the frame, with the daylight of the start
-        of its ``interval_s`` window (the ``X`` of differential rendering).
-        """
-        raise NotImplementedError(f"family {self.name!r} has no static background")
-
     def render_transport(
         self,
         scene: mi.Scene,
@@ -210,10 +142,11 @@ class SceneFamily(abc.ABC):
     ) -> np.ndarray:
         """Transport images of ``scene`` with this family's estimator (``[detector, row, col]``, W).
 
-        :func:`mincam_render.render.transport.render_transport` with the family's
-        :meth:`sun_window`: every render of a dataset (frames, ``X``, ``C``,
-        background components, the planner's pilots and reference) goes
-        through here, so they all use one estimator.
+        :func:`mincam_render.render.transport.render_transport`, through the
+        family's window when it has one
+        (:class:`~mincam_render.render.capabilities.SunlitWindow`): every render
+        of a dataset (frames, ``X``, ``C``, background components, the planner's
+        pilots and reference) goes through here, so they all use one estimator.
         """
         from mincam_render.render.transport import render_transport
 
@@ -224,17 +157,8 @@ class SceneFamily(abc.ABC):
             seed=seed,
             max_depth=max_depth,
             parallax=parallax,
-            sun_window=self.sun_window(),
+            sun_window=self.sun_window() if isinstance(self, SunlitWindow) else None,
         )
-
-    def sun_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The window the sun shines through, ``(corner, edge_u, edge_v)`` (m, world), or None.
-
-        ``edge_u x edge_v`` points out of the room. Renders connect paths to the
-        sunlit patches behind it (:mod:`mincam_render.render.sun_patch`); None (the
-        default) renders with the scene's path tracer alone.
-        """
-        return None
 
     def time_s(self, index: int) -> float:
         """Time of frame ``index`` since the start of the sequence (s)."""

@@ -25,7 +25,8 @@ from mincam_render.core.config import check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render import mitsuba_scene as ms
-from mincam_render.scenes.base import CameraMount, SceneFamily, View
+from mincam_render.render.capabilities import Preview, View
+from mincam_render.scenes.base import CameraMount, SceneFamily
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -80,7 +81,7 @@ class PatchesConfig:
         )
 
 
-class PatchesFamily(SceneFamily):
+class PatchesFamily(SceneFamily, Preview):
     """Counting patches (paper Sec. 5)."""
 
     name = "patches"

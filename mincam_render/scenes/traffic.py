@@ -44,8 +44,9 @@ from mincam_render.core.photometry import irradiance_to_lux
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render import mitsuba_scene as ms
+from mincam_render.render.capabilities import Preview, TemporalLabels, View
 from mincam_render.scenes import sky
-from mincam_render.scenes.base import CameraMount, SceneFamily, View
+from mincam_render.scenes.base import CameraMount, SceneFamily
 from mincam_render.scenes.sumo import (
     EASTBOUND,
     SumoRoad,
@@ -610,12 +611,12 @@ def _boxes(boxes: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.n
 # ---- the family --------------------------------------------------------------------
 
 
-class TrafficFamily(SceneFamily):
+class TrafficFamily(SceneFamily, TemporalLabels, Preview):
     """Traffic speed monitoring (paper Sec. 7.3): a two-way street with SUMO traffic."""
 
     name = "traffic"
     config_type = TrafficConfig
-    needs_history = True
+    history_frames = 30  # the paper's 1 s of history at 30 fps
 
     def __init__(self, config: TrafficConfig, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)

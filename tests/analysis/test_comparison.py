@@ -156,9 +156,9 @@ def test_episodes_render_the_mask_resolution_the_finest_baseline_needs():
 )
 def test_cli_study_default_pixels_follow_the_detector_override(args, tmp_path):
     """The narrow description has no [camera] table: the override still sets 2 detectors."""
-    from mincam_render.scenes.registry import SCENES_DIR
+    from mincam_render.core.package_data import shipped_path
 
-    narrow = str(SCENES_DIR / "patches_narrow.toml")
+    narrow = str(shipped_path("patches_narrow.toml"))
     cmd = ["study", "--family", narrow, *args, "--out", str(tmp_path)]
     res = CliRunner().invoke(main, cmd)
     assert res.exit_code == 2

@@ -125,7 +125,7 @@ def test_a_plan_whose_fields_were_edited_is_refused(tmp_path, own_cache, variant
 
 
 @pytest.mark.parametrize(
-    "path", sorted(plan_cache.SHIPPED_DIR.glob("*.json")), ids=lambda p: p.stem[:12]
+    "path", sorted(plan_cache.shipped_dir().glob("*.json")), ids=lambda p: p.stem[:12]
 )
 def test_shipped_plans_match_the_shipped_descriptions_and_this_renderer(path, variant):
     body = json.loads(path.read_text())
@@ -154,7 +154,7 @@ def test_shipped_plans_match_the_shipped_descriptions_and_this_renderer(path, va
 
 
 def test_a_shipped_plan_is_used_before_the_cache(tmp_path, own_cache, monkeypatch, variant):
-    monkeypatch.setattr(plan_cache, "SHIPPED_DIR", tmp_path / "shipped")
+    monkeypatch.setattr(plan_cache, "shipped_dir", lambda: tmp_path / "shipped")
     shipped = plan_render(AUTO, ship=True)
     assert len(list((tmp_path / "shipped").glob("*.json"))) == 1
     assert not own_cache.exists()  # shipping measures afresh and keeps nothing else

@@ -9,10 +9,12 @@ import pytest
 
 from mincam_render.data import dataset as ds
 from mincam_render.render import precision
+from mincam_render.render.capabilities import DifferentialBackground
 from mincam_render.render.differential import (
     Background,
     BackgroundSettings,
     DifferenceSeeds,
+    background_family,
     background_seed,
     render_background,
     render_frame,
@@ -47,9 +49,9 @@ def test_background_keys_follow_daylight_windows_and_lights(variant):
 
 def test_families_without_background_say_so(variant):
     fam = load_family("patches", seed=0, num_frames=4)
-    assert not fam.has_background
-    with pytest.raises(NotImplementedError, match="no static background"):
-        fam.background_key(0, 60.0)
+    assert not isinstance(fam, DifferentialBackground)
+    with pytest.raises(ValueError, match="'patches' has no static background"):
+        background_family(fam)
 
 
 def test_background_seed_is_a_pure_function_of_seed_and_key():

@@ -52,9 +52,20 @@ def test_layers_are_the_subpackages_of_the_package():
     assert not [p.name for p in (REPO / "mincam_render").glob("*.py") if p.name != "__init__.py"]
 
 
+def test_the_wheel_lists_every_package_and_maps_the_scene_folder():
+    """pyproject lists the packages (find cannot add the mapped scenes/): none forgotten."""
+    tool = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
+    on_disk = {
+        ".".join(p.parent.relative_to(REPO).parts)
+        for p in (REPO / "mincam_render").rglob("__init__.py")
+    }
+    assert set(tool["packages"]) == on_disk | {"mincam_render.scene_data"}
+    assert tool["package-dir"] == {"mincam_render.scene_data": "scenes"}
+
+
 def test_ruff_finds_nothing():
     run = subprocess.run(
-        [_tool("ruff"), "check", "mincam_render", "tests", "benchmarks", "scripts"],
+        [_tool("ruff"), "check", "mincam_render", "tests", "benchmarks", "scripts", "examples"],
         cwd=REPO,
         capture_output=True,
         text=True,

@@ -19,7 +19,12 @@ from click.testing import CliRunner
 from mincam_render.cli.main import main
 
 REPO = Path(__file__).resolve().parents[2]
-DOCS = [REPO / "README.md", REPO / "masks" / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+DOCS = [
+    REPO / "README.md",
+    REPO / "masks" / "README.md",
+    REPO / "examples" / "README.md",
+    *sorted((REPO / "docs").glob("*.md")),
+]
 #: `mincam-render ...` up to the end of an inline code span or of a line
 _PREFIXED = re.compile(r"mincam-render((?: [^`\n|]*)?)")
 #: first cell of a row of the README's command table: | `render FAMILY --frames N` |

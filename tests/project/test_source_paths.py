@@ -6,13 +6,14 @@ import logging
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 from mincam_render.analysis.energy import config as energy_config
+from mincam_render.core.package_data import shipped_path
 from mincam_render.data import plan_cache
 from mincam_render.data.render_job import package_versions, source_revision
-from mincam_render.scenes import registry
 
-REPO = registry.SCENES_DIR.parent
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_a_checkout_records_its_own_revision():
@@ -45,18 +46,17 @@ def test_a_package_installed_inside_another_work_tree_records_no_revision_of_it(
     assert "git_revision" not in done.stdout and "'mincam_render'" in done.stdout
 
 
-def test_the_energy_description_is_found_where_the_scene_descriptions_are(tmp_path, monkeypatch):
-    shipped = tmp_path / "scenes"
+def test_the_energy_description_is_found_among_the_shipped_files(tmp_path, monkeypatch):
+    shipped = tmp_path / "scene_data"
     shipped.mkdir()
-    text = (registry.SCENES_DIR / "energy.toml").read_text()
+    text = shipped_path(energy_config.ENERGY_TOML).read_text()
     (shipped / "energy.toml").write_text(text.replace("area_m2 = 0.016872", "area_m2 = 0.5"))
-    monkeypatch.setattr(registry, "SCENES_DIR", shipped)
-    assert energy_config.shipped_energy_toml() == shipped / "energy.toml"
+    monkeypatch.setattr(energy_config, "shipped_path", lambda *parts: shipped.joinpath(*parts))
     assert energy_config.load_energy_config().panel.area_m2 == 0.5
 
 
 def test_missing_shipped_plans_are_said_once(tmp_path, monkeypatch, caplog):
-    monkeypatch.setattr(plan_cache, "SHIPPED_DIR", tmp_path / "not-installed")
+    monkeypatch.setattr(plan_cache, "shipped_dir", lambda: tmp_path / "not-installed")
     monkeypatch.setenv(plan_cache.CACHE_ENV, str(tmp_path / "cache"))
     plan_cache.shipped_plans_missing.cache_clear()
     fields = {"family_name": "patches", "planner_version": plan_cache.PLANNER_VERSION}

@@ -1,6 +1,7 @@
 """Scene description loading, the family registry and the patches family."""
 
 import dataclasses
+from pathlib import Path
 
 import mitsuba as mi
 import numpy as np
@@ -224,3 +225,20 @@ def test_mesh_refuses_a_reflectance_of_the_wrong_size(variant):
     v[1, 0] = v[2, 1] = 1.0
     with pytest.raises(ValueError, match="one per vertex"):
         ms.mesh("tri", v, [[0, 1, 2]], reflectance=[0.5, 0.5])
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class WithFile:
+    scene: Path = spec(doc="a file named in a description")
+
+
+def test_file_paths_in_a_description_are_relative_to_its_folder(tmp_path):
+    from mincam_render.core.config import load_toml, to_dict
+
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "d.toml").write_text('scene = "../room.xml"\n')
+    described = load_toml(WithFile, tmp_path / "sub" / "d.toml")
+    assert described.scene == tmp_path / "room.xml"  # absolute: the dataset's workers find it
+    assert parse(WithFile, to_dict(described)) == described  # a manifest reads it back
+    with pytest.raises(ConfigError, match=r"scene = 3: expected a file path"):
+        parse(WithFile, {"scene": 3})

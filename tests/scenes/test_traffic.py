@@ -127,9 +127,9 @@ def test_default_daylight_is_tens_of_thousands_of_lux():
 def test_shipped_description_documents_the_defaults():
     import tomllib
 
-    from mincam_render.scenes import SCENES_DIR
+    from mincam_render.core.package_data import shipped_path
 
-    table = tomllib.loads((SCENES_DIR / "traffic.toml").read_text())
+    table = tomllib.loads(shipped_path("traffic.toml").read_text())
     assert table.pop("family") == "traffic"
     assert parse(TrafficConfig, table, source="traffic.toml") == TrafficConfig()
 

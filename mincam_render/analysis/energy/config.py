@@ -20,22 +20,10 @@ from pathlib import Path
 
 from mincam_render.core.checks import check_number
 from mincam_render.core.config import ConfigError, load_toml, spec
+from mincam_render.core.package_data import shipped_path
 
-#: The shipped description's name among the shipped scene descriptions.
-ENERGY_TOML_NAME = "energy.toml"
-
-
-def shipped_energy_toml() -> Path:
-    """The shipped description: beside the scene descriptions, wherever they are shipped.
-
-    Their location is known in one place only
-    (:data:`mincam_render.scenes.registry.SCENES_DIR`), not guessed from this
-    file's place in a source tree. Imported here, not at the top: the scene
-    layer loads Mitsuba, which showing these defaults does not need.
-    """
-    from mincam_render.scenes.registry import SCENES_DIR
-
-    return SCENES_DIR / ENERGY_TOML_NAME
+#: The shipped description's file name among the package data (``scenes/`` in a clone).
+ENERGY_TOML = "energy.toml"
 
 
 def check_ranges(obj: object) -> None:
@@ -392,7 +380,7 @@ def load_energy_config(
         ConfigError: missing file, bad TOML, unknown key, wrong type or range; the
             message names the file and the field.
     """
-    path = Path(path) if path is not None else shipped_energy_toml()
+    path = Path(path) if path is not None else shipped_path(ENERGY_TOML)
     if not path.is_file():
         raise ConfigError(f"{path}: energy description not found")
     return load_toml(EnergyConfig, path, overrides)

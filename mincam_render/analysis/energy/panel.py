@@ -16,7 +16,7 @@ import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from mincam_render.render.irradiance import IrradianceEstimate
-    from mincam_render.scenes.base import SceneFamily
+    from mincam_render.scenes.indoor import IndoorFamily
 
 log = logging.getLogger(__name__)
 SECONDS_PER_HOUR = 3600.0
@@ -98,7 +98,7 @@ def panel_pose(camera_position: ArrayLike, frame: ArrayLike, panel: PanelConfig)
     )
 
 
-def day_family(family: str, config: EnergyConfig) -> SceneFamily:
+def day_family(family: str, config: EnergyConfig) -> IndoorFamily:
     """Family ``family`` with daylight in real time from midnight and the render depth set.
 
     Frame time ``t`` seconds is local solar hour ``t / 3600``.
@@ -110,7 +110,9 @@ def day_family(family: str, config: EnergyConfig) -> SceneFamily:
     from mincam_render.scenes.indoor import IndoorFamily
     from mincam_render.scenes.registry import FAMILY_NAMES, family_class, load_family
 
-    name = family if family in FAMILY_NAMES else _family_key(Path(family))
+    path = Path(family)
+    # a shipped name, a description file (naming its family), a registered name or module:Class
+    name = family if family in FAMILY_NAMES or not path.is_file() else _family_key(path)
     if not issubclass(family_class(name), IndoorFamily):
         raise ValueError(
             f"family {name!r} is not an indoor scene (no lights or window to schedule): "
@@ -122,7 +124,7 @@ def day_family(family: str, config: EnergyConfig) -> SceneFamily:
     # nobody is rendered (components are lit rooms, empty): no burn-in of the people
     overrides = {"max_depth": config.render.max_depth, "burn_in_s": 0.0, "daylight": daylight}
     fam = load_family(family, seed=config.render.seed, num_frames=1, overrides=overrides)
-    return fam
+    return cast("IndoorFamily", fam)  # checked above, by its class
 
 
 def _family_key(path: Path) -> str:
@@ -136,7 +138,7 @@ def _family_key(path: Path) -> str:
     return family
 
 
-def render_panel_light(fam: SceneFamily, config: EnergyConfig) -> tuple[PanelPose, PanelLight]:
+def render_panel_light(fam: IndoorFamily, config: EnergyConfig) -> tuple[PanelPose, PanelLight]:
     """Render the panel's irradiance components in the scene of ``fam`` (from :func:`day_family`).
 
     Returns:
@@ -146,7 +148,7 @@ def render_panel_light(fam: SceneFamily, config: EnergyConfig) -> tuple[PanelPos
     from mincam_render.render.irradiance import measure_irradiance
     from mincam_render.render.mitsuba_scene import irradiance_meter
 
-    rig = fam.rig  # type: ignore[attr-defined]
+    rig = fam.rig
     cam = fam.camera()
     pose = panel_pose(np.asarray(cam.position), cam.frame, config.panel)
     side = math.sqrt(config.panel.area_m2)

@@ -21,6 +21,7 @@ from mincam_render.analysis.sim2real.recording import (
 )
 from mincam_render.analysis.sim2real.simulation import simulate_volts
 from mincam_render.analysis.sim2real.tasks import task_metrics
+from mincam_render.render.capabilities import history_frames
 
 #: The pixel verdicts, in the order the summary counts them.
 PIXEL_VERDICTS = ("agrees", "agrees after gain/offset calibration", "disagrees")
@@ -71,7 +72,7 @@ def _simulate_recording(rec: Recording, *, spp: int, seed: int, progress: bool) 
         seed=int(rec.meta["family_seed"]),
         num_frames=int(rec.frame_index.max()) + 1,
     )
-    rec.meta.setdefault("needs_history", bool(family.needs_history))
+    rec.meta.setdefault("needs_history", history_frames(family) > 1)
     sim_volts, _ = simulate_volts(
         family,
         rec.camera,

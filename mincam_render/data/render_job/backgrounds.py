@@ -21,6 +21,7 @@ import numpy as np
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.manifest import _append_log
 from mincam_render.data.render_job.scene import _load_family, _render_camera
+from mincam_render.render.differential import background_family
 
 if TYPE_CHECKING:
     import mitsuba as mi
@@ -35,7 +36,8 @@ log = logging.getLogger(__name__)
 def background_keys(family: SceneFamily, job: dict) -> list[str]:
     """Background key of every frame of a differential job (frame order)."""
     interval = job["render"]["background"]["interval_s"]
-    return [family.background_key(i, interval) for i in range(job["num_frames"])]
+    family_ = background_family(family)
+    return [family_.background_key(i, interval) for i in range(job["num_frames"])]
 
 
 def _first_frames(keys: list[str]) -> dict[str, int]:
@@ -79,7 +81,7 @@ def render_backgrounds(
     cache: dict[str, np.ndarray] = {}
     for key in wanted:
         yield render_background(
-            family,
+            background_family(family),
             scene,
             render_cam,
             first_frame[key],
@@ -195,7 +197,9 @@ def _render_component(
 
     job = manifest["job"]
     key = job["background_components"][c]
-    array = render_component(family, scene, render_cam, key, settings, dataset_seed=job["seed"])
+    array = render_component(
+        background_family(family), scene, render_cam, key, settings, dataset_seed=job["seed"]
+    )
     record = {"index": c, "key": key, "seed": component_seed(job["seed"], key)}
     components = manifest["background_components"]
     components[c] = record | _write_array(out, _component_path(out, c), array)
@@ -219,7 +223,7 @@ def _render_same_seed(
     job = manifest["job"]
     r = job["render"]
     key, seed, array = render_same_seed(
-        family,
+        background_family(family),
         scene,
         render_cam,
         frame,
@@ -304,9 +308,10 @@ def converged_backgrounds(out: Path) -> np.ndarray:
     interval = job["render"]["background"]["interval_s"]
     keys = background_keys(family, job)
     loaded = load_backgrounds(out, manifest, keys)
+    components = background_family(family).background_components
     return np.stack(
         [
-            loaded[key].converged(family.background_components(i, interval)).astype(np.float32)
+            loaded[key].converged(components(i, interval)).astype(np.float32)
             for i, key in enumerate(keys)
         ]
     )

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.request import RenderRequest
+from mincam_render.render.capabilities import history_frames
 from mincam_render.render.fidelity import FidelityPlan
 
 if TYPE_CHECKING:
@@ -114,6 +115,7 @@ def plan_render(
         The manifest (a JSON-ready dict; format: :mod:`mincam_render.data.dataset`).
     """
     from mincam_render.render import backend
+    from mincam_render.scenes.registry import family_reference
 
     backend.use_variant()
     family, description, rebuild = _describe_family(request)
@@ -122,7 +124,13 @@ def plan_render(
     if request.mask_res is not None:
         camera = dataclasses.replace(camera, mask_resolution=(request.mask_res, request.mask_res))
     plan = _fidelity_plan(
-        request, family.name, identity, camera, use_cache and not ship, ship, progress
+        request,
+        family_reference(type(family)),
+        identity,
+        camera,
+        use_cache and not ship,
+        ship,
+        progress,
     )
     job = _job_section(request, identity, family, description, rebuild, camera, plan)
     return _manifest(request, identity, family, description, job, plan)
@@ -138,12 +146,13 @@ def _job_section(
     plan: FidelityPlan,
 ) -> dict:
     """The manifest's ``job``: all a worker needs to render a shard (and its backgrounds)."""
-    from mincam_render.render.differential import background_parts
+    from mincam_render.render.differential import background_family, background_parts
+    from mincam_render.scenes.registry import family_reference
 
     job: dict[str, Any] = {
         "request_sha256": hashlib.sha256(ds.json_bytes(identity)).hexdigest(),
         "family": {
-            "name": family.name,
+            "name": family_reference(type(family)),
             "source": str(request.family),
             "overrides": request.overrides or {},
             "description": description,
@@ -163,7 +172,9 @@ def _job_section(
         },
     }
     if plan.background is not None:
-        parts = background_parts(family, job["num_frames"], plan.background["interval_s"])
+        parts = background_parts(
+            background_family(family), job["num_frames"], plan.background["interval_s"]
+        )
         job["backgrounds"] = list(parts)
         job["background_parts"] = parts
         job["background_components"] = list(dict.fromkeys(c for p in parts.values() for c in p))
@@ -194,7 +205,8 @@ def _manifest(
         "family": {
             "name": family.name,
             "fps": float(family.fps),
-            "needs_history": bool(family.needs_history),
+            "needs_history": history_frames(family) > 1,
+            "history_frames": history_frames(family),
             "description": description,
         },
         "num_frames": request.num_frames,
@@ -274,7 +286,7 @@ def _fidelity_plan(
     log.info("fidelity planned in %.1f s", seconds)
     if use_cache or ship:
         try:
-            plan_cache.store_plan(fields, plan, seconds, plan_cache.SHIPPED_DIR if ship else None)
+            plan_cache.store_plan(fields, plan, seconds, plan_cache.shipped_dir() if ship else None)
         except OSError as err:
             log.warning("could not keep the fidelity plan in %s: %s", plan_cache.cache_dir(), err)
     return FidelityPlan.from_dict(plan["settings"], plan["decisions"])

@@ -19,6 +19,7 @@ from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.scene import _load_family, _render_camera
 from mincam_render.render import precision
+from mincam_render.render.differential import background_family
 
 if TYPE_CHECKING:
     import mitsuba as mi
@@ -157,7 +158,7 @@ def _frame_background(
     settings = job["render"].get("background")
     if settings is None:
         return None
-    key = family.background_key(i, settings["interval_s"])
+    key = background_family(family).background_key(i, settings["interval_s"])
     background = (backgrounds or {}).get(key)
     if background is None:
         raise ValueError(f"frame {i}: background {key!r} was not given to render_shard")
@@ -183,7 +184,13 @@ def _render_frame(
     max_depth = r["max_depth"] or None
     if background is not None:
         t, lab = render_frame(
-            family, scene, render_cam, i, background, spp=r["spp"], max_depth=max_depth
+            background_family(family),
+            scene,
+            render_cam,
+            i,
+            background,
+            spp=r["spp"],
+            max_depth=max_depth,
         )
         return t, lab, background.frame_seed(i)
     lab = family.set_frame(scene, i)

@@ -74,7 +74,7 @@ def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -
 
     depth = draft.max_depth or None
     bg = render_background(
-        p.family,
+        p.background,
         p.scene,
         draft.render_cam,
         index,
@@ -84,7 +84,7 @@ def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -
         max_depth=depth,
     )
     t, _ = render_frame(
-        p.family, p.scene, draft.render_cam, index, bg, spp=draft.spp, max_depth=depth
+        p.background, p.scene, draft.render_cam, index, bg, spp=draft.spp, max_depth=depth
     )
     return np.repeat(t, p.k, axis=0) if draft.shared else t
 

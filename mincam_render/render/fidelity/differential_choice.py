@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed, stream_seed
+from mincam_render.render.capabilities import DifferentialBackground
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
 from mincam_render.render.fidelity.constants import (
@@ -52,7 +53,7 @@ def decide_differential(
     settled = _settled_without_measuring(p, auto, record)
     if settled is not None:
         return settled
-    parts = background_parts(p.family, p.family.num_frames, p.request.background_interval_s)
+    parts = background_parts(p.background, p.family.num_frames, p.request.background_interval_s)
     components = {c for part in parts.values() for c in part}
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
@@ -70,7 +71,7 @@ def decide_differential(
 def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str, Any] | None:
     """The decision when a flag, full fidelity or the family settles it; else None."""
     family, request = p.family, p.request
-    available = bool(getattr(family, "has_background", False))
+    available = isinstance(family, DifferentialBackground)
     if request.differential is not None:
         if request.differential and not available:
             raise ValueError(
@@ -115,7 +116,7 @@ def _difference_pair(
 
     interval = p.request.background_interval_s
     pairs = [
-        difference_pair(p.family, p.scene, render, i, p.seed(i, seed_offset + 11), interval)
+        difference_pair(p.background, p.scene, render, i, p.seed(i, seed_offset + 11), interval)
         for i in p.indices
     ]
     return np.stack([x for x, _ in pairs]), np.stack([c for _, c in pairs])
@@ -161,7 +162,7 @@ def _frames_in_window(p: Probes, render_cam: FreeformCamera, deep: int | None) -
     """The probes' ``X`` that relative errors of ``X - C`` are taken against."""
     x_ref = []
     for i in p.indices:
-        p.family.set_frame_in_window(p.scene, i, p.request.background_interval_s)
+        p.background.set_frame_in_window(p.scene, i, p.request.background_interval_s)
         x_ref.append(
             p.family.render_transport(
                 p.scene,
@@ -220,7 +221,7 @@ def _background_noise(p: Probes, camera: FreeformCamera, depth: int | None) -> f
     """
     renders: dict[int, list[np.ndarray]] = {0: [], 1: []}
     for i in p.indices:
-        p.family.set_background(p.scene, i, p.request.background_interval_s)
+        p.background.set_background(p.scene, i, p.request.background_interval_s)
         for s in renders:
             renders[s].append(
                 p.family.render_transport(
@@ -248,7 +249,7 @@ def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -
     for i in p.indices:
         renders = []
         for at in (0.0, 0.5, 1.0):
-            p.family.set_background(p.scene, i, p.request.background_interval_s, at=at)
+            p.background.set_background(p.scene, i, p.request.background_interval_s, at=at)
             renders.append(
                 p.family.render_transport(
                     p.scene,

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.render.capabilities import history_frames
 from mincam_render.render.fidelity.budget import spp_for
 from mincam_render.render.fidelity.constants import (
     CANDIDATE_DEPTHS,
@@ -251,7 +252,7 @@ def recorded_decisions(p: Probes) -> dict[str, dict[str, Any]]:
     """Choices with nothing to measure: mask resolution, variant, temporal history."""
     from mincam_render.render import backend
 
-    history = bool(p.family.needs_history)
+    history = history_frames(p.family) > 1
     return {
         "mask_resolution": {
             "value": p.camera.mask_resolution[0],

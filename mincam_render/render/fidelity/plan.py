@@ -40,7 +40,7 @@ decided from:
   texels are sums of the finer ones), so resolution is a design choice of the
   mask (swept in training), not an accuracy knob of the render;
 - **monochrome variant** (photodiodes are single-channel) and **no temporal
-  history** unless the family ``needs_history``: recorded, nothing to measure.
+  history** unless the family has ``TemporalLabels``: recorded, nothing to measure.
 
 Errors are relative errors of measurements ``P = sum T M`` for random printable
 masks (:func:`mincam_render.render.precision.measurement_relative_error`), RMS and max

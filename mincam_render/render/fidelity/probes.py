@@ -29,11 +29,15 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.differential import BackgroundFamily, DifferenceSeeds
+    from mincam_render.render.differential import (
+        BackgroundFamily,
+        DifferenceSeeds,
+        EstimatorFamily,
+    )
 
     # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
     # and does not import them.
-    class ProbedFamily(BackgroundFamily, Protocol):
+    class ProbedFamily(EstimatorFamily, Protocol):
         """What the planner needs of a scene family (``SceneFamily`` has it)."""
 
         num_frames: int
@@ -57,10 +61,6 @@ if TYPE_CHECKING:
         @property
         def name(self) -> str:
             """The family's name."""
-
-        @property
-        def needs_history(self) -> bool:
-            """Whether the family's labels need earlier frames."""
 
         def build_scene(self) -> mi.Scene:
             """The family's Mitsuba scene."""
@@ -192,6 +192,13 @@ class Probes:
         self.total_scale = ErrorScale(family.total_error_scale)
         self._renders: dict[tuple, np.ndarray] = {}
         self._signal: LabelSignal | None = None
+
+    @property
+    def background(self) -> BackgroundFamily:
+        """The family as one with a differential background; ValueError if it has none."""
+        from mincam_render.render.differential import background_family
+
+        return background_family(self.family)
 
     def seed(self, index: int, offset: int) -> int:
         """Render seed of probe frame ``index`` for stream ``offset`` (0 = the frame's own).

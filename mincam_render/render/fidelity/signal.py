@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
+from mincam_render.render.capabilities import DifferentialBackground
 from mincam_render.render.precision import LabelSignal
 
 if TYPE_CHECKING:
@@ -80,21 +81,21 @@ def render_label_signal(
     """
     if len(frames) < 2:
         raise ValueError(f"frames = {list(frames)}: the signal's spread needs at least 2")
-    has_background = bool(getattr(family, "has_background", False))
-    if source is not SignalSource.FRAMES and not has_background:
+    if source is not SignalSource.FRAMES and not isinstance(family, DifferentialBackground):
         raise ValueError(f"signal source {source.value!r} needs a family with a static background")
+    background = cast("BackgroundFamily", family)  # used only where it was checked above
 
     def render(seed: int) -> np.ndarray:
         return family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
 
     if source is SignalSource.LIGHTS:
-        return _lights_signal(family, scene, render, frames, seeds, interval_s)
+        return _lights_signal(background, scene, render, frames, seeds, interval_s)
     estimates = []
     for e in (0, 1):
         per_frame = []
         for i in frames:
             if source is SignalSource.MOVERS:
-                x, c = difference_pair(family, scene, render, i, seeds(i, e), interval_s)
+                x, c = difference_pair(background, scene, render, i, seeds(i, e), interval_s)
                 per_frame.append(x - c)
             else:
                 family.set_frame(scene, i)

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.render.capabilities import (
+    DifferentialBackground,
+    PeopleRemoval,
+    Preview,
+    SunlitWindow,
+)
 from mincam_render.render.fidelity.signal import SignalSource
 from mincam_render.scenes.base import SceneFamily
 from mincam_render.scenes.indoor.config import FurnitureKind
@@ -23,11 +30,14 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.scenes.base import View
+    from mincam_render.render.capabilities import View
 
 
-class IndoorFamily(SceneFamily):
+class IndoorFamily(SceneFamily, DifferentialBackground, PeopleRemoval, SunlitWindow, Preview):
     """What the indoor families share: one :class:`IndoorRig`, people and switched lights.
+
+    Its static background (room, furniture, lights, daylight) renders
+    differentially, its people can be removed, and its window lets the sun in.
 
     Subclasses set ``name``, ``config_type`` and :attr:`floor_lamps`, and define
     ``labels``, ``labels_for(state)`` and ``frame_state``.
@@ -107,9 +117,9 @@ class IndoorFamily(SceneFamily):
             daylight_time_s=self.time_s(index),
         )
 
+    @abc.abstractmethod
     def labels_for(self, state: IndoorState) -> dict[str, np.ndarray]:
         """Labels of any state (e.g. one placed by hand in a test)."""
-        raise NotImplementedError
 
     def apply_state(self, scene: mi.Scene, state: IndoorState) -> dict[str, np.ndarray]:
         """Set ``scene`` to ``state`` in place and return its labels."""
@@ -119,7 +129,6 @@ class IndoorFamily(SceneFamily):
     def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
         return self.apply_state(scene, self.state(index))
 
-    has_background = True
     # people and the door carry the labels (lighting, whose lights do, says so)
     label_signal = SignalSource.MOVERS
 
@@ -175,8 +184,6 @@ class IndoorFamily(SceneFamily):
             raise ValueError(f"{key!r} is not a background component of family {self.name!r}")
         self.rig.apply(scene, state)
 
-    removes_people = True
-
     def set_frame_without_people(self, scene: mi.Scene, index: int) -> None:
         self.rig.apply(scene, replace(self.state(index), people=()))
 
@@ -187,7 +194,7 @@ class IndoorFamily(SceneFamily):
         return self.apply_state(scene, state)
 
     def sun_window(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """The window opening (see the base class), or None without a window."""
+        """The window opening (see :class:`SunlitWindow`), or None without a window."""
         return None if self.rig.window is None else self.rig.window_rectangle()
 
     def window_fraction(self, index: int, interval_s: float) -> float:

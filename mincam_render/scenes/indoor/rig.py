@@ -42,7 +42,7 @@ from mincam_render.scenes.indoor.people import Appearance, BodyModel, Pose
 if TYPE_CHECKING:
     import mitsuba as mi
 
-    from mincam_render.scenes.base import View
+    from mincam_render.render.capabilities import View
     from mincam_render.scenes.sky import Daylight, DaylightConfig
 
 #: Parameter keys of the sun and sky (checked against mi.traverse at build time).
@@ -417,7 +417,7 @@ class IndoorRig:
         return cache
 
     def birdseye_view(self) -> View:
-        from mincam_render.scenes.base import View
+        from mincam_render.render.capabilities import View
 
         w, d, h = self.room.size_m
         half = 0.5 * max(w, d) + 0.2

@@ -86,6 +86,7 @@ def episode_transport(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """
     from mincam_render.data.dataset import open_dataset
     from mincam_render.data.render_job.backgrounds import load_backgrounds
+    from mincam_render.render.differential import background_family
     from mincam_render.scenes.registry import load_family
 
     ds = open_dataset(path)
@@ -94,11 +95,13 @@ def episode_transport(path: Path) -> tuple[np.ndarray, np.ndarray]:
     settings = job["render"].get("background")
     if settings is None:
         return t, t
-    family = load_family(
-        job["family"]["source"],
-        seed=job["seed"],
-        num_frames=job["num_frames"],
-        overrides=job["family"]["overrides"],
+    family = background_family(
+        load_family(
+            job["family"]["source"],
+            seed=job["seed"],
+            num_frames=job["num_frames"],
+            overrides=job["family"]["overrides"],
+        )
     )
     interval = float(settings["interval_s"])
     keys = [family.background_key(i, interval) for i in range(ds.num_frames)]
