@@ -165,7 +165,9 @@ def train_model(
         torch.set_num_threads(threads)
         bar.close()
         logs.close()
-    return _finish(run, clock.elapsed(), out)
+    # the training time as of its last evaluation or checkpoint: a finished run read back
+    # (resumed at its end) reports the same figures as when it finished
+    return _finish(run, run.state.elapsed, out)
 
 
 def _start(
