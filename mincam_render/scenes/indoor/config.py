@@ -12,7 +12,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -20,8 +20,6 @@ from mincam_render.core.config import check_min_max, spec
 
 if TYPE_CHECKING:
     from mincam_render.scenes.base import CameraMount
-    from mincam_render.scenes.lighting import LightingConfig
-    from mincam_render.scenes.workspace import WorkspaceConfig
 
 #: Floor area one person needs (m^2): a room "holds" floor_area / this many people.
 AREA_PER_PERSON_M2 = 2.0
@@ -375,7 +373,30 @@ def check_camera(room: RoomConfig, camera: CameraMount) -> None:
     check_inside("camera.look_at", room, camera.look_at, 0.0)
 
 
-def check_room_layout(config: LightingConfig | WorkspaceConfig) -> None:
+class RoomLayout(Protocol):
+    """What :func:`check_room_layout` reads of an indoor description.
+
+    The lighting and workspace descriptions have these fields; naming them here
+    (rather than those classes) keeps this module below the families that use it.
+    """
+
+    @property
+    def room(self) -> RoomConfig: ...
+    @property
+    def window(self) -> WindowConfig | None: ...
+    @property
+    def door(self) -> DoorConfig: ...
+    @property
+    def furniture(self) -> tuple[FurnitureConfig, ...]: ...
+    @property
+    def ceiling_lights(self) -> tuple[LightBankConfig, ...]: ...
+    @property
+    def max_people(self) -> int: ...
+    @property
+    def camera(self) -> CameraMount: ...
+
+
+def check_room_layout(config: RoomLayout) -> None:
     """Checks shared by the indoor descriptions: openings, furniture, lights, capacity, camera.
 
     Raises:
