@@ -5,6 +5,15 @@ metadata ``{"unit": "m", "range": (lo, hi), "doc": "..."}``. :func:`parse` maps 
 TOML table onto it, recursing into nested dataclasses and tuples of them, and
 rejects unknown keys, wrong types and out-of-range values with a
 :class:`ConfigError` naming the file, the field path and the reason.
+
+A description class also derives from :class:`Described`, so the ``spec``
+ranges hold however an instance is made: from a file, by direct construction
+or by ``dataclasses.replace`` (all three run ``__post_init__``). Why this, and
+not pydantic or attrs: the ranges are already data on the fields (``spec``),
+read by :func:`parse`, the docs and the CLI; a check generated from that same
+data cannot drift from them, and it keeps the descriptions plain stdlib
+dataclasses (``dataclasses.fields``/``replace``/``asdict`` and
+:func:`to_dict` work unchanged, and showing the defaults imports nothing new).
 """
 
 from __future__ import annotations
@@ -19,6 +28,8 @@ import typing
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
+
+from mincam_render.core.checks import check_number
 
 T = TypeVar("T")
 
@@ -40,6 +51,58 @@ def spec(
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=md)
     return dataclasses.field(default=default, metadata=md)
+
+
+def check_ranges(obj: object) -> None:
+    """Raise ``ValueError`` naming the first field of ``obj`` outside its ``spec`` range.
+
+    Numbers are checked, and each number of a tuple field (as :func:`parse`
+    checks them); None, booleans, strings and nested descriptions are not (a
+    nested description checked itself when it was made).
+
+    Args:
+        obj: a dataclass instance whose fields carry ``spec`` metadata.
+
+    Raises:
+        ValueError: ``"<field> = <value>: allowed a number in [lo, hi] <unit>"``.
+    """
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        rng = f.metadata.get("range")
+        if rng is None:
+            continue
+        value = getattr(obj, f.name)
+        named = (
+            [(f"{f.name}[{i}]", v) for i, v in enumerate(value)]
+            if isinstance(value, tuple)
+            else [(f.name, value)]
+        )
+        for name, v in named:
+            if isinstance(v, int | float) and not isinstance(v, bool):
+                check_number(name, v, *rng, unit=f.metadata.get("unit", ""))
+
+
+class Described:
+    """Base of the description dataclasses: their ``spec`` ranges hold however they are made.
+
+    Each subclass's ``__post_init__`` (its own, an inherited one, or none) is
+    wrapped so that :func:`check_ranges` runs first; the class's own checks
+    (relations between fields) follow. ``dataclasses.replace`` and direct
+    construction run ``__post_init__`` as :func:`parse` does, so
+    ``dataclasses.replace(WorkspaceConfig(), max_depth=999)`` raises
+    ``ValueError`` naming ``max_depth``.
+    """
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        own = getattr(cls, "__post_init__", None)
+
+        def __post_init__(self: Any) -> None:
+            check_ranges(self)
+            if own is not None:
+                own(self)
+
+        __post_init__.__doc__ = "Check the ``spec`` ranges, then the class's own checks."
+        cls.__post_init__ = __post_init__  # type: ignore[attr-defined]
 
 
 def check_min_max(config: object, *names: str) -> None:

@@ -15,6 +15,16 @@ the platform's user cache directory, via ``platformdirs``). A file that does not
 parse or whose fields do not hash to its name is ignored with a warning (and
 planned again). Bump :data:`PLANNER_VERSION` when the planner changes what it
 decides: older plans then stop matching.
+
+A plan holds the Mitsuba variant it was measured with (``fields["renderer"]
+["variant"]``, part of its key), and a plan of another variant is **measured
+again, never reused**. Reuse would need a check that the two variants' noise
+is the same, and the only check that proves it is the measurement itself;
+re-measuring keeps the rule above (a kept plan is exactly the plan that would
+be measured here), which a user comparing CPU and GPU renders relies on. The
+cost is minutes per description on the first GPU run (the plans shipped with
+the repository are measured with ``llvm_ad_mono``); :func:`find_plan` says so
+when a plan of another variant is kept.
 """
 
 from __future__ import annotations
@@ -108,7 +118,35 @@ def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
             return {"settings": plan["settings"], "decisions": plan["decisions"]}, where
         except (OSError, ValueError, KeyError, TypeError) as err:
             log.warning("ignoring the plan %s (%s); planning again", path, err)
+    for variant, path in other_variant_plans(fields):
+        log.info(
+            "a fidelity plan of variant %s is kept (%s), but plans are measured per "
+            "variant: planning again for %s",
+            variant,
+            path,
+            plan_variant(fields),
+        )
     return None
+
+
+def plan_variant(fields: dict[str, Any]) -> str:
+    """The Mitsuba variant a plan of ``fields`` is (or would be) measured with."""
+    return str(fields["renderer"]["variant"])
+
+
+def other_variant_plans(fields: dict[str, Any]) -> list[tuple[str, Path]]:
+    """``(variant, path)`` of kept plans of ``fields`` but of another variant (not reused)."""
+    from mincam_render.render.backend import VARIANTS
+
+    found = []
+    for variant in sorted(set(VARIANTS.values()) - {plan_variant(fields)}):
+        key = plan_key({**fields, "renderer": {**fields["renderer"], "variant": variant}})
+        found += [
+            (variant, folder / f"{key}.json")
+            for folder in (shipped_dir(), cache_dir())
+            if (folder / f"{key}.json").is_file()
+        ]
+    return found
 
 
 @functools.cache

@@ -1,9 +1,18 @@
 """The one place that chooses the Mitsuba variant and checks Dr.Jit's backends.
 
 Every module that needs Mitsuba calls :func:`use_variant` before touching
-``mi.*`` types. The choice prefers CUDA (when a GPU driver is present) and falls
-back to the LLVM (CPU) backend. Monochrome variants are used because a freeform
-pixel's photodiode is a single-channel detector.
+``mi.*`` types. The variant is chosen once per process, by the first call, and
+recorded (:func:`chosen_variant`); later calls return it. The choice is the
+backend named by :data:`BACKEND_ENV` when it is set, else CUDA when a GPU driver
+is present, else the LLVM (CPU) backend. Monochrome variants are used because a
+freeform pixel's photodiode is a single-channel detector.
+
+Why once: a process that rendered part of a dataset or measured a fidelity plan
+with one variant must not continue with another (CUDA and LLVM kernels differ
+in the last bits, so shards or plans of two variants would mix silently). A
+request for another backend after the choice raises
+:class:`VariantConflictError`; worker processes are handed the parent's variant
+(:mod:`mincam_render.data.render_job.executors`).
 
 Run ``python -m mincam_render.render.backend`` to print the chosen variant and libLLVM.
 """
@@ -12,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import os
 
 import drjit as dr
 import mitsuba as mi
@@ -30,8 +40,57 @@ class Backend(enum.Enum):
     CUDA = "cuda"
 
 
+#: The monochrome AD variant of each backend.
+VARIANTS = {Backend.LLVM: "llvm_ad_mono", Backend.CUDA: "cuda_ad_mono"}
+#: Environment variable naming the backend of a process (``auto``, ``llvm`` or
+#: ``cuda``); unset means ``auto``. Worker processes inherit it.
+BACKEND_ENV = "MINCAM_RENDER_BACKEND"
+
+#: The variant this process chose (None until the first :func:`use_variant`).
+_chosen: str | None = None
+
+
 class BackendUnavailableError(RuntimeError):
     """No usable Dr.Jit backend (missing/old libLLVM, or no CUDA device)."""
+
+
+class VariantConflictError(BackendUnavailableError):
+    """Another backend was requested after this process chose its variant."""
+
+
+def chosen_variant() -> str | None:
+    """The variant this process chose, or None when nothing has needed Mitsuba yet."""
+    return _chosen
+
+
+def backend_of(variant: str) -> Backend:
+    """The :class:`Backend` of a variant name (``"cuda_ad_mono"`` -> ``Backend.CUDA``).
+
+    Raises:
+        ValueError: not a variant this package uses.
+    """
+    for backend, name in VARIANTS.items():
+        if name == variant:
+            return backend
+    raise ValueError(f"variant {variant!r} is none of {sorted(VARIANTS.values())}")
+
+
+def _requested_backend(backend: Backend) -> Backend:
+    """``backend``, or for ``AUTO`` the one :data:`BACKEND_ENV` names (``AUTO`` if unset).
+
+    Raises:
+        BackendUnavailableError: the environment variable names no backend.
+    """
+    if backend is not Backend.AUTO:
+        return backend
+    name = os.environ.get(BACKEND_ENV, "").strip().lower() or Backend.AUTO.value
+    try:
+        return Backend(name)
+    except ValueError:
+        allowed = ", ".join(b.value for b in Backend)
+        raise BackendUnavailableError(
+            f"{BACKEND_ENV}={name!r} names no backend (allowed: {allowed})"
+        ) from None
 
 
 def _llvm_problem() -> str | None:
@@ -55,29 +114,54 @@ def _llvm_problem() -> str | None:
 def use_variant(backend: Backend = Backend.AUTO) -> str:
     """Select the monochrome AD Mitsuba variant for ``backend`` and return its name.
 
+    The first call of a process chooses and records the variant; later calls
+    return the recorded one (and set it again should anything have changed it).
+
     Args:
-        backend: ``AUTO`` takes CUDA when a device is present, else LLVM.
+        backend: ``AUTO`` takes the process's variant once chosen; before that,
+            the backend :data:`BACKEND_ENV` names, else CUDA when a device is
+            present, else LLVM.
 
     Returns:
         The variant name, e.g. ``"llvm_ad_mono"``.
 
     Raises:
+        VariantConflictError: ``backend`` is not the one this process chose.
         BackendUnavailableError: the requested backend cannot run here.
 
     """
+    global _chosen
     backend = Backend(backend)
+    if _chosen is not None:
+        if backend is not Backend.AUTO and VARIANTS[backend] != _chosen:
+            raise VariantConflictError(
+                f"backend {backend.value!r} requested, but this process already renders "
+                f"with {_chosen} (the variant is chosen once per process; set "
+                f"{BACKEND_ENV} before starting it)"
+            )
+        if mi.variant() != _chosen:
+            mi.set_variant(_chosen)
+        return _chosen
+    variant = _select(_requested_backend(backend))
+    _chosen = variant
+    log.debug("Mitsuba variant %s chosen for this process", variant)
+    return variant
+
+
+def _select(backend: Backend) -> str:
+    """Check that ``backend`` runs here, set its variant in Mitsuba and return its name."""
     want_cuda = backend is Backend.CUDA or (
         backend is Backend.AUTO and dr.has_backend(dr.JitBackend.CUDA)
     )
     if want_cuda:
         if not dr.has_backend(dr.JitBackend.CUDA):
             raise BackendUnavailableError("backend 'cuda' requested but no CUDA device is usable")
-        variant = "cuda_ad_mono"
+        variant = VARIANTS[Backend.CUDA]
     else:
         problem = _llvm_problem()
         if problem is not None:
             raise BackendUnavailableError(problem)
-        variant = "llvm_ad_mono"
+        variant = VARIANTS[Backend.LLVM]
     if not isinstance(mi.logger().appender(0), _MitsubaToLogging):
         _route_mitsuba_log()
     if mi.variant() != variant:

@@ -17,7 +17,7 @@ import mitsuba as mi
 import numpy as np
 
 from mincam_render.core.checks import check_int
-from mincam_render.core.config import spec
+from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelSpec
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.photodiode import DiodeResponse
@@ -27,7 +27,7 @@ from mincam_render.render.precision import ErrorScale
 
 
 @dataclass(frozen=True, kw_only=True)
-class CameraMount:
+class CameraMount(Described):
     """Where the camera board hangs in a scene (world metres, +z up in indoor scenes)."""
 
     position: tuple[float, float, float] = spec(unit="m", doc="board centre")

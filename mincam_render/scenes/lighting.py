@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.render.fidelity.signal import SignalSource
 from mincam_render.render.precision import ErrorScale
@@ -94,7 +94,7 @@ DEFAULT_BANKS = (
 
 
 @dataclass(frozen=True, kw_only=True)
-class LightingConfig:
+class LightingConfig(Described):
     """Description of the lighting family (``scenes/lighting.toml``)."""
 
     fps: float = spec(30.0, unit="1/s", range=(1.0, 1000.0), doc="frame rate")

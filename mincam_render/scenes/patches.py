@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import mitsuba as mi
 import numpy as np
 
-from mincam_render.core.config import check_min_max, spec
+from mincam_render.core.config import Described, check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render import mitsuba_scene as ms
@@ -37,7 +37,7 @@ PLANE_RADIANCE_PARAM = f"{_PLANE_KEY}.emitter.radiance.data"
 
 
 @dataclass(frozen=True, kw_only=True)
-class PatchesConfig:
+class PatchesConfig(Described):
     """Description of the patches family (``scenes/patches.toml``)."""
 
     fps: float = spec(30.0, unit="1/s", range=(1.0, 1000.0), doc="frame rate")

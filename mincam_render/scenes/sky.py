@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import Described, spec
 from mincam_render.core.photometry import VISIBLE_FRACTION_OF_SUNLIGHT
 
 if TYPE_CHECKING:
@@ -38,7 +38,7 @@ _OVERCAST_TRANSMISSION = 0.3
 
 
 @dataclass(frozen=True, kw_only=True)
-class DaylightConfig:
+class DaylightConfig(Described):
     """Where and when: site latitude, date, time span of the sequence, cloudiness."""
 
     latitude_deg: float = spec(40.8, unit="deg", range=(-66.0, 66.0), doc="site latitude")

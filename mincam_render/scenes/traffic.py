@@ -38,7 +38,7 @@ from typing import Any
 import mitsuba as mi
 import numpy as np
 
-from mincam_render.core.config import check_min_max, spec
+from mincam_render.core.config import Described, check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import irradiance_to_lux
 from mincam_render.core.seeds import stream_seed
@@ -123,7 +123,7 @@ _SUMO_CLASS = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class VehicleType:
+class VehicleType(Described):
     """A vehicle type: its shape, size, share of the demand and driving behaviour (SUMO vType)."""
 
     name: str = spec(doc="identifier (letters, digits, _ and -)")
@@ -239,7 +239,7 @@ def _default_vehicle_types() -> tuple[VehicleType, ...]:
 
 
 @dataclass(frozen=True, kw_only=True)
-class TrafficConfig:
+class TrafficConfig(Described):
     """Description of the traffic family (``scenes/traffic.toml``)."""
 
     fps: float = spec(30.0, unit="1/s", range=(1.0, 1000.0), doc="frame rate")

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.core.config import spec
+from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.scenes.base import CameraMount
 from mincam_render.scenes.indoor import (
@@ -100,7 +100,7 @@ DEFAULT_BANKS = (
 
 
 @dataclass(frozen=True, kw_only=True)
-class WorkspaceConfig:
+class WorkspaceConfig(Described):
     """Description of the workspace family (``scenes/workspace.toml``)."""
 
     fps: float = spec(30.0, unit="1/s", range=(1.0, 1000.0), doc="frame rate")

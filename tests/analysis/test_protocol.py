@@ -80,7 +80,7 @@ def test_runs_of_a_task_are_named_and_seeded_by_it():
 
 
 @pytest.fixture(scope="module")
-def splits():
+def two_task_splits():
     return {
         "train": two_task_episode(240, 0),
         "val": {"val-0": two_task_episode(80, 1), "val-1": two_task_episode(80, 2)},
@@ -88,21 +88,21 @@ def splits():
     }
 
 
-def test_task_splits_keep_only_the_tasks_labels(splits):
-    count = task_splits(splits, ("count",))
+def test_task_splits_keep_only_the_tasks_labels(two_task_splits):
+    count = task_splits(two_task_splits, ("count",))
     assert [s.name for s in count["train"].label_specs] == ["count"]
     assert all(list(v.labels) == ["count"] for v in count["val"].values())
     assert all(list(v.labels) == ["count"] for v in count["tests"].values())
-    assert task_splits(splits, ())["train"] is splits["train"]
+    assert task_splits(two_task_splits, ())["train"] is two_task_splits["train"]
     with pytest.raises(ValueError, match="need one or more of"):
-        splits["train"].with_labels(["zones"])
+        two_task_splits["train"].with_labels(["zones"])
 
 
-def test_per_task_cameras_train_and_compare_each_task_on_its_own(splits, tmp_path):
+def test_per_task_cameras_train_and_compare_each_task_on_its_own(two_task_splits, tmp_path):
     designs = (Design(pixels=2), Design(grid=(2, 2)))
     recipe = tr.TrainConfig(max_steps=40, batch_size=16, eval_every=20)
     cfg = ComparisonConfig(designs=designs, seeds=2, train=recipe)
-    runs = train_runs(cfg, splits, tmp_path, progress=False)
+    runs = train_runs(cfg, two_task_splits, tmp_path, progress=False)
     assert list(runs) == ["count", "bright_left"]
     run = runs["count"]["mincam-2px"][0]
     assert run["run_dir"] == str(tmp_path / "runs" / "count" / "mincam-2px-seed0")
@@ -113,7 +113,7 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(splits, tmp_pat
     assert list(side["episodes"]["test-1"]["labels"]) == ["bright_left"]
     blocks = {}
     for t, by_design in runs.items():
-        task = task_splits(splits, (t,))
+        task = task_splits(two_task_splits, (t,))
         blocks[t] = task_comparison(cfg, by_design, task, view_and_label_map(task["train"]))
     assert blocks["count"]["error_name"] == "count RMSE"
     assert blocks["bright_left"]["error_name"] == "bright_left error rate"
@@ -128,7 +128,7 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(splits, tmp_pat
     # a joint camera learns both labels at once
     joint = train_runs(
         ComparisonConfig(designs=designs, seeds=1, train=recipe, protocol="joint"),
-        splits,
+        two_task_splits,
         tmp_path / "joint",
         progress=False,
     )

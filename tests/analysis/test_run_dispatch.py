@@ -51,16 +51,16 @@ SAME = ("model", "steps", "best_step", "best_val_loss", "stopped_early", "test",
 
 
 @pytest.fixture(scope="module")
-def splits(tmp_path_factory, variant):
+def rendered_splits(tmp_path_factory, variant):
     data = render_episodes(CFG, tmp_path_factory.mktemp("episodes"), workers=0, progress=False)
     return comparison_splits(data)
 
 
 @pytest.fixture(scope="module")
-def sequential(splits, tmp_path_factory):
+def sequential(rendered_splits, tmp_path_factory):
     """``(out, runs)``: every run trained in this process, as comparisons always did."""
     out = tmp_path_factory.mktemp("sequential")
-    return out, _one_task(train_runs(CFG, splits, out, progress=False))
+    return out, _one_task(train_runs(CFG, rendered_splits, out, progress=False))
 
 
 def _one_task(runs: dict) -> dict:
@@ -97,10 +97,10 @@ def _layout(out: Path) -> dict[str, bytes | None]:
     return files
 
 
-def test_local_workers_train_every_run_like_this_process(splits, sequential, tmp_path):
+def test_local_workers_train_every_run_like_this_process(rendered_splits, sequential, tmp_path):
     """Worker processes train on their own copy of the splits, 1 torch thread each here."""
     out, runs = sequential
-    pooled = _one_task(train_runs(CFG, splits, tmp_path, train_workers=2, progress=False))
+    pooled = _one_task(train_runs(CFG, rendered_splits, tmp_path, train_workers=2, progress=False))
     assert _figures(pooled) == _figures(runs)  # bit for bit
     assert _layout(tmp_path) == _layout(out)
     head = pooled["mincam-2px-nosensor"][0]
@@ -110,13 +110,13 @@ def test_local_workers_train_every_run_like_this_process(splits, sequential, tmp
 
 
 def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_process_does(
-    splits, sequential, tmp_path
+    rendered_splits, sequential, tmp_path
 ):
     """What a Ray task and the driver do, without Ray: no file system shared but the bytes."""
     out, runs = sequential
     task = comparison_tasks(CFG)[0]  # the ablation: its head's run.json names its masks' run
     assert task.name == "mincam-2px-nosensor-seed0"
-    result, files, worker_runs = run_dispatch._ray_train(splits, task, {})
+    result, files, worker_runs = run_dispatch._ray_train(rendered_splits, task, {})
     assert not Path(worker_runs).exists()  # the task's directory is gone with the task
     assert any(worker_runs.encode() in data for data in files.values())
     written = run_dispatch._write_run(tmp_path / "runs", task, result, files, worker_runs)
@@ -132,7 +132,7 @@ def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_pr
 
 
 def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_checkpoint(
-    splits, sequential, tmp_path, monkeypatch
+    rendered_splits, sequential, tmp_path, monkeypatch
 ):
     out, runs = sequential
     shutil.copytree(out / "runs", tmp_path / "runs")
@@ -148,7 +148,7 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
             ))  # fmt: skip
 
     monkeypatch.setattr(run_dispatch, "_on_pool", pool)
-    again = _one_task(train_runs(CFG, splits, tmp_path, train_workers=2, progress=False))
+    again = _one_task(train_runs(CFG, rendered_splits, tmp_path, train_workers=2, progress=False))
     assert dispatched == ["baseline-2x2-seed1"]
     assert _figures(again) == _figures(runs)
     # resumed at its end, not trained again: training would have saved new checkpoints
@@ -157,11 +157,13 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
     assert (unfinished.parent / name).read_bytes() == (out / "runs" / name).read_bytes()
 
 
-def test_ray_tasks_train_every_run_like_this_process(splits, sequential, tmp_path):
+def test_ray_tasks_train_every_run_like_this_process(rendered_splits, sequential, tmp_path):
     """16 s on 2 loaded cores (a local Ray cluster started, the package shipped to it)."""
     pytest.importorskip("ray")
     out, runs = sequential
-    on_ray = _one_task(train_runs(CFG, splits, tmp_path, ray_address="local", progress=False))
+    on_ray = _one_task(
+        train_runs(CFG, rendered_splits, tmp_path, ray_address="local", progress=False)
+    )
     assert _figures(on_ray) == _figures(runs)
     assert _layout(tmp_path) == _layout(out)
 
@@ -185,7 +187,9 @@ STEPS = 400
 
 
 @pytest.mark.slow
-def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes(splits, tmp_path):
+def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes(
+    rendered_splits, tmp_path
+):
     """About 60 s: seed 0 trained first, then seed 1 on 2 workers, one of them killed."""
     import dataclasses
 
@@ -193,7 +197,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
         CFG, train=TrainConfig(max_steps=STEPS, eval_every=10, patience=1000)
     )
     first = dataclasses.replace(long, seeds=1)
-    _one_task(train_runs(first, splits, tmp_path, progress=False))
+    _one_task(train_runs(first, rendered_splits, tmp_path, progress=False))
     # a finished run read back rewrites its run.json and metrics.json (same contents);
     # its checkpoint is written only by training
     kept = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("checkpoint.pt")}
@@ -201,7 +205,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
 
     def run() -> None:
         try:
-            _one_task(train_runs(long, splits, tmp_path, train_workers=2, progress=False))
+            _one_task(train_runs(long, rendered_splits, tmp_path, train_workers=2, progress=False))
         except BaseException as err:  # the main thread checks it
             failure.append(err)
 
@@ -218,7 +222,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
     assert "exit code -9) while running task" in str(err) and "-seed1" in str(err)
     assert "finished runs are kept" in str(err) and "\n" not in str(err)
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # seed 0 not trained again
-    again = _one_task(train_runs(long, splits, tmp_path, train_workers=2, progress=False))
+    again = _one_task(train_runs(long, rendered_splits, tmp_path, train_workers=2, progress=False))
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # read back, not trained again
     assert all(r["steps"] == STEPS for rs in again.values() for r in rs)
 

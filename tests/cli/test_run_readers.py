@@ -51,7 +51,7 @@ def _refused(args: list[str], expect: str, out: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, variant):
+def cli_runs(tmp_path_factory, variant):
     """``{"dataset": its folder, kind: run folder, "unfinished": a killed run's folder}``."""
     root = tmp_path_factory.mktemp("readers")
     out = {"dataset": root / "ds"}
@@ -90,8 +90,8 @@ READERS = ["export-masks", "prune", "report robustness"]
 
 @pytest.mark.parametrize("kind", MINCAM_KINDS)
 @pytest.mark.parametrize("command", READERS)
-def test_every_minimalist_run_is_read_by_every_reader(runs, kind, command, tmp_path):
-    res = _ok(_reader(command, runs[kind], runs["dataset"], tmp_path / "out"))
+def test_every_minimalist_run_is_read_by_every_reader(cli_runs, kind, command, tmp_path):
+    res = _ok(_reader(command, cli_runs[kind], cli_runs["dataset"], tmp_path / "out"))
     assert "Traceback" not in res.output
     written = {p.name for p in (tmp_path / "out").rglob("*") if p.is_file()}
     expected = {
@@ -103,15 +103,17 @@ def test_every_minimalist_run_is_read_by_every_reader(runs, kind, command, tmp_p
 
 
 @pytest.mark.parametrize("command", READERS)
-def test_a_baseline_run_is_refused_by_every_reader_in_one_line(runs, command, tmp_path):
+def test_a_baseline_run_is_refused_by_every_reader_in_one_line(cli_runs, command, tmp_path):
     out = tmp_path / "out"
-    _refused(_reader(command, runs["baseline"], runs["dataset"], out), "is a baseline run", out)
+    _refused(
+        _reader(command, cli_runs["baseline"], cli_runs["dataset"], out), "is a baseline run", out
+    )
 
 
 @pytest.mark.parametrize("command", READERS)
-def test_an_unfinished_run_is_refused_by_every_reader_unless_allowed(runs, command, tmp_path):
+def test_an_unfinished_run_is_refused_by_every_reader_unless_allowed(cli_runs, command, tmp_path):
     out = tmp_path / "out"
-    args = _reader(command, runs["unfinished"], runs["dataset"], out)
+    args = _reader(command, cli_runs["unfinished"], cli_runs["dataset"], out)
     _refused(args, "training did not finish (unfinished: step 20 of 20", out)
     res = _ok([*args, "--allow-unfinished"])
     if command == "export-masks":
@@ -130,11 +132,13 @@ def test_an_unfinished_run_is_refused_by_every_reader_unless_allowed(runs, comma
         assert designs[0]["name"] == "unfinished (unfinished)"
 
 
-def test_an_export_replaces_its_folder_whole_and_refuses_a_folder_of_other_files(runs, tmp_path):
+def test_an_export_replaces_its_folder_whole_and_refuses_a_folder_of_other_files(
+    cli_runs, tmp_path
+):
     one = tmp_path / "one"
-    _ok(["train", runs["dataset"], *QUICK, "--pixels", "1", "--out", one])
+    _ok(["train", cli_runs["dataset"], *QUICK, "--pixels", "1", "--out", one])
     out = tmp_path / "masks"
-    _ok(["export-masks", runs["mincam"], "--task", "t", "--out", out])
+    _ok(["export-masks", cli_runs["mincam"], "--task", "t", "--out", out])
     _ok(["export-masks", one, "--task", "t", "--out", out])
     sidecar = json.loads((out / "t" / "masks.json").read_text())
     listed = {*sidecar["files"]["png"], "masks.exr", "print_sheet.svg", "print_sheet.pdf"}
@@ -142,21 +146,23 @@ def test_an_export_replaces_its_folder_whole_and_refuses_a_folder_of_other_files
     assert sidecar["files"]["png"] == ["mask_00.png"]  # no stale mask_01.png beside it
     assert [p.name for p in out.iterdir()] == ["t"]  # no hidden sibling left
     (out / "t" / "notes.txt").write_text("mine")
-    res = _invoke(["export-masks", runs["mincam"], "--task", "t", "--out", out])
+    res = _invoke(["export-masks", cli_runs["mincam"], "--task", "t", "--out", out])
     assert res.exit_code == 2 and "notes.txt" in res.output
     assert json.loads((out / "t" / "masks.json").read_text()) == sidecar
 
 
 @pytest.mark.parametrize("task", ["../../escaped", "a/b", "..", ".hidden", ""])
-def test_a_task_name_cannot_leave_out(runs, tmp_path, task):
+def test_a_task_name_cannot_leave_out(cli_runs, tmp_path, task):
     out = tmp_path / "out"
-    _refused(["export-masks", runs["mincam"], "--task", task, "--out", out], "--task", out)
+    _refused(["export-masks", cli_runs["mincam"], "--task", task, "--out", out], "--task", out)
     assert [p.name for p in tmp_path.iterdir()] == []
 
 
-def test_a_run_resumes_through_another_spelling_or_place_of_its_paths(runs, tmp_path, monkeypatch):
+def test_a_run_resumes_through_another_spelling_or_place_of_its_paths(
+    cli_runs, tmp_path, monkeypatch
+):
     ds = tmp_path / "ds"
-    shutil.copytree(runs["dataset"], ds)
+    shutil.copytree(cli_runs["dataset"], ds)
     monkeypatch.chdir(tmp_path)
     _ok(["train", "ds", *QUICK, "--out", "run"])  # relative paths, as typed
     (tmp_path / "elsewhere").mkdir()

@@ -17,6 +17,7 @@ from mincam_render.data.render_job import (
     plan_render,
     render_dataset,
 )
+from mincam_render.render.backend import VARIANTS, Backend
 from mincam_render.scenes.registry import load_family
 
 AUTO = RenderRequest(
@@ -92,6 +93,34 @@ def test_the_resolved_targets_are_part_of_the_plan_key():
     assert load_family("workspace", seed=0, num_frames=2).total_error_scale == "frame"
 
 
+def test_a_plan_key_says_which_variant_it_holds():
+    identity = {"family": "workspace", "num_frames": 100, "seed": 4}
+    planning = {"error_scale": "frame", "target_error": 0.01, "difference_seeds": "window"}
+
+    def fields(variant):
+        renderer = {"variant": variant, "mitsuba": "3.9.1", "drjit": "1.5.0"}
+        return plan_cache.plan_fields(identity, "workspace", renderer, planning)
+
+    cpu, gpu = fields("llvm_ad_mono"), fields("cuda_ad_mono")
+    assert plan_cache.plan_variant(cpu) == "llvm_ad_mono"
+    assert plan_cache.plan_variant(gpu) == "cuda_ad_mono"
+    assert plan_cache.plan_key(cpu) != plan_cache.plan_key(gpu)
+
+
+def test_a_plan_of_another_variant_is_measured_again_and_said(own_cache, caplog):
+    identity = {"family": "workspace", "num_frames": 100, "seed": 4}
+    planning = {"error_scale": "frame", "target_error": 0.01, "difference_seeds": "window"}
+    renderer = {"variant": "llvm_ad_mono", "mitsuba": "3.9.1", "drjit": "1.5.0"}
+    cpu = plan_cache.plan_fields(identity, "workspace", renderer, planning)
+    gpu = {**cpu, "renderer": {**renderer, "variant": "cuda_ad_mono"}}
+    kept = plan_cache.store_plan(cpu, {"settings": {}, "decisions": {}}, 1.0)
+    with caplog.at_level(logging.INFO, logger="mincam_render.data.plan_cache"):
+        assert plan_cache.find_plan(gpu) is None
+        assert plan_cache.find_plan(cpu) is not None
+    assert plan_cache.other_variant_plans(gpu) == [("llvm_ad_mono", kept)]
+    assert "plans are measured per variant: planning again for cuda_ad_mono" in caplog.text
+
+
 def test_requests_without_the_later_fields_keep_their_format_4_identity():
     # datasets rendered before error_scale, signal_target_error and
     # difference_seeds existed resume: those fields stay out while None
@@ -146,8 +175,9 @@ def test_shipped_plans_match_the_shipped_descriptions_and_this_renderer(path, va
     assert fields["description"] in descriptions, "scenes/*.toml changed: re-ship the plan"
     assert family.name == fields["family_name"]
     versions = package_versions()
+    # shipped for the backend every host has; a GPU host measures its own (plan_cache)
     assert fields["renderer"] == {
-        "variant": variant,
+        "variant": VARIANTS[Backend.LLVM],
         "mitsuba": versions["mitsuba"],
         "drjit": versions["drjit"],
     }

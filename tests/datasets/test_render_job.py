@@ -189,6 +189,25 @@ def test_dataset_of_an_older_format_is_read_but_not_resumed(tmp_path, tiny_reque
         render_dataset(tiny_request, out, workers=0)
 
 
+def test_a_dataset_of_another_variant_is_not_resumed(tmp_path, tiny_request, variant):
+    from mincam_render.render.backend import VARIANTS
+
+    out = tmp_path / "ds"
+    render_dataset(tiny_request, out, workers=0)
+    other = next(v for v in VARIANTS.values() if v != variant)
+    m = ds.read_manifest(out)  # as if started on a host with the other backend
+    m["variant"] = other
+    m["shards"][2], m["complete"] = None, False
+    ds.write_manifest(out, m)
+    shards = _files(out)
+    with pytest.raises(ds.DatasetError) as err:
+        render_dataset(tiny_request, out, workers=0)
+    message = str(err.value)
+    assert f"rendered with Mitsuba variant {other!r}" in message
+    assert f"renders with {variant!r}" in message and "\n" not in message
+    assert _files(out) == shards  # nothing was rendered into it
+
+
 def test_non_empty_directory_without_manifest_is_refused(tmp_path, tiny_request):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(ds.DatasetError, match="not empty"):

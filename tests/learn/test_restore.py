@@ -35,7 +35,7 @@ def _splits(temporal: bool):
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory, variant):
+def runs_of_each_kind(tmp_path_factory, variant):
     """``{kind: (run directory, its metrics, its test split)}``: one finished run of each kind."""
     root = tmp_path_factory.mktemp("runs")
     out = {}
@@ -48,8 +48,8 @@ def runs(tmp_path_factory, variant):
 
 
 @pytest.mark.parametrize("kind", list(KINDS))
-def test_every_kind_of_run_restores_to_the_camera_it_tested(runs, kind):
-    run_dir, metrics, test = runs[kind]
+def test_every_kind_of_run_restores_to_the_camera_it_tested(runs_of_each_kind, kind):
+    run_dir, metrics, test = runs_of_each_kind[kind]
     run = tr.open_run(run_dir)
     assert run.finished and run.training == "finished" and run.step == CFG.max_steps
     model = tr.restore_model(run, test)
@@ -58,8 +58,8 @@ def test_every_kind_of_run_restores_to_the_camera_it_tested(runs, kind):
 
 
 @pytest.mark.parametrize("kind", MINCAM_KINDS)
-def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs, kind):
-    run_dir, _, test = runs[kind]
+def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs_of_each_kind, kind):
+    run_dir, _, test = runs_of_each_kind[kind]
     run = tr.open_run(run_dir)
     m, camera = tr.masks_of(run)
     assert m.shape == (2, *camera.mask_resolution) and np.all((m > 0) & (m < 1))
@@ -72,8 +72,8 @@ def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs, kind)
     assert curves["nominal_error"] > 0 and "mix" in curves["curves"]
 
 
-def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs):
-    run_dir, _, test = runs["baseline"]
+def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs_of_each_kind):
+    run_dir, _, test = runs_of_each_kind["baseline"]
     run = tr.open_run(run_dir)
     for use, call in {
         "prune": lambda: tr.restore_mincam(run, test, "prune"),
@@ -84,16 +84,16 @@ def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs):
         assert "\n" not in str(err.value)
 
 
-def test_restore_refuses_data_of_another_history_or_resolution(runs):
-    run_dir, _, test = runs["temporal"]
+def test_restore_refuses_data_of_another_history_or_resolution(runs_of_each_kind):
+    run_dir, _, test = runs_of_each_kind["temporal"]
     with pytest.raises(ValueError, match="windows of 12 frames; the data gives 1"):
         tr.restore_model(tr.open_run(run_dir), linear_task(40, res=4))
     with pytest.raises(ValueError, match="masks of"):
-        tr.restore_model(tr.open_run(runs["mincam"][0]), linear_task(40, res=4))
+        tr.restore_model(tr.open_run(runs_of_each_kind["mincam"][0]), linear_task(40, res=4))
 
 
-def test_a_checkpoint_that_does_not_fit_run_json_is_one_line(runs, tmp_path):
-    run_dir, _, test = runs["mincam"]
+def test_a_checkpoint_that_does_not_fit_run_json_is_one_line(runs_of_each_kind, tmp_path):
+    run_dir, _, test = runs_of_each_kind["mincam"]
     run = tr.open_run(run_dir)
     record = json.loads(json.dumps(run.record))
     record["model"]["head"] = "tcn"  # run.json edited: the weights are an MLP's

@@ -304,14 +304,28 @@ def test_training_data_reads_float16_shards_without_decoding_them(float16_datase
 
 
 def test_training_from_float16_dataset_learns(float16_dataset):
+    """Training on float16 shards fits them: the loss falls to well under half the untrained one.
+
+    Learning is measured on the training frames (also the validation set here, so
+    the kept best state is the best fit): 16 frames are too few to generalise,
+    and their held-out loss rises as they are fitted (measured: 2.35 untrained,
+    3.0 after 30 steps). Measured at seed 0: 2.27 untrained, 0.46 after 200
+    steps (ratio 0.20), falling at every validation; the bound allows twice that.
+    """
     from mincam_render.data.dataset import open_dataset
 
     ds = open_dataset(float16_dataset)
-    train, val = (tr.TrainingData.from_dataset(ds, s) for s in ("train", "val"))
+    train = tr.TrainingData.from_dataset(ds, "train")
+    assert train.transport.dtype == np.float16
     model = tr.build_mincam(train, 2)
-    res = tr.train_model(model, train, val, tr.TrainConfig(max_steps=30, batch_size=8))
-    assert res.steps == 30 and np.isfinite(res.best_val_loss)
-    assert np.isfinite(model.logits.detach().numpy()).all()
+    _, _, untrained = tr.predict(model, train)
+    config = tr.TrainConfig(max_steps=200, batch_size=8, eval_every=50)
+    res = tr.train_model(model, train, train, config)
+    _, _, trained = tr.predict(model, train)
+    assert res.steps == 200 and np.isfinite(model.logits.detach().numpy()).all()
+    assert trained < 0.4 * untrained, (untrained, trained)
+    losses = [h["val_loss"] for h in res.history]
+    assert len(losses) == 4 and all(b < a for a, b in zip(losses, losses[1:], strict=False))
 
 
 def test_concat_joins_static_episodes_and_refuses_temporal_or_mismatched_ones():

@@ -115,7 +115,11 @@ def test_scene_file_without_family_or_with_an_unknown_one(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def tiny_dataset(tmp_path_factory, variant) -> Path:
+def dataset_to_damage(tmp_path_factory, variant) -> Path:
+    """24 patches frames, 2 detectors, 8x8 masks, 2 spp, shards of 8: damaged copies of it.
+
+    Not ``tests/datasets``' ``tiny_dataset`` (another request): no two fixtures share a name.
+    """
     out = tmp_path_factory.mktemp("ds") / "tiny"
     req = RenderRequest(
         family="patches",
@@ -189,9 +193,9 @@ def _damage(root: Path, how: str) -> str:
         "corrupt-npy-header",
     ],
 )
-def test_damaged_datasets_fail_training_with_one_line(tmp_path, tiny_dataset, how):
+def test_damaged_datasets_fail_training_with_one_line(tmp_path, dataset_to_damage, how):
     root = tmp_path / "copy"
-    shutil.copytree(tiny_dataset, root)
+    shutil.copytree(dataset_to_damage, root)
     name = _damage(root, how)
     out = tmp_path / "run"
     res = CliRunner().invoke(
@@ -215,10 +219,10 @@ def test_damaged_datasets_fail_training_with_one_line(tmp_path, tiny_dataset, ho
 
 
 @pytest.mark.parametrize("how", ["missing-shard", "truncated-shard", "flipped-byte"])
-def test_export_exr_verifies_the_shards_it_reads(tmp_path, tiny_dataset, how):
+def test_export_exr_verifies_the_shards_it_reads(tmp_path, dataset_to_damage, how):
     """Frames of a damaged shard (1: frames 8-15) are refused; others still export."""
     root = tmp_path / "copy"
-    shutil.copytree(tiny_dataset, root)
+    shutil.copytree(dataset_to_damage, root)
     name = _damage(root, how)
     out = tmp_path / "exr"
     res = CliRunner().invoke(main, ["export-exr", str(root), "--frames", "0,9", "--out", str(out)])
@@ -644,10 +648,10 @@ def test_real_full_disk_render_fails_clearly_and_keeps_what_fits(tiny_tmpfs, var
 TRAIN_ARGS = ["--steps", "400", "--eval-every", "20", "--batch-size", "8", "--patience", "100"]
 
 
-def _kill_train_then_resume(tiny_dataset: Path, tmp_path: Path, delay_s: float) -> None:
+def _kill_train_then_resume(dataset_to_damage: Path, tmp_path: Path, delay_s: float) -> None:
     out = tmp_path / f"killed-{delay_s:.2f}"
     p = cli_process(
-        ["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS], start_new_session=True
+        ["train", str(dataset_to_damage), "--out", str(out), *TRAIN_ARGS], start_new_session=True
     )
     deadline = time.monotonic() + 180
     while not (out / "checkpoint.pt").exists():
@@ -660,7 +664,7 @@ def _kill_train_then_resume(tiny_dataset: Path, tmp_path: Path, delay_s: float) 
     ck = torch.load(out / "checkpoint.pt", weights_only=False)  # never a torn checkpoint
     assert 20 <= ck["step"] <= 400 and not (out / "metrics.json").exists()
     p = cli_process(
-        ["train", str(tiny_dataset), "--out", str(out), *TRAIN_ARGS], start_new_session=True
+        ["train", str(dataset_to_damage), "--out", str(out), *TRAIN_ARGS], start_new_session=True
     )
     _, err = p.communicate(timeout=300)
     assert p.returncode == 0, err
@@ -669,21 +673,21 @@ def _kill_train_then_resume(tiny_dataset: Path, tmp_path: Path, delay_s: float) 
 
 
 @pytest.mark.slow  # two interpreter start-ups of torch + Mitsuba: ~20 s
-def test_train_killed_mid_run_resumes_to_the_end(tiny_dataset, tmp_path):
-    _kill_train_then_resume(tiny_dataset, tmp_path, 0.3)
+def test_train_killed_mid_run_resumes_to_the_end(dataset_to_damage, tmp_path):
+    _kill_train_then_resume(dataset_to_damage, tmp_path, 0.3)
 
 
 @pytest.mark.slow
-def test_train_killed_at_random_moments_resumes_identically(tiny_dataset, tmp_path):
+def test_train_killed_at_random_moments_resumes_identically(dataset_to_damage, tmp_path):
     ref = tmp_path / "ref"
     p = cli_process(
-        ["train", str(tiny_dataset), "--out", str(ref), *TRAIN_ARGS], start_new_session=True
+        ["train", str(dataset_to_damage), "--out", str(ref), *TRAIN_ARGS], start_new_session=True
     )
     assert p.wait(timeout=300) == 0
     want = torch.load(ref / "checkpoint.pt", weights_only=False)["best_state"]
     rng = np.random.default_rng(7)
     for delay in rng.uniform(0.0, 2.0, 4):
-        _kill_train_then_resume(tiny_dataset, tmp_path, float(delay))
+        _kill_train_then_resume(dataset_to_damage, tmp_path, float(delay))
         got = torch.load(tmp_path / f"killed-{delay:.2f}" / "checkpoint.pt", weights_only=False)[
             "best_state"
         ]

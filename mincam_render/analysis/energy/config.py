@@ -13,37 +13,19 @@ No numpy, torch or Mitsuba import: the command line shows these defaults at once
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from mincam_render.core.checks import check_number
-from mincam_render.core.config import ConfigError, load_toml, spec
+from mincam_render.core.config import ConfigError, Described, load_toml, spec
 from mincam_render.core.package_data import shipped_path
 
 #: The shipped description's file name among the package data (``scenes/`` in a clone).
 ENERGY_TOML = "energy.toml"
 
 
-def check_ranges(obj: object) -> None:
-    """Raise ``ValueError`` naming the first field of ``obj`` outside its ``spec`` range.
-
-    Args:
-        obj: a dataclass instance whose fields carry ``spec`` metadata.
-
-    Raises:
-        ValueError: ``"<field> = <value>: allowed a number in [lo, hi] <unit>"``.
-    """
-    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
-        rng, unit = f.metadata.get("range"), f.metadata.get("unit", "")
-        value = getattr(obj, f.name)
-        if rng is not None and isinstance(value, int | float) and not isinstance(value, bool):
-            check_number(f.name, value, *rng, unit=unit)
-
-
 @dataclass(frozen=True, kw_only=True)
-class PanelConfig:
+class PanelConfig(Described):
     """The photovoltaic panel beside the camera board and its power path to the capacitor."""
 
     area_m2: float = spec(
@@ -82,9 +64,6 @@ class PanelConfig:
         doc="panel normal tilted from the board's normal toward the board's up axis",
     )
 
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
     @property
     def electrical_efficiency(self) -> float:
         """Panel W to capacitor W per W of visible light: efficiency x mismatch x MPPT."""
@@ -92,7 +71,7 @@ class PanelConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class StorageConfig:
+class StorageConfig(Described):
     """The supercapacitor bank and the converter from it to the load."""
 
     capacitance_f: float = spec(
@@ -128,7 +107,6 @@ class StorageConfig:
     )
 
     def __post_init__(self) -> None:
-        check_ranges(self)
         v_max = self.max_voltage_v
         for name in ("brownout_voltage_v", "restart_voltage_v", "initial_voltage_v"):
             if getattr(self, name) > v_max:
@@ -158,7 +136,7 @@ class StorageConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ConsumptionConfig:
+class ConsumptionConfig(Described):
     """The minimalist camera's electronics: readout, multiplexer, MCU, BLE radio."""
 
     supply_voltage_v: float = spec(3.0, unit="V", range=(1.0, 5.5), doc="load supply rail")
@@ -247,7 +225,6 @@ class ConsumptionConfig:
     )
 
     def __post_init__(self) -> None:
-        check_ranges(self)
         if not (self.head_on_device or self.send_samples):
             raise ValueError("head_on_device = false and send_samples = false: nothing is sent")
 
@@ -258,7 +235,7 @@ class ConsumptionConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class CameraModuleConfig:
+class CameraModuleConfig(Described):
     """A conventional low-resolution camera module, for comparison at matched task error."""
 
     name: str = spec("Himax HM01B0", doc="the module")
@@ -278,25 +255,21 @@ class CameraModuleConfig:
     pixel_bytes: int = spec(1, unit="B", range=(1, 8), doc="bytes per transmitted grid pixel")
 
     def __post_init__(self) -> None:
-        check_ranges(self)
         if min(self.mode_pixels) < 1:
             raise ValueError(f"mode_pixels = {list(self.mode_pixels)}: both must be >= 1")
 
 
 @dataclass(frozen=True, kw_only=True)
-class LightSchedule:
+class LightSchedule(Described):
     """When one switchable light is on (local solar hours, [on_hour, off_hour))."""
 
     name: str = spec(doc="the light's name in the scene description")
     on_hour: float = spec(unit="h", range=(0.0, 24.0), doc="switched on")
     off_hour: float = spec(unit="h", range=(0.0, 24.0), doc="switched off (< on_hour: overnight)")
 
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class ScheduleConfig:
+class ScheduleConfig(Described):
     """The simulated day: sampling, office lights, weather."""
 
     step_min: float = spec(
@@ -317,7 +290,6 @@ class ScheduleConfig:
     )
 
     def __post_init__(self) -> None:
-        check_ranges(self)
         if abs(24 * 60 / self.step_min - round(24 * 60 / self.step_min)) > 1e-9:
             raise ValueError(f"step_min = {self.step_min!r} min: must divide 24 h evenly")
 
@@ -330,7 +302,7 @@ class ScheduleConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class RenderConfig:
+class RenderConfig(Described):
     """How the panel's irradiance is rendered."""
 
     spp: int = spec(16384, range=(1, 1 << 24), doc="samples per batch of the irradiance meter")
@@ -343,12 +315,9 @@ class RenderConfig:
     )
     seed: int = spec(0, range=(0, 2**31 - 1), doc="sampler seed of the first batch")
 
-    def __post_init__(self) -> None:
-        check_ranges(self)
-
 
 @dataclass(frozen=True, kw_only=True)
-class EnergyConfig:
+class EnergyConfig(Described):
     """Everything the self-powered budget needs besides the scene."""
 
     fps: float = spec(30.0, unit="1/s", range=(1e-3, 1e4), doc="frame rate simulated over the day")
@@ -362,9 +331,6 @@ class EnergyConfig:
     camera_module: CameraModuleConfig = spec(default_factory=CameraModuleConfig)
     schedule: ScheduleConfig = spec(default_factory=ScheduleConfig)
     render: RenderConfig = spec(default_factory=RenderConfig)
-
-    def __post_init__(self) -> None:
-        check_ranges(self)
 
 
 def load_energy_config(

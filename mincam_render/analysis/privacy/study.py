@@ -142,18 +142,18 @@ def _fit_decoders(
     The error is of the reconstructed validation views (all pixels), the loss
     every decoder was trained on.
     """
-    from mincam_render.analysis.privacy import decoders
+    from mincam_render.analysis.privacy.decoders import DECODERS, reconstruct, train_decoder
 
     train = [k for k in sorted(x) if k.startswith("train-")]
     xt = np.concatenate([x[k] for k in train])
     dt = np.concatenate([episodes[k].difference for k in train])
     val = episodes["val-0"]
     fitted = {
-        kind: decoders.train_decoder(kind, (xt, dt), (x["val-0"], val.difference), cfg.attack, seed)
-        for kind in decoders.DECODERS
+        kind: train_decoder(kind, (xt, dt), (x["val-0"], val.difference), cfg.attack, seed)
+        for kind in DECODERS
     }
     mse = {
-        k: float(np.mean((decoders.reconstruct(d, x["val-0"], val.background) - val.views) ** 2))
+        k: float(np.mean((reconstruct(d, x["val-0"], val.background) - val.views) ** 2))
         for k, d in fitted.items()
     }
     return fitted, mse
@@ -167,20 +167,18 @@ def _attack_once(
     seed: int,
 ) -> dict[str, Any]:
     """One attacker seed against one trained design: per test episode and decoder, its figures."""
-    from mincam_render.analysis.privacy import attacks, decoders
+    from mincam_render.analysis.privacy.attacks import design_camera, measurements, train_reid
+    from mincam_render.analysis.privacy.decoders import reconstruct
     from mincam_render.learn.train import TrainingData
 
     train = TrainingData.concat([data[k] for k in sorted(data) if k.startswith("train-")])
-    camera = attacks.design_camera(run_dir, train)
-    x = {
-        k: attacks.measurements(camera, d, seed=stream_seed(seed, f"noise/{k}"))
-        for k, d in data.items()
-    }
+    camera = design_camera(run_dir, train)
+    x = {k: measurements(camera, d, seed=stream_seed(seed, f"noise/{k}")) for k, d in data.items()}
     fitted, val_mse = _fit_decoders(x, episodes, cfg, seed)
     kind = min(val_mse, key=val_mse.__getitem__)  # the attacker keeps its best on validation
     train_names = sorted(k for k in data if k.startswith("train-"))
     pt = np.concatenate([episodes[k].present for k in train_names])
-    reid = attacks.train_reid(
+    reid = train_reid(
         (np.concatenate([x[k] for k in train_names]), pt),
         (x["val-0"], episodes["val-0"].present),
         cfg.attack,
@@ -197,7 +195,7 @@ def _attack_once(
     for name in sorted(k for k in data if k.startswith("test-")):
         ep = episodes[name]
         for k, d in fitted.items():
-            recon = decoders.reconstruct(d, x[name], ep.background)
+            recon = reconstruct(d, x[name], ep.background)
             out["by_decoder"][k][name] = score_reconstruction(ep, recon)
             if k == kind:
                 out["examples"][name] = recon

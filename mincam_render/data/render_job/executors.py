@@ -87,6 +87,7 @@ def _run_processes(
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
     from mincam_render.data.worker_pool import PoolError, run_tasks, threads_per_worker
+    from mincam_render.render import backend
 
     workers = min(workers, len(todo))  # and the cores go to the workers that run
     try:
@@ -98,7 +99,7 @@ def _run_processes(
             workers=workers,
             tasks_per_worker=shards_per_worker,
             initializer=_worker_init,
-            initargs=(threads_per_worker(workers), os.getpid()),
+            initargs=(threads_per_worker(workers), os.getpid(), backend.chosen_variant()),
             on_progress=None if bar is None else lambda shard, n: bar.update(n),
         )
     except PoolError as err:
@@ -117,6 +118,7 @@ def _run_ray(
     backgrounds_of: Callable[[int], dict | None],
 ) -> None:
     from mincam_render.data.ray_cluster import RayError, collect, ray_session
+    from mincam_render.render import backend
 
     try:
         with ray_session(address) as ray:
@@ -124,7 +126,8 @@ def _run_ray(
             # one Dr.Jit thread per task: Ray runs as many tasks as the cluster has CPUs
             task = ray.remote(num_cpus=1, max_calls=shards_per_worker)(_ray_render_shard)
             job_ref = ray.put(job)
-            shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i)): i for i in todo}
+            variant = backend.use_variant()  # the parent's: no shard of another variant
+            shard_of = {task.remote(job_ref, i, 1, backgrounds_of(i), variant): i for i in todo}
             log.info("Ray: %d shard tasks on %d CPUs", len(shard_of), cpus)
             collect(ray, shard_of, lambda shard, result: finish(result, False), what="shard")
     except RayError as err:
@@ -132,7 +135,7 @@ def _run_ray(
 
 
 def _ray_render_shard(
-    job: dict, shard: int, threads: int, backgrounds: dict | None
+    job: dict, shard: int, threads: int, backgrounds: dict | None, variant: str | None = None
 ) -> tuple[int, np.ndarray, dict, float]:
-    _worker_init(threads, None)
+    _worker_init(threads, None, variant)
     return render_shard(job, shard, backgrounds)

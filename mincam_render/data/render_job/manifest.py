@@ -2,7 +2,9 @@
 
 An existing directory must hold a manifest of the *same* request (compared
 field by field), whose plan is then reused as is, so a resumed render is
-identical to an uninterrupted one. Intact shards are kept; corrupted or
+identical to an uninterrupted one. It must also have been rendered with this
+process's Mitsuba variant: shards of two variants (CPU and GPU kernels differ in
+the last bits) must not mix in one dataset. Intact shards are kept; corrupted or
 truncated ones are marked for re-rendering.
 """
 
@@ -65,7 +67,8 @@ def _reopen(request: RenderRequest, out: Path) -> dict:
     """The manifest of ``out``, checked to be of this format and of ``request``.
 
     Raises:
-        DatasetError: another format version, or another configuration.
+        DatasetError: another format version, another Mitsuba variant, or another
+            configuration.
     """
     manifest = ds.read_manifest(out)
     if manifest.get("format_version", 0) != ds.FORMAT_VERSION:
@@ -74,6 +77,7 @@ def _reopen(request: RenderRequest, out: Path) -> dict:
             f"{manifest.get('format_version', 0)}, this one writes {ds.FORMAT_VERSION}); "
             "it can be read but not resumed: render into another --out directory"
         )
+    _check_variant(out, manifest)
     _, description, _ = _describe_family(request)
     identity = request.identity(description)
     if manifest["request"] != identity:
@@ -91,6 +95,34 @@ def _reopen(request: RenderRequest, out: Path) -> dict:
             versions,
         )
     return manifest
+
+
+def _check_variant(out: Path, manifest: dict) -> None:
+    """Refuse to resume ``out`` with another Mitsuba variant than the one it was rendered with.
+
+    Raises:
+        DatasetError: the manifest's ``variant`` is not this process's.
+    """
+    from mincam_render.render import backend
+
+    now = backend.use_variant()
+    if manifest.get("variant") != now:
+        raise ds.DatasetError(
+            f"{out} was rendered with Mitsuba variant {manifest.get('variant')!r}, this "
+            f"process renders with {now!r}; shards of two variants must not mix: set "
+            f"{backend.BACKEND_ENV}={_backend_name(manifest.get('variant'))} to resume it, "
+            "or render into another --out directory"
+        )
+
+
+def _backend_name(variant: object) -> str:
+    """The :data:`~mincam_render.render.backend.BACKEND_ENV` value of ``variant`` (or ``...``)."""
+    from mincam_render.render import backend
+
+    try:
+        return backend.backend_of(str(variant)).value
+    except ValueError:
+        return "..."
 
 
 def _identity_diff(old: dict, new: dict, prefix: str = "") -> list[str]:

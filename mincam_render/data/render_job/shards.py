@@ -35,13 +35,26 @@ FRAME_DELAY_ENV = "MINCAM_RENDER_TEST_FRAME_DELAY_S"
 _WORKER: dict[str, Any] = {"parent": None, "cache": {}}
 
 
-def _worker_init(threads: int, parent_pid: int | None) -> None:
-    """Initializer of a worker process: limit Dr.Jit threads, remember the parent."""
+def _worker_init(threads: int, parent_pid: int | None, variant: str | None = None) -> None:
+    """Initializer of a worker process: its variant, Dr.Jit threads, the parent.
+
+    Args:
+        threads: Dr.Jit threads of this worker.
+        parent_pid: the process that started it (None: none to watch).
+        variant: the job's Mitsuba variant (its parent's), so no shard of one job
+            is rendered with another; None: this process's own choice.
+
+    Raises:
+        BackendUnavailableError: ``variant`` cannot run in this process.
+    """
     import drjit as dr
 
-    from mincam_render.render.backend import use_variant
+    from mincam_render.render.backend import backend_of, use_variant
 
-    use_variant()
+    if variant is None:
+        use_variant()
+    else:
+        use_variant(backend_of(variant))
     dr.set_thread_count(max(1, int(threads)))
     _WORKER["parent"] = parent_pid
 

@@ -91,7 +91,8 @@ from mincam_render.render.precision import DTYPES
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.fidelity.probes import PlanRequest, ProbedFamily
+    from mincam_render.render.fidelity.probes import PlanRequest
+    from mincam_render.render.fidelity.signal import ProbedFamily
 
     class FidelityRequest(PlanRequest, Protocol):
         """A render request as :func:`decide_fidelity` reads it (``RenderRequest`` has it)."""

@@ -29,45 +29,11 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.differential import (
-        BackgroundFamily,
-        DifferenceSeeds,
-        EstimatorFamily,
-    )
+    from mincam_render.render.differential import BackgroundFamily, DifferenceSeeds
+    from mincam_render.render.fidelity.signal import ProbedFamily
 
     # Structural types: ``render`` sits below ``scenes`` and ``data`` in the layers
     # and does not import them.
-    class ProbedFamily(EstimatorFamily, Protocol):
-        """What the planner needs of a scene family (``SceneFamily`` has it)."""
-
-        num_frames: int
-
-        @property
-        def planning_error_scale(self) -> ErrorScale:
-            """What the planning target is relative to (a class variable of the family)."""
-
-        @property
-        def signal_target_error(self) -> float | None:
-            """The target relative to the label signal, chosen by the task-level check."""
-
-        @property
-        def total_error_scale(self) -> ErrorScale:
-            """What errors relative to the total are relative to: frame or mean."""
-
-        @property
-        def label_signal(self) -> SignalSource:
-            """Where the family's labels live in its frames."""
-
-        @property
-        def name(self) -> str:
-            """The family's name."""
-
-        def build_scene(self) -> mi.Scene:
-            """The family's Mitsuba scene."""
-
-        def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
-            """Set ``scene`` to frame ``index``; return its labels."""
-
     class PlanRequest(Protocol):
         """What the planner reads of a render request (``RenderRequest`` has it)."""
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
 import numpy as np
 
@@ -28,8 +28,41 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
-    from mincam_render.render.differential import BackgroundFamily
-    from mincam_render.render.fidelity.probes import ProbedFamily
+    from mincam_render.render.differential import BackgroundFamily, EstimatorFamily
+    from mincam_render.render.precision import ErrorScale
+
+    # A structural type (``render`` sits below ``scenes`` in the layers); here,
+    # beside the SignalSource it names, so that probes imports signal, not back.
+    class ProbedFamily(EstimatorFamily, Protocol):
+        """What the planner needs of a scene family (``SceneFamily`` has it)."""
+
+        num_frames: int
+
+        @property
+        def planning_error_scale(self) -> ErrorScale:
+            """What the planning target is relative to (a class variable of the family)."""
+
+        @property
+        def signal_target_error(self) -> float | None:
+            """The target relative to the label signal, chosen by the task-level check."""
+
+        @property
+        def total_error_scale(self) -> ErrorScale:
+            """What errors relative to the total are relative to: frame or mean."""
+
+        @property
+        def label_signal(self) -> SignalSource:
+            """Where the family's labels live in its frames."""
+
+        @property
+        def name(self) -> str:
+            """The family's name."""
+
+        def build_scene(self) -> mi.Scene:
+            """The family's Mitsuba scene."""
+
+        def set_frame(self, scene: mi.Scene, index: int) -> dict[str, np.ndarray]:
+            """Set ``scene`` to frame ``index``; return its labels."""
 
 
 class SignalSource(enum.StrEnum):

@@ -12,16 +12,14 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from mincam_render.core.config import check_min_max, spec
+from mincam_render.core.config import Described, check_min_max, spec
 
 if TYPE_CHECKING:
     from mincam_render.scenes.base import CameraMount
-    from mincam_render.scenes.lighting import LightingConfig
-    from mincam_render.scenes.workspace import WorkspaceConfig
 
 #: Floor area one person needs (m^2): a room "holds" floor_area / this many people.
 AREA_PER_PERSON_M2 = 2.0
@@ -75,7 +73,7 @@ FURNITURE_ALBEDO = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class RoomConfig:
+class RoomConfig(Described):
     """A box room: size and the albedo of its surfaces."""
 
     size_m: tuple[float, float, float] = spec(
@@ -96,7 +94,7 @@ class RoomConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class WindowConfig:
+class WindowConfig(Described):
     """An open window (a hole in a wall; the sun and sky come in through it)."""
 
     wall: Wall = spec(Wall.SOUTH, doc="wall holding the window")
@@ -107,7 +105,7 @@ class WindowConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class DoorConfig:
+class DoorConfig(Described):
     """A hinged door that swings into the room, with a corridor behind it."""
 
     wall: Wall = spec(Wall.NORTH, doc="wall holding the door")
@@ -136,7 +134,7 @@ class DoorConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class FurnitureConfig:
+class FurnitureConfig(Described):
     """One piece of furniture standing on the floor.
 
     Local axes: x is its depth (a chair's sitter faces +x; a desk's user sits on
@@ -170,7 +168,7 @@ class FurnitureConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class ZoneConfig:
+class ZoneConfig(Described):
     """A named rectangle of floor; occupied when a person's footprint overlaps it."""
 
     name: str = spec(doc="label element name")
@@ -185,7 +183,7 @@ class ZoneConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class LightBankConfig:
+class LightBankConfig(Described):
     """Ceiling panels switched together (LED troffers: 600 x 600 mm, ~3600 lm)."""
 
     name: str = spec(doc="label element name")
@@ -203,7 +201,7 @@ class LightBankConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class FloorLampConfig:
+class FloorLampConfig(Described):
     """A floor lamp: a pole with a glowing drum shade (a 100 W-equivalent bulb ~1600 lm)."""
 
     name: str = spec(doc="label element name")
@@ -217,7 +215,7 @@ class FloorLampConfig:
 
 
 @dataclass(frozen=True, kw_only=True)
-class PeopleConfig:
+class PeopleConfig(Described):
     """How people look and behave; each visit draws uniformly within these ranges.
 
     With ``roster = N > 0`` the looks are drawn once, from ``roster_seed``, for
@@ -375,7 +373,30 @@ def check_camera(room: RoomConfig, camera: CameraMount) -> None:
     check_inside("camera.look_at", room, camera.look_at, 0.0)
 
 
-def check_room_layout(config: LightingConfig | WorkspaceConfig) -> None:
+class RoomLayout(Protocol):
+    """What :func:`check_room_layout` reads of an indoor description.
+
+    The lighting and workspace descriptions have these fields; naming them here
+    (rather than those classes) keeps this module below the families that use it.
+    """
+
+    @property
+    def room(self) -> RoomConfig: ...
+    @property
+    def window(self) -> WindowConfig | None: ...
+    @property
+    def door(self) -> DoorConfig: ...
+    @property
+    def furniture(self) -> tuple[FurnitureConfig, ...]: ...
+    @property
+    def ceiling_lights(self) -> tuple[LightBankConfig, ...]: ...
+    @property
+    def max_people(self) -> int: ...
+    @property
+    def camera(self) -> CameraMount: ...
+
+
+def check_room_layout(config: RoomLayout) -> None:
     """Checks shared by the indoor descriptions: openings, furniture, lights, capacity, camera.
 
     Raises:
