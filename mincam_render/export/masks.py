@@ -312,6 +312,10 @@ def _write_export(
 
 #: The files an export writes besides its ``mask_NN.png``.
 EXPORT_FILES = ("masks.exr", "print_sheet.svg", "print_sheet.pdf", "masks.json")
+#: Figures a comparison draws beside the masks it keeps (what they look at,
+#: :func:`mincam_render.analysis.mask_structure.plot_mask_views`): an export
+#: replaces them with the folder, and the comparison draws them again.
+COMPANION_FILES = ("looks_at.png",)
 
 
 def _written_by_an_export(path: Path) -> bool:
@@ -319,7 +323,7 @@ def _written_by_an_export(path: Path) -> bool:
     name = path.name
     png = re.fullmatch(r"mask_\d{2,}\.png", name) is not None
     temporary = name.startswith(".") and name.endswith((".tmp", ".tmp.exr"))
-    return path.is_file() and (png or temporary or name in EXPORT_FILES)
+    return path.is_file() and (png or temporary or name in EXPORT_FILES + COMPANION_FILES)
 
 
 def _checked_transmittance(transmittance: np.ndarray) -> np.ndarray:

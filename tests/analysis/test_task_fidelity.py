@@ -32,7 +32,6 @@ def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
         error=mean,
         ci95=(mean - 0.1, mean + 0.1),
         per_seed=tuple(e.mean(axis=1)),
-        val_per_seed=(None,) * len(e),
         state="converged",
         steps=(100,) * len(e),
         train_s_per_run=1.0,

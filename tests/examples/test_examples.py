@@ -73,7 +73,9 @@ def test_the_declarative_example_renders_compares_and_exports(tmp_path, variant)
     output = _invoke("pipeline", "--family", task, *TINY, "--out", tmp_path / "main")
     assert "trivial" in output
     _check_comparison(tmp_path / "main")
-    _check_masks(tmp_path / "main" / "runs" / "mincam-2px-seed0", tmp_path / "masks", "table")
+    _check_masks(
+        tmp_path / "main" / "runs" / "objects" / "mincam-2px-seed0", tmp_path / "masks", "objects"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -106,7 +108,9 @@ def test_an_installed_family_is_found_by_its_entry_point(parking_installed, tmp_
     description = EXAMPLES / "parking_family" / "parking.toml"
     _invoke("pipeline", "--family", description, *TINY, "--out", tmp_path / "main")
     _check_comparison(tmp_path / "main")
-    _check_masks(tmp_path / "main" / "runs" / "mincam-2px-seed0", tmp_path / "masks", "parking")
+    _check_masks(
+        tmp_path / "main" / "runs" / "taken" / "mincam-2px-seed0", tmp_path / "masks", "taken"
+    )
 
 
 def test_a_description_names_the_family_class_of_an_uninstalled_package(tmp_path, variant):
@@ -123,7 +127,7 @@ def test_a_description_names_the_family_class_of_an_uninstalled_package(tmp_path
     cli = [sys.executable, "-m", "mincam_render.cli.main"]
     for args in (
         ["pipeline", "--family", str(task), *TINY, "--out", "main"],
-        ["export-masks", "main/runs/mincam-2px-seed0", "--task", "parking", "--out", "masks"],
+        ["export-masks", "main/runs/taken/mincam-2px-seed0", "--task", "taken", "--out", "masks"],
     ):
         run = subprocess.run([*cli, *args], cwd=tmp_path, env=env, capture_output=True,
                              text=True, check=False)  # fmt: skip
@@ -133,7 +137,7 @@ def test_a_description_names_the_family_class_of_an_uninstalled_package(tmp_path
     )
     assert manifest["job"]["family"]["name"] == "parking_family.family:ParkingFamily"
     _check_comparison(tmp_path / "main")
-    assert (tmp_path / "masks" / "parking" / "print_sheet.svg").is_file()
+    assert (tmp_path / "masks" / "taken" / "print_sheet.svg").is_file()
 
 
 def test_a_bad_description_stops_the_pipeline_before_anything_is_written(tmp_path, variant):

@@ -632,7 +632,11 @@ def test_real_full_disk_render_fails_clearly_and_keeps_what_fits(tiny_tmpfs, var
         "0",
         "--no-progress",
     ]
-    r = CliRunner().invoke(main, args)
+    refused = CliRunner().invoke(main, args)  # the up-front estimate sees the disk is too small
+    assert refused.exit_code == 2, refused.output
+    one_clear_line(refused.output, "more than the free disk")
+    assert not out.exists() or not any(out.iterdir())  # nothing written
+    r = CliRunner().invoke(main, [*args, "--yes"])  # told to go on, it fills the disk
     assert r.exit_code == 1, r.output
     one_clear_line(r.output, "No space left")
     m = ds.read_manifest(out)
