@@ -59,7 +59,11 @@ def test_missing_shipped_plans_are_said_once(tmp_path, monkeypatch, caplog):
     monkeypatch.setattr(plan_cache, "shipped_dir", lambda: tmp_path / "not-installed")
     monkeypatch.setenv(plan_cache.CACHE_ENV, str(tmp_path / "cache"))
     plan_cache.shipped_plans_missing.cache_clear()
-    fields = {"family_name": "patches", "planner_version": plan_cache.PLANNER_VERSION}
+    fields = {
+        "family_name": "patches",
+        "planner_version": plan_cache.PLANNER_VERSION,
+        "renderer": {"variant": "llvm_ad_mono"},
+    }
     with caplog.at_level(logging.WARNING, logger=plan_cache.__name__):
         assert plan_cache.find_plan(fields) is None
         assert plan_cache.find_plan(fields) is None

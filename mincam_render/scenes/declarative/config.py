@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
-from mincam_render.core.config import check_min_max, spec
+from mincam_render.core.config import Described, check_min_max, spec
 from mincam_render.core.labels import LabelKind
 from mincam_render.scenes.base import CameraMount
 
@@ -46,7 +46,7 @@ class Box:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Mover:
+class Mover(Described):
     """A shape of the scene that moves within a region or along a path, and may come and go.
 
     Its *reference point* is the centre of its bounding box in the scene file; the
@@ -105,7 +105,7 @@ class Mover:
 
 
 @dataclass(frozen=True, kw_only=True)
-class EmitterSwitch:
+class EmitterSwitch(Described):
     """An emitter of the scene switched on and off (a two-state Markov process)."""
 
     id: str = spec(doc="id of the emitter, or of the shape an area emitter is attached to")
@@ -148,7 +148,7 @@ RULE_LABELS = {
 
 
 @dataclass(frozen=True, kw_only=True)
-class LabelDescription:
+class LabelDescription(Described):
     """One label, computed from each frame's state by its ``kind``."""
 
     name: str = spec(doc="key of the label in the dataset")
@@ -177,7 +177,7 @@ class LabelDescription:
 
 
 @dataclass(frozen=True, kw_only=True)
-class MitsubaConfig:
+class MitsubaConfig(Described):
     """A user's Mitsuba scene as a task (``family = "mitsuba"``; docs/your_own_task.md)."""
 
     scene: Path = spec(doc="the Mitsuba XML scene, relative to the description's folder")
