@@ -43,9 +43,9 @@ def markdown(result: TaskFidelityResult) -> str:
         [
             "level",
             "reference",
-            "error/signal: random masks | 4x4 box | 1 texel",
-            "noise/signal (mean over frames out)",
-            "autocorrelation lag 1 frame | 1 window (random masks)",
+            "error/signal: random masks / 4x4 box / 1 texel",
+            "noise/signal (mean over frames out): the same three",
+            "autocorrelation (random masks): lag 1 frame / 1 window",
         ],
         [_noise_row(lv) for lv in result.levels if lv.noise is not None],
     )
@@ -82,9 +82,9 @@ def _noise_row(lv: LevelFigures) -> list[str]:
     return [
         lv.level,
         lv.noise.reference,
-        " \\| ".join(f"{err[k]:.3f}" for k in kinds),
-        " \\| ".join(f"{noise[k]:.3f}" for k in kinds),
-        f"{acf['lag_1_frame']:.2f} \\| {acf['lag_1_window']:.2f}",
+        " / ".join(f"{err[k]:.3f}" for k in kinds),
+        " / ".join(f"{noise[k]:.3f}" for k in kinds),
+        f"{acf['lag_1_frame']:.2f} / {acf['lag_1_window']:.2f}",
     ]
 
 
