@@ -122,7 +122,9 @@ def plot_mask_views(
     k = len(masks)
     cols = min(k + 2, 6)
     rows = -(-(k + 2) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(2.1 * cols, 2.3 * rows), squeeze=False)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(2.1 * cols, 2.5 * rows), squeeze=False, layout="constrained"
+    )
     panels = [("view (mean transport)", view, "gray"), ("label map |corr|", label_map_, "magma")]
     panels += [
         (
@@ -142,7 +144,6 @@ def plot_mask_views(
     for ax in list(axes.flat)[len(panels) :]:
         ax.axis("off")
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
