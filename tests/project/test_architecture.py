@@ -108,3 +108,18 @@ def test_runs_are_read_back_through_one_restore_path():
         if "load_checkpoint(" in path.read_text() or "torch.load(" in path.read_text()
     }
     assert readers == {"mincam_render/learn/checkpoint.py", "mincam_render/learn/restore.py"}
+
+
+def test_the_mitsuba_variant_is_set_in_one_place():
+    """The backend is explicit state: only render/backend sets Mitsuba's variant.
+
+    A second ``mi.set_variant`` elsewhere could switch a process between CPU and
+    GPU under a dataset's feet; ``backend.use_variant`` chooses once and records
+    it, and a resumed dataset of another variant is refused.
+    """
+    setters = {
+        path.relative_to(REPO).as_posix()
+        for path in (REPO / "mincam_render").rglob("*.py")
+        if "set_variant(" in path.read_text()
+    }
+    assert setters == {"mincam_render/render/backend.py"}
