@@ -55,6 +55,7 @@ from mincam_render.analysis.run_dispatch import check_executor, task_splits, tra
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
+    Pooling,
     bootstrap_interval,
     converged,
     paired_difference,
@@ -152,14 +153,14 @@ def episode_record(data: TrainingData) -> dict[str, Any]:
     return {"samples": len(data), **data.source, "manifest_sha256": sha256_file(path)}
 
 
-def _pooling(error_name: str) -> str:
-    return "rms" if error_name.endswith("RMSE") else "mean"
+def _pooling(error_name: str) -> Pooling:
+    return Pooling.RMS if error_name.endswith("RMSE") else Pooling.MEAN
 
 
 def _intervals(
     per_config: Mapping[str, list[Mapping[str, Mapping[str, Any]]]],
     figure: Callable[[Mapping[str, Any]], float],
-    pooling: str,
+    pooling: Pooling,
     seed: int,
 ) -> dict[str, dict[str, Any]]:
     """``{configuration: {"mean", "ci95"}}`` of ``figure(episode metrics)`` per configuration."""
@@ -205,7 +206,7 @@ def label_intervals(
     out: dict[str, dict[str, Any]] = {}
     for label, m in some.items():
         metric = "rmse" if "rmse" in m else "accuracy"
-        pooling = "rms" if metric == "rmse" else "mean"
+        pooling = Pooling.RMS if metric == "rmse" else Pooling.MEAN
         configs = _intervals(per_config, partial(_figure, label=label, key=metric), pooling, seed)
         out[label] = {"metric": metric, "unit": m.get("unit", ""), "configs": configs}
         if len(m.get("accuracy_per_element", ())) > 1:
@@ -214,7 +215,7 @@ def label_intervals(
                     "configs": _intervals(
                         per_config,
                         partial(_figure, label=label, key="accuracy_per_element", element=i),
-                        "mean",
+                        Pooling.MEAN,
                         seed,
                     )
                 }

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, paired_difference
+from mincam_render.analysis.statistics import EpisodeErrors, Pooling, paired_difference
 
 #: Attack figures where a higher value means a more successful attacker.
 ATTACK_FIGURES = ("fg_psnr_db", "reid_top1")
@@ -38,7 +38,7 @@ def _episode_figure(privacy: Mapping[str, Any], design: str, figure: str) -> Epi
     return EpisodeErrors(
         error=np.array([[s[e][figure] for e in names] for s in per_seed]),
         frames=np.array([privacy["episodes"][e]["samples"] for e in names]),
-        pooling="mean",
+        pooling=Pooling.MEAN,
     )
 
 

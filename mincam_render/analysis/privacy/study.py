@@ -45,6 +45,7 @@ from mincam_render.analysis.privacy.metrics import (
 )
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
+    Pooling,
     bootstrap_interval,
     converged,
     paired_difference,
@@ -118,7 +119,7 @@ def _errors(
     return EpisodeErrors(
         error=np.array([[s[e][figure] for e in names] for s in per_seed]),
         frames=np.array([frames[e] for e in names]),
-        pooling="mean",
+        pooling=Pooling.MEAN,
     )
 
 
