@@ -200,9 +200,16 @@ def test_decoders_recover_a_difference_that_the_readout_determines(rng, kind, wi
     assert learned["psnr_db"] > nobody["psnr_db"] + 6, (learned, nobody)
 
 
+def test_decoder_kinds_are_an_enum_whose_values_are_the_json_keys():
+    assert decoders.DECODERS == tuple(decoders.DecoderKind)
+    assert [str(k) for k in decoders.DECODERS] == ["mlp", "conv", "ridge"]  # privacy.json's order
+    kinds = decoders.DecoderKind
+    assert json.dumps({kinds.RIDGE: kinds.CONV}) == '{"ridge": "conv"}'
+
+
 def test_decoder_bad_input(rng):
     x, d = rng.uniform(0, 1, (20, 2)), rng.uniform(0, 1, (20, 4, 4))
-    with pytest.raises(ValueError, match="allowed mlp, conv, ridge"):
+    with pytest.raises(ValueError, match="decoder 'unet': allowed mlp, conv, ridge"):
         decoders.train_decoder("unet", (x, d), (x, d), FAST, 0)
     with pytest.raises(ValueError, match="rows == cols"):
         decoders.train_decoder("conv", (x, d[:, :, :3]), (x, d[:, :, :3]), FAST, 0)
