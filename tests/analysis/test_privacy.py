@@ -9,7 +9,11 @@ import pytest
 from support import linear_task
 
 from mincam_render.analysis.privacy import attacks, decoders
-from mincam_render.analysis.privacy.config import ROSTER_OVERRIDES, AttackConfig, default_comparison
+from mincam_render.analysis.privacy.config import (
+    ROSTER_OVERRIDES,
+    AttackConfig,
+    default_comparison,
+)
 from mincam_render.analysis.privacy.curve import corner_verdicts
 from mincam_render.analysis.privacy.metrics import (
     display,
@@ -410,3 +414,15 @@ def test_audit_designs_follow_the_render_size():
     assert {"mincam-16px", "baseline-64x64", "mincam-8px-private1"} <= set(names)
     assert large.mask_res == 64 and large.overrides["camera"] == {"detectors": 16}
     assert large.overrides["people"] == ROSTER_OVERRIDES["people"]
+
+
+@pytest.mark.parametrize(
+    ("size", "message"),
+    [
+        ({"detectors": 12}, "detectors = 12: allowed 8, 16"),
+        ({"texels": 48}, "texels = 48: allowed 32, 64"),
+    ],
+)
+def test_audit_sizes_other_than_the_two_rendered_are_refused(size, message):
+    with pytest.raises(ValueError, match=message):
+        default_comparison(**size)
