@@ -70,6 +70,7 @@ from mincam_render.data.ray_cluster import ray_session
 from mincam_render.data.render_job import RenderRequest, package_versions, render_dataset
 from mincam_render.export.masks import export_masks
 from mincam_render.learn.train import TrainingData, metrics, run_masks
+from mincam_render.learn.train_config import ModelKind
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
 SHARDS_PER_EPISODE = 4
@@ -316,7 +317,7 @@ def _design_summary(
     """
     conv = [dict(converged(r["history"]), stopped_early=r["stopped_early"]) for r in runs]
     structure = None
-    if runs[0]["model"]["kind"] == "mincam":
+    if ModelKind(runs[0]["model"]["kind"]) is ModelKind.MINCAM:
         best = min(runs, key=lambda r: r["best_val_loss"])
         labels = tuple(next(iter(best["episodes"].values()))["labels"])
         structure = dataclasses.asdict(run_structure(best["run_dir"], view_map, labels))
@@ -602,6 +603,11 @@ def _keep_all_masks(
     return kept
 
 
+def _is_baseline(design: Mapping[str, Any]) -> bool:
+    """A study's design record is a baseline's (its ``model.kind``, never its name)."""
+    return ModelKind(design["model"]["kind"]) is ModelKind.BASELINE
+
+
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
     """Pixel reduction of design ``reference`` at equal error (the paper's 256x, 2048x).
 
@@ -620,7 +626,7 @@ def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any
         (
             d
             for n, d in designs.items()
-            if n.startswith("baseline-") and d["model"].get("head", "mlp") == head
+            if _is_baseline(d) and d["model"].get("head", "mlp") == head
         ),
         key=lambda d: d["model"]["pixels"],
     )
@@ -794,7 +800,7 @@ def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
     seed = int(result.get("config", {}).get("seed", 0))
     lines = []
     for name, d in designs.items():
-        if not name.startswith("baseline-"):
+        if not _is_baseline(d):
             continue
         other = Interval(d["error"]["mean"], *d["error"]["ci95"])
         lines.append(verdict(reference, iv, name, other))

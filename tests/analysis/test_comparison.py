@@ -28,7 +28,8 @@ from mincam_render.learn.train_config import HeadKind
 
 
 def _design(pixels, mean, lo, hi, grid=None):
-    model = {"pixels": pixels, **({"grid": list(grid)} if grid else {})}
+    kind = "baseline" if grid else "mincam"  # the kind is read from here, never from the name
+    model = {"kind": kind, "pixels": pixels, **({"grid": list(grid)} if grid else {})}
     return {
         "model": model,
         "error": {"mean": mean, "ci95": [lo, hi]},
@@ -224,6 +225,13 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(tmp_path):
     m = run_masks(tmp_path / "run")[0]
     png = np.asarray(Image.open(tmp_path / "kept" / side["files"]["png"][1]), np.float64)
     np.testing.assert_allclose(png / 65535.0, m[1], atol=1 / 65535)
+
+
+def test_baselines_are_told_by_their_model_kind_not_their_name():
+    res = _result()
+    res["designs"] = {f"design-{i}": d for i, d in enumerate(res["designs"].values())}
+    assert reduction_factor(res, "design-0")["baseline"] == "4x4"
+    assert len(reference_verdicts(res, "design-0")) == 3
 
 
 def test_reference_verdicts_and_training_states():
