@@ -1,5 +1,6 @@
 """Comparisons of designs: design names, episode seeds, reduction factor, study table, CLI."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -367,3 +368,20 @@ def test_lighting_figure_shows_accuracy_against_pixels_and_a_panel_per_light(tmp
     assert top.lines[0].get_ydata()[0] == pytest.approx(0.5)  # the trivial line at 1 - 0.5
     titles = [ax.get_title() for ax in fig.axes[1:]]
     assert titles == ["lights", "lights: lamp", "lights: bank"]
+
+
+def test_designs_read_back_from_a_results_config_with_their_kinds():
+    from mincam_render.analysis.comparison_config import Design, designs_by_name
+    from mincam_render.learn.train_config import MaskReference
+
+    designs = (Design(pixels=8, privacy_weight=1.0), Design(grid=(4, 4), head=HeadKind.TCN),
+               Design(pixels=2, reference=MaskReference.PCA, tuned=True))  # fmt: skip
+    # as a result's config holds them: json.dumps(asdict(...), default=str)
+    records = json.loads(json.dumps([dataclasses.asdict(d) for d in designs], default=str))
+    assert records[1]["head"] == "HeadKind.TCN"
+    back = designs_by_name(records)
+    assert list(back.values()) == list(designs)
+    assert [d.is_mincam for d in back.values()] == [True, False, True]
+    assert Design.from_json({"pixels": 1, "grid": None, "head": "tcn"}).head is HeadKind.TCN
+    with pytest.raises(ValueError, match="HeadKind = 'lstm': allowed 'mlp', 'tcn'"):
+        Design.from_json({"pixels": 1, "grid": None, "head": "lstm"})

@@ -305,8 +305,9 @@ def _result(mincam_psnr: float, mincam_reid: float) -> dict:
             "baseline-32x32": _design(0.5, 0.1, 22.0, 0.9, 10.0),
         },
         "episodes": {f"test-{e}": {"samples": 200} for e in range(3)},
-        "config": {"comparison": {"seed": 0}},
-    }
+        "config": {"comparison": {"seed": 0, "designs": [  # kinds come from here, not names
+            {"pixels": 2, "grid": None}, *({"pixels": None, "grid": [g, g]} for g in (2, 8, 32))]}},
+    }  # fmt: skip
 
 
 def test_corner_needs_a_task_match_and_separated_attack_intervals():
