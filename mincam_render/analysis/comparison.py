@@ -55,6 +55,7 @@ from mincam_render.analysis.run_dispatch import check_executor, task_splits, tra
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
+    Pooling,
     bootstrap_interval,
     converged,
     paired_difference,
@@ -69,6 +70,7 @@ from mincam_render.data.ray_cluster import ray_session
 from mincam_render.data.render_job import RenderRequest, package_versions, render_dataset
 from mincam_render.export.masks import export_masks
 from mincam_render.learn.train import TrainingData, metrics, run_masks
+from mincam_render.learn.train_config import ModelKind
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
 SHARDS_PER_EPISODE = 4
@@ -152,14 +154,14 @@ def episode_record(data: TrainingData) -> dict[str, Any]:
     return {"samples": len(data), **data.source, "manifest_sha256": sha256_file(path)}
 
 
-def _pooling(error_name: str) -> str:
-    return "rms" if error_name.endswith("RMSE") else "mean"
+def _pooling(error_name: str) -> Pooling:
+    return Pooling.RMS if error_name.endswith("RMSE") else Pooling.MEAN
 
 
 def _intervals(
     per_config: Mapping[str, list[Mapping[str, Mapping[str, Any]]]],
     figure: Callable[[Mapping[str, Any]], float],
-    pooling: str,
+    pooling: Pooling,
     seed: int,
 ) -> dict[str, dict[str, Any]]:
     """``{configuration: {"mean", "ci95"}}`` of ``figure(episode metrics)`` per configuration."""
@@ -205,7 +207,7 @@ def label_intervals(
     out: dict[str, dict[str, Any]] = {}
     for label, m in some.items():
         metric = "rmse" if "rmse" in m else "accuracy"
-        pooling = "rms" if metric == "rmse" else "mean"
+        pooling = Pooling.RMS if metric == "rmse" else Pooling.MEAN
         configs = _intervals(per_config, partial(_figure, label=label, key=metric), pooling, seed)
         out[label] = {"metric": metric, "unit": m.get("unit", ""), "configs": configs}
         if len(m.get("accuracy_per_element", ())) > 1:
@@ -214,7 +216,7 @@ def label_intervals(
                     "configs": _intervals(
                         per_config,
                         partial(_figure, label=label, key="accuracy_per_element", element=i),
-                        "mean",
+                        Pooling.MEAN,
                         seed,
                     )
                 }
@@ -315,7 +317,7 @@ def _design_summary(
     """
     conv = [dict(converged(r["history"]), stopped_early=r["stopped_early"]) for r in runs]
     structure = None
-    if runs[0]["model"]["kind"] == "mincam":
+    if ModelKind(runs[0]["model"]["kind"]) is ModelKind.MINCAM:
         best = min(runs, key=lambda r: r["best_val_loss"])
         labels = tuple(next(iter(best["episodes"].values()))["labels"])
         structure = dataclasses.asdict(run_structure(best["run_dir"], view_map, labels))
@@ -601,6 +603,11 @@ def _keep_all_masks(
     return kept
 
 
+def _is_baseline(design: Mapping[str, Any]) -> bool:
+    """A study's design record is a baseline's (its ``model.kind``, never its name)."""
+    return ModelKind(design["model"]["kind"]) is ModelKind.BASELINE
+
+
 def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any]:
     """Pixel reduction of design ``reference`` at equal error (the paper's 256x, 2048x).
 
@@ -619,7 +626,7 @@ def reduction_factor(result: Mapping[str, Any], reference: str) -> dict[str, Any
         (
             d
             for n, d in designs.items()
-            if n.startswith("baseline-") and d["model"].get("head", "mlp") == head
+            if _is_baseline(d) and d["model"].get("head", "mlp") == head
         ),
         key=lambda d: d["model"]["pixels"],
     )
@@ -793,7 +800,7 @@ def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
     seed = int(result.get("config", {}).get("seed", 0))
     lines = []
     for name, d in designs.items():
-        if not name.startswith("baseline-"):
+        if not _is_baseline(d):
             continue
         other = Interval(d["error"]["mean"], *d["error"]["ci95"])
         lines.append(verdict(reference, iv, name, other))

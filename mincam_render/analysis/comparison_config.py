@@ -6,9 +6,9 @@ No PyTorch or Mitsuba import, so the command line shows these defaults at once.
 from __future__ import annotations
 
 import enum
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
@@ -27,6 +27,27 @@ class Protocol(enum.Enum):
 
     PER_TASK = "per-task"
     JOINT = "joint"
+
+
+_E = TypeVar("_E", bound=enum.Enum)
+
+
+def _enum_of_json(kind: type[_E], text: str) -> _E:
+    """``kind``'s member of ``text``: its value, or ``"Kind.NAME"`` (its ``str``)."""
+    prefix = f"{kind.__name__}."
+    if text.startswith(prefix) and text[len(prefix) :] in kind.__members__:
+        return kind[text[len(prefix) :]]
+    try:
+        return kind(text)
+    except ValueError:
+        allowed = ", ".join(repr(m.value) for m in kind)
+        raise ValueError(f"{kind.__name__} = {text!r}: allowed {allowed}") from None
+
+
+def designs_by_name(records: Sequence[Mapping[str, Any]]) -> dict[str, Design]:
+    """``{name: design}`` of a result's ``config`` designs (:meth:`Design.from_json`)."""
+    designs = (Design.from_json(r) for r in records)
+    return {d.name: d for d in designs}
 
 
 @dataclass(frozen=True)
@@ -98,6 +119,28 @@ class Design:
     def is_mincam(self) -> bool:
         """A minimalist camera (it has masks to keep)."""
         return self.pixels is not None
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> Design:
+        """The design of its JSON form in a result's ``config`` (``dataclasses.asdict``).
+
+        Enums there are their values, or their ``str`` (``"HeadKind.MLP"``) as
+        ``json.dumps(..., default=str)`` wrote them; fields a result from before
+        them lacks take their defaults.
+
+        Raises:
+            ValueError: an unknown head or reference, or an invalid design.
+        """
+        ref = d.get("reference")
+        return cls(
+            pixels=d.get("pixels"),
+            grid=None if d.get("grid") is None else tuple(d["grid"]),
+            sensor_model=bool(d.get("sensor_model", True)),
+            head=_enum_of_json(HeadKind, d.get("head", HeadKind.MLP.value)),
+            privacy_weight=float(d.get("privacy_weight", 0.0)),
+            reference=None if ref is None else _enum_of_json(MaskReference, ref),
+            tuned=bool(d.get("tuned", False)),
+        )
 
     def train_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :func:`mincam_render.learn.train.train_run`."""

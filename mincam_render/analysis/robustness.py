@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
+from mincam_render.analysis.statistics import EpisodeErrors, Pooling, bootstrap_interval
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.perturbation import TERM_FIELDS, PerturbationModel, PerturbationTerm
@@ -226,7 +226,8 @@ def design_record(
 def _draw_interval(per_run: np.ndarray, seed: int) -> Any:
     """Mean and bootstrap interval of ``[run][draw]`` figures (runs and draws resampled)."""
     return bootstrap_interval(
-        EpisodeErrors(error=per_run, frames=np.ones(per_run.shape[1]), pooling="mean"), seed=seed
+        EpisodeErrors(error=per_run, frames=np.ones(per_run.shape[1]), pooling=Pooling.MEAN),
+        seed=seed,
     )
 
 

@@ -22,6 +22,7 @@ by less than 2 % (:func:`converged`).
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -36,20 +37,31 @@ RESAMPLES = 4000
 CONVERGED_IMPROVEMENT = 0.02
 
 
+class Pooling(enum.StrEnum):
+    """How an episode's per-frame errors pool into one figure (``EpisodeErrors``)."""
+
+    RMS = "rms"  # root mean square over frames: RMSE
+    MEAN = "mean"  # mean over frames: error rates, accuracies, attack figures
+
+
 @dataclass(frozen=True)
 class EpisodeErrors:
     """Test errors of one configuration: ``error[seed, episode]`` and frames per episode.
 
     Args:
-        error: ``[seeds, episodes]`` RMSE (``pooling="rms"``) or error rate
-            (``pooling="mean"``) of each seed on each test episode.
+        error: ``[seeds, episodes]`` RMSE (``Pooling.RMS``) or error rate
+            (``Pooling.MEAN``) of each seed on each test episode.
         frames: ``[episodes]`` test frames of each episode (the pooling weights).
-        pooling: ``"rms"`` for RMSE, ``"mean"`` for error rates.
+        pooling: :class:`Pooling` (or its value, ``"rms"``/``"mean"``, as JSON holds it).
+
+    Raises:
+        ValueError: shapes that do not match, non-finite errors, an episode
+            without frames, or an unknown pooling (naming the allowed ones).
     """
 
     error: np.ndarray
     frames: np.ndarray
-    pooling: str
+    pooling: Pooling
 
     def __post_init__(self) -> None:
         err = np.asarray(self.error, np.float64)
@@ -61,8 +73,11 @@ class EpisodeErrors:
             )
         if not np.all(np.isfinite(err)) or np.any(n <= 0):
             raise ValueError("errors must be finite and every episode must have frames")
-        if self.pooling not in ("rms", "mean"):
-            raise ValueError(f"pooling = {self.pooling!r}: allowed 'rms' or 'mean'")
+        try:
+            object.__setattr__(self, "pooling", Pooling(self.pooling))
+        except ValueError:
+            allowed = ", ".join(repr(p.value) for p in Pooling)
+            raise ValueError(f"pooling = {self.pooling!r}: allowed {allowed}") from None
         object.__setattr__(self, "error", err)
         object.__setattr__(self, "frames", n)
 
@@ -70,7 +85,7 @@ class EpisodeErrors:
         """Mean over ``seeds`` of the error pooled over ``episodes`` (index arrays)."""
         e = self.error[np.ix_(seeds, episodes)]
         w = self.frames[episodes] / self.frames[episodes].sum()
-        per_seed = np.sqrt((e**2) @ w) if self.pooling == "rms" else e @ w
+        per_seed = np.sqrt((e**2) @ w) if self.pooling is Pooling.RMS else e @ w
         return float(per_seed.mean())
 
     def as_dict(self) -> dict[str, Any]:
@@ -78,13 +93,13 @@ class EpisodeErrors:
         return {
             "error": self.error.tolist(),
             "frames": self.frames.tolist(),
-            "pooling": self.pooling,
+            "pooling": self.pooling.value,
         }
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> EpisodeErrors:
         """Inverse of :meth:`as_dict`."""
-        return cls(np.asarray(d["error"]), np.asarray(d["frames"]), str(d["pooling"]))
+        return cls(np.asarray(d["error"]), np.asarray(d["frames"]), d["pooling"])
 
     def point(self) -> float:
         """The configuration's figure: every seed, every episode."""
@@ -165,7 +180,8 @@ def paired_difference(a: EpisodeErrors, b: EpisodeErrors, seed: int = 0) -> Inte
     if not np.array_equal(a.frames, b.frames) or a.pooling != b.pooling:
         raise ValueError(
             "a paired difference needs the same test episodes: frames "
-            f"{a.frames.tolist()} vs {b.frames.tolist()}, pooling {a.pooling!r} vs {b.pooling!r}"
+            f"{a.frames.tolist()} vs {b.frames.tolist()}, "
+            f"pooling {a.pooling.value!r} vs {b.pooling.value!r}"
         )
     axes = [np.arange(a.error.shape[0]), np.arange(b.error.shape[0]), np.arange(len(a.frames))]
     return _bootstrap(

@@ -16,7 +16,7 @@ import click
 from mincam_render.data.render_job import RenderRequest
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity import Fidelity
-from mincam_render.render.precision import DTYPES, ErrorScale
+from mincam_render.render.precision import ErrorScale, StorageDtype
 
 from .errors import user_error
 from .options import (
@@ -110,7 +110,7 @@ _REQUEST_OPTIONS = [
         help="Mask texels per side (default: the family camera's).",
     ),
     click.option(
-        "--dtype", type=click.Choice(list(DTYPES)), default=_default("dtype"),
+        "--dtype", type=click.Choice([d.value for d in StorageDtype]), default=_default("dtype"),
         help="Storage type (default: float16 if within --dtype-error).",
     ),
     click.option(

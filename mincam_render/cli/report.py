@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from mincam_render.analysis.privacy.config import AttackConfig
+from mincam_render.analysis.privacy.config import AUDIT_DETECTORS, AUDIT_TEXELS, AttackConfig
 from mincam_render.analysis.robustness import RobustnessConfig
 
 from .errors import InputError, user_error
@@ -322,15 +322,15 @@ def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData
 )
 @click.option(
     "--detectors",
-    type=click.Choice(["8", "16"]),
-    default="8",
+    type=click.Choice(AUDIT_DETECTORS),
+    default=AUDIT_DETECTORS[0],
     show_default=True,
     help="Detectors rendered: mincam designs of 1, 2, 4, ... up to this many pixels.",
 )
 @click.option(
     "--mask-res",
-    type=click.Choice(["32", "64"]),
-    default="32",
+    type=click.Choice(AUDIT_TEXELS),
+    default=AUDIT_TEXELS[0],
     show_default=True,
     help="Mask texels per side rendered: baselines up to this fine (64: adds 64x64). "
     "16 detectors at 64 texels cost about 8 times the default render.",
@@ -353,8 +353,8 @@ def report_privacy_cmd(
     task_seeds: int,
     seeds: int,
     max_steps: int,
-    detectors: str,
-    mask_res: str,
+    detectors: int,
+    mask_res: int,
     workers: int,
     train_workers: int,
     ray_address: str | None,
@@ -395,7 +395,7 @@ def report_privacy_cmd(
     try:
         other = -(-2 * train_frames // 3)
         comparison = dataclasses.replace(
-            default_comparison(int(detectors), int(mask_res)),
+            default_comparison(detectors, mask_res),
             train_frames=train_frames,
             val_frames=other,
             test_frames=other,

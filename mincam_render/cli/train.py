@@ -482,7 +482,7 @@ def prune_cmd(
     (out / "prune.json").write_text(strict_json.dumps([source | r for r in records]))
     rows = [
         {
-            "kind": "mincam",
+            "kind": ModelKind.MINCAM.value,
             "pixels": r["pixels"],
             "error": r["test"]["error"],
             "error_name": r["test"]["error_name"],

@@ -39,6 +39,8 @@ from pathlib import Path
 from typing import Any
 
 from mincam_render.core.package_data import shipped_path
+from mincam_render.render.differential import DifferenceSeeds
+from mincam_render.render.precision import ErrorScale
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +54,10 @@ PLANNER_VERSION = 4
 CACHE_ENV = "MINCAM_RENDER_PLAN_CACHE"
 #: The planning of every plan before targets relative to the label signal: relative
 #: to each frame's total, ``X - C`` seeded per background window.
-TOTAL_PLANNING = {"error_scale": "frame", "difference_seeds": "window"}
+TOTAL_PLANNING = {
+    "error_scale": ErrorScale.FRAME.value,
+    "difference_seeds": DifferenceSeeds.WINDOW.value,
+}
 #: Request fields that do not change a plan (the episode and its storage layout).
 EPISODE_FIELDS = ("family", "seed", "overrides", "shard_frames", "splits")
 

@@ -28,6 +28,7 @@ receives as a keyword argument; the parent forwards it to its own callback.
 
 from __future__ import annotations
 
+import enum
 import logging
 import multiprocessing as mp
 import os
@@ -50,6 +51,14 @@ DEFAULT_STALL_FACTOR = 10.0
 DEFAULT_STALL_FLOOR_S = 900.0
 #: Seconds between the parent's checks when no message arrives.
 POLL_S = 1.0
+
+
+class Message(enum.StrEnum):
+    """What a worker's message to the parent says: ``(Message, task key, payload)``."""
+
+    PROGRESS = "progress"  # payload: units of the task done since the last report
+    ERROR = "error"  # payload: the exception that ended the task (raised again by the parent)
+    DONE = "done"  # payload: the task's result
 
 
 class PoolError(RuntimeError):
@@ -152,14 +161,14 @@ def _worker_main(
         key, args = message
 
         def on_progress(n: int = 1, key: Hashable = key) -> None:
-            _send(conn, ("progress", key, n))
+            _send(conn, (Message.PROGRESS, key, n))
 
         try:
             result = fn(*args, on_progress=on_progress)
         except BaseException as err:  # sent to the parent, which raises it again
-            _send(conn, ("error", key, _picklable(err)))
+            _send(conn, (Message.ERROR, key, _picklable(err)))
             return
-        _send(conn, ("done", key, result))
+        _send(conn, (Message.DONE, key, result))
 
 
 def _send(conn: Connection, message: tuple) -> None:
@@ -286,17 +295,18 @@ def _read_messages(
             kind, key, payload = w.conn.recv()
         except (EOFError, OSError):
             return False  # the worker is gone; _retire decides whether that lost a task
-        if kind == "progress":
-            watch.report()
-            if on_progress is not None:
-                on_progress(key, payload)
-        elif kind == "error":
-            w.task = None
-            raise payload
-        else:
-            watch.report(time.monotonic() - w.started_s)
-            w.task = None
-            on_result(key, payload)
+        match Message(kind):
+            case Message.PROGRESS:
+                watch.report()
+                if on_progress is not None:
+                    on_progress(key, payload)
+            case Message.ERROR:
+                w.task = None
+                raise payload
+            case Message.DONE:
+                watch.report(time.monotonic() - w.started_s)
+                w.task = None
+                on_result(key, payload)
 
 
 def _retire(w: _Worker, pool: list[_Worker]) -> None:

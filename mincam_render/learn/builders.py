@@ -17,7 +17,7 @@ import torch
 from mincam_render.core.labels import LabelKind
 from mincam_render.learn.models import BaselineCamera, CountLoss, Head, MincamCamera, Model
 from mincam_render.learn.temporal_head import TemporalConvHead
-from mincam_render.learn.train_config import HeadKind
+from mincam_render.learn.train_config import HeadKind, ModelKind
 from mincam_render.learn.training_data import TrainingData
 
 #: The paper's loss for COUNT labels by scene family (``TrainingData.source["family"]``):
@@ -190,7 +190,7 @@ def describe_model(model: Model) -> dict[str, Any]:
     """
     if isinstance(model, MincamCamera):
         desc = {
-            "kind": "mincam",
+            "kind": ModelKind.MINCAM.value,
             "pixels": model.num_pixels,
             "detectors": model.detectors.tolist(),
             "sensor_model": model.sensor_model,
@@ -200,7 +200,7 @@ def describe_model(model: Model) -> dict[str, Any]:
             desc["mask_block"] = model.mask_block
     else:
         desc = {
-            "kind": "baseline",
+            "kind": ModelKind.BASELINE.value,
             "pixels": model.num_pixels,
             "grid": list(model.grid),
             "exposure_w": float(model.exposure_w),

@@ -20,7 +20,6 @@ ablation's frozen masks) goes through here.
 
 from __future__ import annotations
 
-import enum
 import json
 import os
 from dataclasses import dataclass
@@ -33,7 +32,7 @@ import torch
 from mincam_render.learn.builders import build_head
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.models import BaselineCamera, MincamCamera, Model
-from mincam_render.learn.train_config import HeadKind
+from mincam_render.learn.train_config import HeadKind, ModelKind
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
 
@@ -41,13 +40,6 @@ from mincam_render.optics.camera import FreeformCamera
 FINISHED_MARK = "metrics.json"
 #: State of a privacy-trained run that belongs to its training, not to its camera.
 ADVERSARY_PREFIX = "adversary."
-
-
-class ModelKind(enum.Enum):
-    """The kind of camera a run trained (``run.json``'s ``model.kind``)."""
-
-    MINCAM = "mincam"
-    BASELINE = "baseline"
 
 
 #: How a message names the runs of a kind.

@@ -14,7 +14,7 @@ from mincam_render.learn.builders import build_baseline, build_mincam, describe_
 from mincam_render.learn.evaluation import evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import Model
-from mincam_render.learn.train_config import TrainConfig
+from mincam_render.learn.train_config import ModelKind, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 
 log = logging.getLogger(__name__)
@@ -178,10 +178,10 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, title
 
     fig, ax = plt.subplots(figsize=(5, 3.5))
     for kind, style, label in (
-        ("mincam", "o-", "minimalist camera"),
-        ("baseline", "s--", "baseline camera"),
+        (ModelKind.MINCAM, "o-", "minimalist camera"),
+        (ModelKind.BASELINE, "s--", "baseline camera"),
     ):
-        pts = sorted((r["pixels"], r["error"]) for r in rows if r["kind"] == kind)
+        pts = sorted((r["pixels"], r["error"]) for r in rows if ModelKind(r["kind"]) is kind)
         if pts:
             ax.plot(*zip(*pts, strict=True), style, label=label)
     ax.set_xscale("log", base=2)

@@ -21,6 +21,13 @@ class CountLoss(enum.Enum):
     CROSS_ENTROPY = "cross_entropy"
 
 
+class ModelKind(enum.StrEnum):
+    """The kind of camera a run trained (``run.json``'s and a study's ``model.kind``)."""
+
+    MINCAM = "mincam"
+    BASELINE = "baseline"
+
+
 class HeadKind(enum.Enum):
     """The inference network behind the pixels.
 

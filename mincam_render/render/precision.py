@@ -22,8 +22,28 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Storage dtypes of transport images.
-DTYPES = ("float16", "float32")
+
+class StorageDtype(enum.StrEnum):
+    """Storage type of transport images in a dataset's shards (:func:`encode_transport`)."""
+
+    FLOAT16 = "float16"  # scaled per frame by a power of two (frame_scales)
+    FLOAT32 = "float32"  # as rendered, scale 1
+
+
+#: The storage types' names (:class:`StorageDtype`).
+DTYPES = tuple(d.value for d in StorageDtype)
+
+
+def storage_dtype(value: str, name: str = "dtype") -> StorageDtype:
+    """``value`` as a :class:`StorageDtype`.
+
+    Raises:
+        ValueError: another value, naming ``name`` and the allowed ones.
+    """
+    try:
+        return StorageDtype(value)
+    except ValueError:
+        raise ValueError(f"{name} = {value!r}: allowed {', '.join(DTYPES)}") from None
 
 
 class ErrorScale(enum.StrEnum):
@@ -135,12 +155,15 @@ def frame_scales(transport_w: np.ndarray) -> np.ndarray:
     return scales
 
 
-def encode_transport(transport_w: np.ndarray, dtype: str) -> tuple[np.ndarray, np.ndarray]:
+def encode_transport(
+    transport_w: np.ndarray, dtype: StorageDtype | str
+) -> tuple[np.ndarray, np.ndarray]:
     """Stored array and per-frame scales for ``T[frame, detector, row, col]`` (W).
 
     Args:
         transport_w: float32 transport images, finite.
-        dtype: ``"float16"`` (scaled per frame) or ``"float32"`` (scale 1).
+        dtype: :class:`StorageDtype` (or its value): ``FLOAT16`` (scaled per
+            frame) or ``FLOAT32`` (scale 1).
 
     Returns:
         ``(stored, scales)``: little-endian array of ``dtype`` and float64 scales [N].
@@ -148,12 +171,11 @@ def encode_transport(transport_w: np.ndarray, dtype: str) -> tuple[np.ndarray, n
     Raises:
         ValueError: unknown dtype or non-finite values.
     """
-    if dtype not in DTYPES:
-        raise ValueError(f"dtype = {dtype!r}: allowed {', '.join(DTYPES)}")
+    dtype = storage_dtype(dtype)
     t = np.asarray(transport_w, dtype=np.float32)
     if not np.all(np.isfinite(t)):
         raise ValueError("transport images contain NaN or infinity; refusing to store them")
-    if dtype == "float32":
+    if dtype is StorageDtype.FLOAT32:
         return t.astype("<f4"), np.ones(t.shape[0])
     scales = frame_scales(t)
     shape = (-1,) + (1,) * (t.ndim - 1)

@@ -1,5 +1,6 @@
 """Comparisons of designs: design names, episode seeds, reduction factor, study table, CLI."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -28,7 +29,8 @@ from mincam_render.learn.train_config import HeadKind
 
 
 def _design(pixels, mean, lo, hi, grid=None):
-    model = {"pixels": pixels, **({"grid": list(grid)} if grid else {})}
+    kind = "baseline" if grid else "mincam"  # the kind is read from here, never from the name
+    model = {"kind": kind, "pixels": pixels, **({"grid": list(grid)} if grid else {})}
     return {
         "model": model,
         "error": {"mean": mean, "ci95": [lo, hi]},
@@ -226,6 +228,13 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(tmp_path):
     np.testing.assert_allclose(png / 65535.0, m[1], atol=1 / 65535)
 
 
+def test_baselines_are_told_by_their_model_kind_not_their_name():
+    res = _result()
+    res["designs"] = {f"design-{i}": d for i, d in enumerate(res["designs"].values())}
+    assert reduction_factor(res, "design-0")["baseline"] == "4x4"
+    assert len(reference_verdicts(res, "design-0")) == 3
+
+
 def test_reference_verdicts_and_training_states():
     res = _result()
     v = reference_verdicts(res, "mincam-4px")
@@ -359,3 +368,20 @@ def test_lighting_figure_shows_accuracy_against_pixels_and_a_panel_per_light(tmp
     assert top.lines[0].get_ydata()[0] == pytest.approx(0.5)  # the trivial line at 1 - 0.5
     titles = [ax.get_title() for ax in fig.axes[1:]]
     assert titles == ["lights", "lights: lamp", "lights: bank"]
+
+
+def test_designs_read_back_from_a_results_config_with_their_kinds():
+    from mincam_render.analysis.comparison_config import Design, designs_by_name
+    from mincam_render.learn.train_config import MaskReference
+
+    designs = (Design(pixels=8, privacy_weight=1.0), Design(grid=(4, 4), head=HeadKind.TCN),
+               Design(pixels=2, reference=MaskReference.PCA, tuned=True))  # fmt: skip
+    # as a result's config holds them: json.dumps(asdict(...), default=str)
+    records = json.loads(json.dumps([dataclasses.asdict(d) for d in designs], default=str))
+    assert records[1]["head"] == "HeadKind.TCN"
+    back = designs_by_name(records)
+    assert list(back.values()) == list(designs)
+    assert [d.is_mincam for d in back.values()] == [True, False, True]
+    assert Design.from_json({"pixels": 1, "grid": None, "head": "tcn"}).head is HeadKind.TCN
+    with pytest.raises(ValueError, match="HeadKind = 'lstm': allowed 'mlp', 'tcn'"):
+        Design.from_json({"pixels": 1, "grid": None, "head": "lstm"})

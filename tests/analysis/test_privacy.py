@@ -9,7 +9,11 @@ import pytest
 from support import linear_task
 
 from mincam_render.analysis.privacy import attacks, decoders
-from mincam_render.analysis.privacy.config import ROSTER_OVERRIDES, AttackConfig, default_comparison
+from mincam_render.analysis.privacy.config import (
+    ROSTER_OVERRIDES,
+    AttackConfig,
+    default_comparison,
+)
 from mincam_render.analysis.privacy.curve import corner_verdicts
 from mincam_render.analysis.privacy.metrics import (
     display,
@@ -200,9 +204,16 @@ def test_decoders_recover_a_difference_that_the_readout_determines(rng, kind, wi
     assert learned["psnr_db"] > nobody["psnr_db"] + 6, (learned, nobody)
 
 
+def test_decoder_kinds_are_an_enum_whose_values_are_the_json_keys():
+    assert decoders.DECODERS == tuple(decoders.DecoderKind)
+    assert [str(k) for k in decoders.DECODERS] == ["mlp", "conv", "ridge"]  # privacy.json's order
+    kinds = decoders.DecoderKind
+    assert json.dumps({kinds.RIDGE: kinds.CONV}) == '{"ridge": "conv"}'
+
+
 def test_decoder_bad_input(rng):
     x, d = rng.uniform(0, 1, (20, 2)), rng.uniform(0, 1, (20, 4, 4))
-    with pytest.raises(ValueError, match="allowed mlp, conv, ridge"):
+    with pytest.raises(ValueError, match="decoder 'unet': allowed mlp, conv, ridge"):
         decoders.train_decoder("unet", (x, d), (x, d), FAST, 0)
     with pytest.raises(ValueError, match="rows == cols"):
         decoders.train_decoder("conv", (x, d[:, :, :3]), (x, d[:, :, :3]), FAST, 0)
@@ -294,8 +305,9 @@ def _result(mincam_psnr: float, mincam_reid: float) -> dict:
             "baseline-32x32": _design(0.5, 0.1, 22.0, 0.9, 10.0),
         },
         "episodes": {f"test-{e}": {"samples": 200} for e in range(3)},
-        "config": {"comparison": {"seed": 0}},
-    }
+        "config": {"comparison": {"seed": 0, "designs": [  # kinds come from here, not names
+            {"pixels": 2, "grid": None}, *({"pixels": None, "grid": [g, g]} for g in (2, 8, 32))]}},
+    }  # fmt: skip
 
 
 def test_corner_needs_a_task_match_and_separated_attack_intervals():
@@ -403,3 +415,15 @@ def test_audit_designs_follow_the_render_size():
     assert {"mincam-16px", "baseline-64x64", "mincam-8px-private1"} <= set(names)
     assert large.mask_res == 64 and large.overrides["camera"] == {"detectors": 16}
     assert large.overrides["people"] == ROSTER_OVERRIDES["people"]
+
+
+@pytest.mark.parametrize(
+    ("size", "message"),
+    [
+        ({"detectors": 12}, "detectors = 12: allowed 8, 16"),
+        ({"texels": 48}, "texels = 48: allowed 32, 64"),
+    ],
+)
+def test_audit_sizes_other_than_the_two_rendered_are_refused(size, message):
+    with pytest.raises(ValueError, match=message):
+        default_comparison(**size)

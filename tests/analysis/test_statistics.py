@@ -6,6 +6,7 @@ import pytest
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
     Interval,
+    Pooling,
     bootstrap_interval,
     converged,
     paired_difference,
@@ -100,7 +101,9 @@ def test_episode_errors_round_trip_through_json():
     e = EpisodeErrors(np.array([[1.0, 2.5], [0.5, 3.0]]), np.array([10, 40]), "rms")
     back = EpisodeErrors.from_dict(json.loads(json.dumps(e.as_dict())))
     assert np.array_equal(back.error, e.error) and np.array_equal(back.frames, e.frames)
-    assert back.pooling == "rms" and back.point() == pytest.approx(e.point())
+    assert back.pooling is Pooling.RMS and back.point() == pytest.approx(e.point())
+    assert json.dumps(e.as_dict()) == json.dumps(back.as_dict())  # the value, as before
+    assert e.as_dict()["pooling"] == "rms" and type(e.as_dict()["pooling"]) is str
 
 
 @pytest.mark.parametrize(
@@ -122,8 +125,10 @@ def test_bad_episode_errors_are_refused():
         EpisodeErrors(error=np.ones(3), frames=np.ones(3), pooling="rms")
     with pytest.raises(ValueError, match="finite"):
         EpisodeErrors(error=np.array([[np.nan]]), frames=np.ones(1), pooling="rms")
-    with pytest.raises(ValueError, match="pooling"):
+    with pytest.raises(ValueError, match="pooling = 'median': allowed 'rms', 'mean'"):
         EpisodeErrors(error=np.ones((1, 1)), frames=np.ones(1), pooling="median")
+    with pytest.raises(ValueError, match="allowed 'rms', 'mean'"):
+        EpisodeErrors.from_dict({"error": [[1.0]], "frames": [1], "pooling": "RMS"})
 
 
 def test_stream_seeds_are_stable_distinct_and_refuse_negatives():

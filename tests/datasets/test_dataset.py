@@ -146,6 +146,31 @@ def test_float16_encoding_error_and_scales(rng):
     np.testing.assert_array_equal(precision.decode_transport(s32, sc32), t)
 
 
+def test_storage_dtype_is_an_enum_converted_once_and_other_values_are_named():
+    from mincam_render.data.render_job import RenderRequest
+    from mincam_render.render.fidelity.plan import FidelityPlan
+
+    req = RenderRequest(family="patches", num_frames=4, dtype="float16")
+    assert req.dtype is precision.StorageDtype.FLOAT16
+    # the identity (what a dataset's manifest hashes) holds the plain string, as before
+    identity = req.identity({})
+    assert identity["dtype"] == "float16" and type(identity["dtype"]) is str
+    assert '"dtype": "float16"' in json.dumps(identity, sort_keys=True)
+    allowed = "allowed None or one of float16, float32"
+    with pytest.raises(ValueError, match=f"RenderRequest.dtype = 'float64' is invalid: {allowed}"):
+        RenderRequest(family="patches", num_frames=4, dtype="float64")
+    with pytest.raises(ValueError, match="dtype = 'half': allowed float16, float32"):
+        precision.encode_transport(np.zeros((1, 1, 2, 2), np.float32), "half")
+    plan = FidelityPlan(
+        spp=1, max_depth=2, shared_render=True, mask_resolution=8, dtype="float32",
+        background=None, decisions={},
+    )  # fmt: skip
+    assert plan.dtype is precision.StorageDtype.FLOAT32
+    assert type(plan.settings()["dtype"]) is str
+    with pytest.raises(ValueError, match="dtype = 'f32': allowed float16, float32"):
+        dataclasses.replace(plan, dtype="f32")
+
+
 def test_error_relative_to_each_frame_or_to_the_mean_frame():
     # uniform transport: every mask measures the same multiple of the frame's level,
     # so a constant error e_i of frame i is e_i / level_i or e_i / mean level

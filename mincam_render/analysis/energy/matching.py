@@ -13,8 +13,12 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
+
+from mincam_render.learn.train_config import ModelKind
 
 #: The paper's matches: family -> (freeform pixels, baseline grid) of equal error.
 PAPER_MATCHES: dict[str, tuple[int, tuple[int, int]]] = {
@@ -51,6 +55,11 @@ class Match:
     matched: bool = True
 
 
+def _kind(design: Mapping[str, Any]) -> ModelKind:
+    """The kind of camera of a study's design record (``model.kind``)."""
+    return ModelKind(design["model"]["kind"])
+
+
 def _error(design: dict) -> tuple[float, float, float]:
     e = design["error"]
     return float(e["mean"]), float(e["ci95"][0]), float(e["ci95"][1])
@@ -66,12 +75,13 @@ def match_from_study(study: dict, source: str) -> Match:
     mincams = [
         (d["model"]["pixels"], name)
         for name, d in designs.items()
-        if d["model"]["kind"] == "mincam" and d["model"].get("sensor_model", True)
+        if ModelKind(d["model"]["kind"]) is ModelKind.MINCAM
+        and d["model"].get("sensor_model", True)
     ]
     grids = sorted(
         (d["model"]["grid"][0] * d["model"]["grid"][1], name)
         for name, d in designs.items()
-        if d["model"]["kind"] == "baseline"
+        if _kind(d) is ModelKind.BASELINE
     )
     if not mincams or not grids:
         raise ValueError(f"{source}: need minimalist and baseline designs in 'designs'")

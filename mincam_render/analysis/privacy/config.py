@@ -25,6 +25,10 @@ AUDIT_FIDELITY = {
 
 #: Weight of the privacy term of the audit's privacy-trained design (8 px).
 AUDIT_PRIVACY_WEIGHT = 1.0
+#: Detectors an audit may render (:func:`default_comparison`): the default, and the large one.
+AUDIT_DETECTORS = (8, 16)
+#: Mask texels per side an audit may render: the default, and the large one.
+AUDIT_TEXELS = (32, 64)
 
 
 def default_designs(detectors: int = 8, texels: int = 32) -> tuple[Design, ...]:
@@ -57,7 +61,17 @@ def default_comparison(detectors: int = 8, texels: int = 32) -> ComparisonConfig
     ``detectors`` and ``texels`` (mask texels per side) size the render and so
     the designs (:func:`default_designs`); at 16 and 64 the render costs about
     8 times the default's.
+
+    Raises:
+        ValueError: ``detectors`` not one of :data:`AUDIT_DETECTORS`, or
+            ``texels`` not one of :data:`AUDIT_TEXELS`.
     """
+    for name, value, allowed in (
+        ("detectors", detectors, AUDIT_DETECTORS),
+        ("texels", texels, AUDIT_TEXELS),
+    ):
+        if value not in allowed:
+            raise ValueError(f"{name} = {value!r}: allowed {', '.join(map(str, allowed))}")
     overrides = dict(ROSTER_OVERRIDES)
     if detectors != 8:
         overrides["camera"] = {"detectors": detectors}

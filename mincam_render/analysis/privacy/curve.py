@@ -20,10 +20,16 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, paired_difference
+from mincam_render.analysis.comparison_config import Design, designs_by_name
+from mincam_render.analysis.statistics import EpisodeErrors, Pooling, paired_difference
 
 #: Attack figures where a higher value means a more successful attacker.
 ATTACK_FIGURES = ("fg_psnr_db", "reid_top1")
+
+
+def audit_designs(privacy: Mapping[str, Any]) -> dict[str, Design]:
+    """``{name: design}`` of a privacy audit's designs (from its ``config``, not their names)."""
+    return designs_by_name(privacy["config"]["comparison"]["designs"])
 
 
 def _below(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
@@ -38,7 +44,7 @@ def _episode_figure(privacy: Mapping[str, Any], design: str, figure: str) -> Epi
     return EpisodeErrors(
         error=np.array([[s[e][figure] for e in names] for s in per_seed]),
         frames=np.array([privacy["episodes"][e]["samples"] for e in names]),
-        pooling="mean",
+        pooling=Pooling.MEAN,
     )
 
 
@@ -76,7 +82,8 @@ def corner_verdicts(privacy: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     Args:
         privacy: ``privacy.json``'s contents (``designs`` with ``task_error``,
             ``fg_psnr_db``, ``reid_top1`` as ``{"mean", "ci95"}`` and ``per_seed``
-            figures per test episode; ``episodes`` with their ``samples``).
+            figures per test episode; ``episodes`` with their ``samples``;
+            ``config.comparison`` with its ``designs`` and ``seed``).
 
     Returns:
         ``{design: {"task_matched": [baselines no better at the task],
@@ -87,10 +94,11 @@ def corner_verdicts(privacy: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
         "verdict": one line}}``.
     """
     designs = privacy["designs"]
-    baselines = [n for n in designs if n.startswith("baseline-")]
+    kinds = audit_designs(privacy)
+    baselines = [n for n in designs if not kinds[n].is_mincam]
     out = {}
     for name, d in designs.items():
-        if not name.startswith("mincam-"):
+        if not kinds[name].is_mincam:
             continue
         matched = [b for b in baselines if not _below(designs[b]["task_error"], d["task_error"])]
         beats = {f: [b for b in matched if _below(d[f], designs[b][f])] for f in ATTACK_FIGURES}

@@ -23,6 +23,7 @@ difference, the state of the lowest validation loss kept):
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -34,8 +35,17 @@ from torch import nn
 from mincam_render.analysis.privacy.attacks import Fitted, Standardise, fit_adam, mlp, seeded
 from mincam_render.analysis.privacy.config import AttackConfig
 
+
+class DecoderKind(enum.StrEnum):
+    """A decoder of the people (module docstring); the values are ``privacy.json``'s keys."""
+
+    MLP = "mlp"
+    CONV = "conv"
+    RIDGE = "ridge"
+
+
 #: The decoders an attacker trains, in ``privacy.json``'s order.
-DECODERS = ("mlp", "conv", "ridge")
+DECODERS = tuple(DecoderKind)
 #: The coarsest grid of the convolutional decoder: it halves the view while the
 #: side stays even and the half at least this many pixels.
 CONV_MIN_GRID = 8
@@ -101,7 +111,7 @@ class ConvDecoder(nn.Module):
 
 
 def train_decoder(
-    kind: str,
+    kind: DecoderKind | str,
     train: tuple[np.ndarray, np.ndarray],
     val: tuple[np.ndarray, np.ndarray],
     cfg: AttackConfig,
@@ -110,7 +120,7 @@ def train_decoder(
     """A decoder (``kind`` of :data:`DECODERS`) from read-outs to differences ``[frame, row, col]``.
 
     Args:
-        kind: ``"mlp"``, ``"conv"`` or ``"ridge"`` (module docstring).
+        kind: a :class:`DecoderKind` (or its value).
         train: ``(read-outs [frame, pixel], differences [frame, row, col])``.
         val: the same of the validation episode (early stopping, ridge penalty).
         cfg: the attacker's settings (steps, batch, hidden units, channels).
@@ -120,20 +130,22 @@ def train_decoder(
         ValueError: an unknown ``kind``; a non-square view.
     """
     x, y = train
-    if kind not in DECODERS:
-        raise ValueError(f"decoder {kind!r}: allowed {', '.join(DECODERS)}")
+    try:
+        kind = DecoderKind(kind)
+    except ValueError:
+        raise ValueError(f"decoder {kind!r}: allowed {', '.join(DECODERS)}") from None
     if y.ndim != 3 or y.shape[1] != y.shape[2]:
         raise ValueError(f"differences {y.shape}: need [frame, row, col] with rows == cols")
-    if kind == "ridge":
+    if kind is DecoderKind.RIDGE:
         return fit_ridge(train, val)
     model = seeded(seed, lambda: _network(kind, x, y.shape[1], cfg))
     fitted: Fitted = fit_adam(model, F.mse_loss, train, val, cfg, seed)
     return fitted
 
 
-def _network(kind: str, x_train: np.ndarray, width: int, cfg: AttackConfig) -> nn.Module:
+def _network(kind: DecoderKind, x_train: np.ndarray, width: int, cfg: AttackConfig) -> nn.Module:
     """The untrained ``mlp`` or ``conv`` decoder to ``width`` x ``width`` images."""
-    if kind == "conv":
+    if kind is DecoderKind.CONV:
         return ConvDecoder(x_train, width, cfg.hidden, cfg.conv_channels)
     return nn.Sequential(*mlp(x_train, width * width, cfg.hidden), nn.Unflatten(1, (width, width)))
 

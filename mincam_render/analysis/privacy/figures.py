@@ -11,6 +11,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.analysis.comparison_config import Design
+from mincam_render.analysis.privacy.curve import audit_designs
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -22,21 +25,22 @@ CURVE_AXES = (
 )
 
 
-def _style(name: str) -> dict[str, Any]:
-    if "-private" in name:
+def _style(design: Design) -> dict[str, Any]:
+    if design.privacy_weight:
         return {"color": "C2", "marker": "D"}
-    return {"color": "C0", "marker": "o"} if name.startswith("mincam-") else {
+    return {"color": "C0", "marker": "o"} if design.is_mincam else {
         "color": "C1", "marker": "s"}  # fmt: skip
 
 
 def _plot_curve(ax: Axes, privacy: Mapping[str, Any], key: str, label: str) -> None:
+    kinds = audit_designs(privacy)
     for name, d in privacy["designs"].items():
         x, y = d[key], d["task_error"]
         ax.errorbar(
             x["mean"], y["mean"],
             xerr=[[x["mean"] - x["ci95"][0]], [x["ci95"][1] - x["mean"]]],
             yerr=[[y["mean"] - y["ci95"][0]], [y["ci95"][1] - y["mean"]]],
-            ls="none", capsize=2, **_style(name),
+            ls="none", capsize=2, **_style(kinds[name]),
         )  # fmt: skip
         ax.annotate(name.replace("baseline-", "").replace("mincam-", ""), (x["mean"], y["mean"]),
                     fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
@@ -75,16 +79,18 @@ def matched_baseline(privacy: Mapping[str, Any], design: str) -> str | None:
     """The baseline whose mean task error is closest to ``design``'s (None without baselines)."""
     designs = privacy["designs"]
     target = designs[design]["task_error"]["mean"]
-    names = [n for n in designs if n.startswith("baseline-")]
+    kinds = audit_designs(privacy)
+    names = [n for n in designs if not kinds[n].is_mincam]
     return min(names, key=lambda n: abs(designs[n]["task_error"]["mean"] - target), default=None)
 
 
-def _design_order(examples: Mapping[str, np.ndarray]) -> tuple[list[str], list[str]]:
+def _design_order(
+    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+) -> tuple[list[str], list[str]]:
     """``(names in the file's order, names to show: minimalist, then baselines)``."""
+    kinds = audit_designs(privacy)
     names = [str(n) for n in examples["designs"]]
-    order = [n for n in names if n.startswith("mincam-")] + [
-        n for n in names if n.startswith("baseline-")
-    ]
+    order = sorted(names, key=lambda n: not kinds[n].is_mincam)  # stable: the file's order
     return names, order
 
 
@@ -115,14 +121,13 @@ def examples_figure(
     privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
 ) -> tuple[Figure, str]:
     """Rows: test frames; columns: the true view, each design's reconstruction (first seed)."""
-    names, order = _design_order(examples)
+    names, order = _design_order(privacy, examples)
     columns = [("true view", list(examples["true"]))] + [
         (_short(n), list(examples["recon"][names.index(n)])) for n in order
     ]
     fig, _ = _grid(columns, len(examples["frames"]), cmap="gray", vmin=0, vmax=1)
-    pairs = ", ".join(
-        f"{n} ~ {matched_baseline(privacy, n)}" for n in order if n.startswith("mincam-")
-    )
+    kinds = audit_designs(privacy)
+    pairs = ", ".join(f"{n} ~ {matched_baseline(privacy, n)}" for n in order if kinds[n].is_mincam)
     return fig, (
         f"Test frames {', '.join(map(str, examples['frames']))} of the first test episode: "
         "the true view (display image) and what the first attacker seed decodes from each "
@@ -139,7 +144,7 @@ def foreground_figure(
     privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
 ) -> tuple[Figure, str]:
     """The same frames as :func:`examples_figure`, as differences from the frame's background."""
-    names, order = _design_order(examples)
+    names, order = _design_order(privacy, examples)
     bg = examples["background"]
     columns = [("people (true)", list(examples["true"] - bg))] + [
         (_short(n), list(examples["recon"][names.index(n)] - bg)) for n in order

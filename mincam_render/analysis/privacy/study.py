@@ -28,7 +28,7 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,12 +45,16 @@ from mincam_render.analysis.privacy.metrics import (
 )
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
+    Pooling,
     bootstrap_interval,
     converged,
     paired_difference,
 )
 from mincam_render.core import strict_json
 from mincam_render.core.seeds import stream_seed
+
+if TYPE_CHECKING:
+    from mincam_render.analysis.privacy.decoders import DecoderKind
 
 #: The reconstruction figures (foreground, then the whole view), in ``privacy.json``'s order.
 IMAGE_FIGURES = ("fg_psnr_db", "fg_ssim", "psnr_db", "ssim")
@@ -118,7 +122,7 @@ def _errors(
     return EpisodeErrors(
         error=np.array([[s[e][figure] for e in names] for s in per_seed]),
         frames=np.array([frames[e] for e in names]),
-        pooling="mean",
+        pooling=Pooling.MEAN,
     )
 
 
@@ -136,7 +140,7 @@ def _intervals(
 
 def _fit_decoders(
     x: Mapping[str, np.ndarray], episodes: Mapping[str, Episode], cfg: PrivacyConfig, seed: int
-) -> tuple[dict[str, Any], dict[str, float]]:
+) -> tuple[dict[DecoderKind, Any], dict[DecoderKind, float]]:
     """Every decoder of :data:`~.decoders.DECODERS`, and each one's validation mean squared error.
 
     The error is of the reconstructed validation views (all pixels), the loss
@@ -168,7 +172,7 @@ def _attack_once(
 ) -> dict[str, Any]:
     """One attacker seed against one trained design: per test episode and decoder, its figures."""
     from mincam_render.analysis.privacy.attacks import design_camera, measurements, train_reid
-    from mincam_render.analysis.privacy.decoders import reconstruct
+    from mincam_render.analysis.privacy.decoders import DecoderKind, reconstruct
     from mincam_render.learn.train import TrainingData
 
     train = TrainingData.concat([data[k] for k in sorted(data) if k.startswith("train-")])
@@ -190,7 +194,7 @@ def _attack_once(
         "examples": {},
         "decoder": kind,
         "decoder_val_mse": val_mse,
-        "ridge_penalty": fitted["ridge"].penalty,
+        "ridge_penalty": fitted[DecoderKind.RIDGE].penalty,
     }
     for name in sorted(k for k in data if k.startswith("test-")):
         ep = episodes[name]

@@ -34,7 +34,8 @@ class RenderRequest:
             None to decide.
         shared_render: one render for all detectors, or None to decide.
         mask_res: mask texels per side, or None for the family camera's.
-        dtype: ``"float16"``/``"float32"`` storage, or None to decide.
+        dtype: storage type (:class:`~mincam_render.render.precision.StorageDtype`
+            or its value), or None to decide.
         target_error: target Monte Carlo measurement error relative to the total
             (the frame's or its mean, as the family says), when the plan is made
             in that scale.
@@ -70,7 +71,7 @@ class RenderRequest:
     max_depth: int | None = None
     shared_render: bool | None = None
     mask_res: int | None = None
-    dtype: str | None = None
+    dtype: precision.StorageDtype | None = None
     target_error: float = 0.01
     error_scale: precision.ErrorScale | None = None
     signal_target_error: float | None = None
@@ -107,9 +108,8 @@ class RenderRequest:
         for name in ("differential", "shared_difference"):
             if getattr(self, name) is not None and not isinstance(getattr(self, name), bool):
                 raise bad(name, "None, True or False")
-        if self.dtype is not None and self.dtype not in precision.DTYPES:
-            raise bad("dtype", f"None or one of {', '.join(precision.DTYPES)}")
         for name, kind in (
+            ("dtype", precision.StorageDtype),
             ("error_scale", precision.ErrorScale),
             ("difference_seeds", DifferenceSeeds),
         ):

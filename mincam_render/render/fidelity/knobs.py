@@ -24,7 +24,12 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
-from mincam_render.render.precision import ErrorScale, decode_transport, encode_transport
+from mincam_render.render.precision import (
+    ErrorScale,
+    StorageDtype,
+    decode_transport,
+    encode_transport,
+)
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -226,7 +231,7 @@ def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
     precision; the error relative to the label signal is recorded beside it.
     """
     request = p.request
-    stored, scales = encode_transport(chosen, "float16")
+    stored, scales = encode_transport(chosen, StorageDtype.FLOAT16)
     decoded = decode_transport(stored, scales)
     f16_err = p.error(decoded, chosen, p.total_scale)
     measured = {
@@ -237,15 +242,16 @@ def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
     if request.dtype is not None:
         dtype, source, reason = request.dtype, "flag", "set by --dtype"
     elif not auto:
-        dtype, source, reason = "float32", "full", "full fidelity stores float32"
+        dtype, source, reason = StorageDtype.FLOAT32, "full", "full fidelity stores float32"
     else:
-        dtype = "float16" if f16_err["max"] < request.dtype_error_bound else "float32"
+        small = f16_err["max"] < request.dtype_error_bound
+        dtype = StorageDtype.FLOAT16 if small else StorageDtype.FLOAT32
         source = "auto"
         reason = (
             f"float16 changes measurements by at most {f16_err['max']:.3g} "
-            f"{'<' if dtype == 'float16' else '>='} bound {request.dtype_error_bound:g}"
+            f"{'<' if small else '>='} bound {request.dtype_error_bound:g}"
         )
-    return {"value": dtype, "source": source, "reason": reason, **measured}
+    return {"value": dtype.value, "source": source, "reason": reason, **measured}
 
 
 def recorded_decisions(p: Probes) -> dict[str, dict[str, Any]]:

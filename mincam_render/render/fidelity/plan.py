@@ -87,7 +87,7 @@ from mincam_render.render.fidelity.knobs import (
     recorded_decisions,
 )
 from mincam_render.render.fidelity.probes import Probes, Stages
-from mincam_render.render.precision import DTYPES
+from mincam_render.render.precision import StorageDtype, storage_dtype
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
@@ -121,7 +121,8 @@ class FidelityPlan:
         max_depth: path depth of frames; 0 = the scene's own integrator.
         shared_render: one render from the board centre copied to every detector.
         mask_resolution: texels per side of the transport images (>= 1).
-        dtype: storage type, ``float16`` or ``float32``.
+        dtype: storage type (:class:`~mincam_render.render.precision.StorageDtype`
+            or its value, as a plan's JSON holds it).
         background: differential rendering's background settings
             (``{"interval_s", "spp", "max_depth", "shared_difference"}``), or None
             for plain renders.
@@ -137,15 +138,14 @@ class FidelityPlan:
     max_depth: int
     shared_render: bool
     mask_resolution: int
-    dtype: str
+    dtype: StorageDtype
     background: dict[str, Any] | None
     decisions: dict[str, Any]
 
     def __post_init__(self) -> None:
         for name, low in (("spp", 1), ("max_depth", 0), ("mask_resolution", 1)):
             check_int(name, getattr(self, name), low)
-        if self.dtype not in DTYPES:
-            raise ValueError(f"dtype = {self.dtype!r}: allowed one of {DTYPES}")
+        object.__setattr__(self, "dtype", storage_dtype(self.dtype))
 
     def settings(self) -> dict[str, Any]:
         """The settings as the manifest's ``job.render`` and the plan cache hold them."""
@@ -154,7 +154,7 @@ class FidelityPlan:
             "max_depth": self.max_depth,
             "shared_render": self.shared_render,
             "mask_resolution": self.mask_resolution,
-            "dtype": self.dtype,
+            "dtype": self.dtype.value,
             "background": self.background,
         }
 

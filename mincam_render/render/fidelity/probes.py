@@ -21,6 +21,7 @@ from mincam_render.render.fidelity.signal import SignalSource, render_label_sign
 from mincam_render.render.precision import (
     ErrorScale,
     LabelSignal,
+    StorageDtype,
     measurement_relative_error,
     measurements_of,
 )
@@ -58,8 +59,8 @@ if TYPE_CHECKING:
             """Mask texels per side, or None for the family camera's."""
 
         @property
-        def dtype(self) -> str | None:
-            """``"float16"``/``"float32"`` storage, or None to decide."""
+        def dtype(self) -> StorageDtype | None:
+            """Storage type, or None to decide."""
 
         @property
         def target_error(self) -> float:

@@ -6,8 +6,10 @@ frame's state is a pure function of its index.
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import networkx as nx
 import numpy as np
@@ -180,12 +182,22 @@ class PeopleTrack:
     door_angle_rad: np.ndarray
 
 
+class AgentTask(enum.StrEnum):
+    """What an agent does next; its tasks are ``(AgentTask, argument)`` pairs, in order."""
+
+    WALK = "walk"  # argument: waypoints (x, y) still to reach, popped as reached
+    SIT = "sit"  # argument: the seat's index; turn to face its way, then sit down
+    DWELL = "dwell"  # argument: seconds left to stay
+    STAND = "stand"  # argument: the seat's index, freed once standing
+    EXIT = "exit"  # argument: None; leaves the room (frees the slot)
+
+
 @dataclass
 class _Agent:
     appearance: int
     pos: np.ndarray  # (x, y) on the floor (m)
     heading_rad: float
-    tasks: list = field(default_factory=list)
+    tasks: list[tuple[AgentTask, Any]] = field(default_factory=list)
     stops_left: int = 0
     phase_rad: float = 0.0
     gait: float = 0.0
@@ -328,7 +340,7 @@ class _PeopleSimulation:
                 stops = self.people.stops
                 ag = self.new_agent(corridor, int(self.rng.integers(stops[0], stops[1] + 1)))
                 ag.heading_rad = math.atan2(*(doorway - corridor)[::-1])
-                ag.tasks = [("walk", [doorway, inside])]
+                ag.tasks = [(AgentTask.WALK, [doorway, inside])]
                 ag.passing = True
                 self.agents[k] = ag
 
@@ -345,22 +357,22 @@ class _PeopleSimulation:
                 ag.seat = si
                 goal = np.array(seats[si][:2])
                 ag.tasks = [
-                    ("walk", nav.plan(ag.pos, goal)[1:]),
-                    ("sit", si),
-                    ("dwell", float(rng.uniform(*people.dwell_s))),
-                    ("stand", si),
+                    (AgentTask.WALK, nav.plan(ag.pos, goal)[1:]),
+                    (AgentTask.SIT, si),
+                    (AgentTask.DWELL, float(rng.uniform(*people.dwell_s))),
+                    (AgentTask.STAND, si),
                 ]
             else:
                 goal = nav.random_point(rng)
                 ag.tasks = [
-                    ("walk", nav.plan(ag.pos, goal)[1:]),
-                    ("dwell", float(rng.uniform(*people.dwell_s))),
+                    (AgentTask.WALK, nav.plan(ag.pos, goal)[1:]),
+                    (AgentTask.DWELL, float(rng.uniform(*people.dwell_s))),
                 ]
         else:
             corridor, doorway, inside = self.entrance
             ag.tasks = [
-                ("walk", [*nav.plan(ag.pos, inside)[1:], doorway, corridor]),
-                ("exit", None),
+                (AgentTask.WALK, [*nav.plan(ag.pos, inside)[1:], doorway, corridor]),
+                (AgentTask.EXIT, None),
             ]
             ag.passing = True
 
@@ -373,29 +385,29 @@ class _PeopleSimulation:
             self.plan_next(k, ag)
         kind, arg = ag.tasks[0]
         moving = False
-        if kind == "walk":
+        if kind is AgentTask.WALK:
             self.walk(ag, arg, dt)
             moving = True
             if not arg:
                 ag.tasks.pop(0)
-        elif kind == "sit":
+        elif kind is AgentTask.SIT:
             target = self.seats[arg][2]
             ag.heading_rad = _turn(ag.heading_rad, target, TURN_RATE_RAD_S * dt)
             if abs((target - ag.heading_rad + math.pi) % (2 * math.pi) - math.pi) < 1e-6:
                 ag.sit = min(1.0, ag.sit + SIT_RATE_PER_S * dt)
                 if ag.sit >= 1.0:
                     ag.tasks.pop(0)
-        elif kind == "dwell":
-            ag.tasks[0] = ("dwell", arg - dt)
+        elif kind is AgentTask.DWELL:
+            ag.tasks[0] = (AgentTask.DWELL, arg - dt)
             if arg - dt <= 0:
                 ag.tasks.pop(0)
-        elif kind == "stand":
+        elif kind is AgentTask.STAND:
             ag.sit = max(0.0, ag.sit - SIT_RATE_PER_S * dt)
             if ag.sit <= 0.0:
                 self.seat_owner[arg] = None
                 ag.seat = None
                 ag.tasks.pop(0)
-        elif kind == "exit":
+        elif kind is AgentTask.EXIT:
             self.agents[k] = None
             return
         ag.gait = (
