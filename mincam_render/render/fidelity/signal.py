@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Protocol, cast
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from mincam_render.render.capabilities import DifferentialBackground
+from mincam_render.render.differential import background_family
 from mincam_render.render.precision import LabelSignal
 
 if TYPE_CHECKING:
@@ -114,20 +114,19 @@ def render_label_signal(
     """
     if len(frames) < 2:
         raise ValueError(f"frames = {list(frames)}: the signal's spread needs at least 2")
-    if source is not SignalSource.FRAMES and not isinstance(family, DifferentialBackground):
-        raise ValueError(f"signal source {source.value!r} needs a family with a static background")
-    background = cast("BackgroundFamily", family)  # used only where it was checked above
+    # MOVERS and LIGHTS need the static background: checked where every renderer checks it
+    background = None if source is SignalSource.FRAMES else background_family(family)
 
     def render(seed: int) -> np.ndarray:
         return family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
 
-    if source is SignalSource.LIGHTS:
+    if source is SignalSource.LIGHTS and background is not None:
         return _lights_signal(background, scene, render, frames, seeds, interval_s)
     estimates = []
     for e in (0, 1):
         per_frame = []
         for i in frames:
-            if source is SignalSource.MOVERS:
+            if background is not None:  # MOVERS
                 x, c = difference_pair(background, scene, render, i, seeds(i, e), interval_s)
                 per_frame.append(x - c)
             else:

@@ -87,7 +87,7 @@ class TaskFidelityConfig:
             seeds=8,
             designs=CHECK_DESIGNS,
             tasks=("people_count",),
-            train=TrainConfig(gain_range=(1.0, 1.0)),
+            train=TrainConfig(),  # the design protocol's recipe: no gain augmentation
         )
     )
     levels: tuple[SampleLevel, ...] = ()
