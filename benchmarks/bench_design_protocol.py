@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/bench_design_protocol.py --task workspace --work /data/protocol-ws \\
         [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
+        [--ladder 1,2,4,8]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -100,10 +101,18 @@ def main() -> None:
     ap.add_argument("--episodes", type=Path, default=None, help="shared episodes directory")
     ap.add_argument("--sections", default="protocol,recipes,ladder,references,oracle,restarts")
     ap.add_argument("--train-workers", type=int, default=1)
+    ap.add_argument(
+        "--ladder",
+        default=None,
+        help="training-episode counts of the learning curves, e.g. 1,2,4,8 (default: the task's)",
+    )
     ap.add_argument("--out", type=Path, default=RESULTS / "design_protocol.json")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    cfg = DesignProtocolConfig(**TASKS[args.task])
+    task = dict(TASKS[args.task])
+    if args.ladder:
+        task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
+    cfg = DesignProtocolConfig(**task)
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
     result = run(cfg, args.work, episodes_dir=args.episodes, sections=sections,
                  train_workers=args.train_workers, progress=True)  # fmt: skip
