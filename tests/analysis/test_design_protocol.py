@@ -9,11 +9,15 @@ import pytest
 from mincam_render.analysis.comparison_config import ComparisonConfig, Design
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.studies.design_protocol import (
+    DesignFigure,
     DesignProtocolConfig,
+    Floor,
+    FloorVerdict,
     RecipeVariant,
     run,
     write_report,
 )
+from mincam_render.studies.design_protocol.study import LadderPoint, floor_checks
 
 QUICK = {"spp": 2, "max_depth": 0, "shared_render": False, "differential": False}
 CFG = DesignProtocolConfig(
@@ -39,6 +43,7 @@ CFG = DesignProtocolConfig(
     reference_pixels=(2,),
     protocol_episodes=1,
     restarts=2,
+    floors=(Floor(design="mincam-2px", baseline="baseline-2x2", margin=0.05),),
 )
 
 
@@ -97,12 +102,77 @@ def test_the_figures_are_the_comparisons_on_disk(study):
     }  # fmt: skip
 
 
+def test_floors_are_paired_on_the_largest_training_set(study):
+    _, result = study
+    (check,) = result.floors
+    last = result.ladder[-1]
+    assert check.episodes == 2 and check.floor.margin == 0.05
+    diff = last.designs["mincam-2px"].errors().error - last.designs["baseline-2x2"].errors().error
+    assert check.paired.mean == pytest.approx(diff.mean(), abs=1e-9)  # equal frames per episode
+    low, high = check.paired.ci95
+    expected = (
+        FloorVerdict.MET if high < 0.05 else FloorVerdict.MISSED if low >= 0.05
+        else FloorVerdict.UNDECIDED
+    )  # fmt: skip
+    assert check.verdict is expected
+
+
+def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
+    flat = [e for seed in errors for e in seed]
+    return DesignFigure(
+        design=name, pixels=2, error=sum(flat) / len(flat), ci95=(0.0, 1.0),
+        per_seed=tuple(sum(s) / len(s) for s in errors), state="converged",
+        steps=(1,) * len(errors), train_s_per_run=1.0,
+        episode_errors={"error": errors, "frames": [100.0] * len(errors[0]), "pooling": "mean"},
+    )  # fmt: skip
+
+
+def _point(design: list[list[float]], baseline: list[list[float]]) -> LadderPoint:
+    """A ladder point of mincam-2px and baseline-8x8 with these per-seed, per-episode errors."""
+    figures = {"mincam-2px": _figure("mincam-2px", design),
+               "baseline-8x8": _figure("baseline-8x8", baseline)}  # fmt: skip
+    return LadderPoint(episodes=4, frames=400, render_s=1.0, trivial=2.0, designs=figures)
+
+
+@pytest.mark.parametrize(
+    ("shift", "margin", "verdict"),
+    [
+        (-0.2, 0.0, FloorVerdict.MET),  # lower on every episode
+        (+0.2, 0.0, FloorVerdict.MISSED),  # higher on every episode
+        (+0.2, 0.3, FloorVerdict.MET),  # higher, but within the margin
+        (+0.35, 0.3, FloorVerdict.MISSED),  # beyond the margin on every episode
+    ],
+)
+def test_a_floor_verdict_follows_the_paired_interval(shift, margin, verdict):
+    base = [[1.0, 1.4, 0.8, 1.2, 1.1, 0.9]] * 3
+    design = [[e + shift for e in seed] for seed in base]
+    point = _point(design, base)
+    cfg = DesignProtocolConfig(
+        floors=(Floor(design="mincam-2px", baseline="baseline-8x8", margin=margin),)
+    )
+    (check,) = floor_checks(cfg, point)
+    assert check.paired.mean == pytest.approx(shift)
+    assert check.verdict is verdict
+
+
+def test_an_undecided_floor_holds_the_margin_in_its_interval():
+    base = [[1.0, 1.4, 0.8, 1.2, 1.1, 0.9]] * 3
+    noisy = [[e + d for e, d in zip(seed, (-0.5, 0.5, -0.4, 0.4, -0.3, 0.35), strict=True)]
+             for seed in base]  # fmt: skip
+    point = _point(noisy, base)
+    cfg = DesignProtocolConfig(floors=(Floor(design="mincam-2px", baseline="baseline-8x8"),))
+    (check,) = floor_checks(cfg, point)
+    assert check.paired.ci95[0] < 0.0 < check.paired.ci95[1]
+    assert check.verdict is FloorVerdict.UNDECIDED
+
+
 def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     _, result = study
     paths = write_report(result, tmp_path, stem="protocol")
     text = paths["md"].read_text()
     assert "## Learning curves" in text and "## Recipes" in text and "### 2 px" in text
     assert "## Seed spread" in text
+    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 |" in text
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
 
@@ -116,3 +186,9 @@ def test_configuration_is_validated():
         RecipeVariant(name="x", changes={"gain": 1})
     with pytest.raises(ValueError, match="mask_block"):
         RecipeVariant(name="x", changes={"mask_block": 0})
+    with pytest.raises(ValueError, match="two designs"):
+        Floor(design="mincam-2px", baseline="mincam-2px")
+    with pytest.raises(ValueError, match="margin"):
+        Floor(design="mincam-2px", baseline="baseline-8x8", margin=-0.1)
+    with pytest.raises(ValueError, match="both must be ladder designs"):
+        DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))

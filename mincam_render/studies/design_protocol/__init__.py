@@ -2,17 +2,26 @@
 
 from mincam_render.studies.design_protocol.config import (
     DesignProtocolConfig,
+    Floor,
     RecipeVariant,
     default_recipes,
 )
 from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 from mincam_render.studies.design_protocol.report import write_report
-from mincam_render.studies.design_protocol.study import DesignProtocolResult, run
+from mincam_render.studies.design_protocol.study import (
+    DesignProtocolResult,
+    FloorCheck,
+    FloorVerdict,
+    run,
+)
 
 __all__ = [
     "DesignFigure",
     "DesignProtocolConfig",
     "DesignProtocolResult",
+    "Floor",
+    "FloorCheck",
+    "FloorVerdict",
     "Paired",
     "RecipeVariant",
     "default_recipes",

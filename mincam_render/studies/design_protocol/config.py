@@ -22,6 +22,32 @@ LADDER_DESIGNS = (
 
 
 @dataclass(frozen=True, kw_only=True)
+class Floor:
+    """A figure a design must reach against a baseline (the issue's "done when").
+
+    Met when ``design - baseline < margin`` on the same test episodes: the
+    paired 95 % interval lies below ``margin`` (in the task's error units: RMSE,
+    or error rate = 1 - accuracy).
+
+    Args:
+        design: the minimalist design (``mincam-2px``).
+        baseline: the box camera it is held against (``baseline-8x8``).
+        margin: how much higher the design's error may be (0: strictly lower;
+            0.02: "within 2 points" of an error rate).
+    """
+
+    design: str
+    baseline: str
+    margin: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.design or not self.baseline or self.design == self.baseline:
+            raise ValueError(f"floor {self.design!r} against {self.baseline!r}: two designs")
+        if not 0.0 <= self.margin < 1.0:
+            raise ValueError(f"floor margin {self.margin}: must be in [0, 1) error units")
+
+
+@dataclass(frozen=True, kw_only=True)
 class RecipeVariant:
     """One recipe tried on the validation episodes: changes to the base recipe.
 
@@ -93,6 +119,8 @@ class DesignProtocolConfig:
             camera of the same pixels and one of the per-task cameras' total.
         restarts: runs per kept camera in the restarts section (the best on
             validation is kept).
+        floors: what the learning curves' largest training set is held to
+            (both designs among ``ladder_designs``).
     """
 
     episodes: ComparisonConfig = field(
@@ -109,6 +137,7 @@ class DesignProtocolConfig:
     protocol_episodes: int = 8
     protocol_pixels: tuple[int, ...] = (2,)
     restarts: int = 3
+    floors: tuple[Floor, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
@@ -125,6 +154,13 @@ class DesignProtocolConfig:
         if len(set(names)) != len(names):
             raise ValueError(f"recipes {names}: give each name once")
         object.__setattr__(self, "references", tuple(MaskReference(r) for r in self.references))
+        ladder_names = {d.name for d in self.ladder_designs}
+        for f in self.floors:
+            if not {f.design, f.baseline} <= ladder_names:
+                raise ValueError(
+                    f"floor {f.design} against {f.baseline}: both must be ladder designs "
+                    f"({sorted(ladder_names)})"
+                )
 
     def comparison(
         self, train_episodes: int, designs: tuple[Design, ...], **changes: Any

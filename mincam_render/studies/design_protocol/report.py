@@ -40,6 +40,7 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 def markdown(result: DesignProtocolResult) -> str:
     """Every section as Markdown tables (validation and test beside each other)."""
     lines = [f"# Design protocol: {result.task} ({result.error_name})", ""]
+    lines += _floor_lines(result)
     lines += _protocol_lines(result) + _recipe_lines(result) + _ladder_lines(result)
     lines += _reference_lines(result) + _oracle_lines(result) + _restart_lines(result)
     if result.selection is not None:
@@ -53,6 +54,22 @@ def markdown(result: DesignProtocolResult) -> str:
             "",
         ]
     return "\n".join(lines)
+
+
+def _floor_lines(result: DesignProtocolResult) -> list[str]:
+    if not result.floors:
+        return []
+    rows = [
+        [
+            f"{c.floor.design} - {c.floor.baseline} < {c.floor.margin:g}",
+            str(c.episodes),
+            _interval(c.paired.mean, c.paired.ci95, "+"),
+            c.verdict.value,
+        ]
+        for c in result.floors
+    ]
+    header = ["floor", "training episodes", "paired difference [95 % CI]", "verdict"]
+    return ["## Floors (paired on the same test episodes)", "", *_table(header, rows), ""]
 
 
 def _protocol_lines(result: DesignProtocolResult) -> list[str]:

@@ -23,6 +23,8 @@ measured on the same test episodes and pairs with the others.
    plain against the best of several restarts chosen on validation.
 7. **Selection** (:func:`selection_agreement`): how well the pooled validation
    error ranks runs and designs against their test error.
+8. **Floors** (:func:`floor_checks`): the configured floors (a design against a
+   box camera, with a margin) on the learning curves' largest training set.
 
 Everything resumes: comparisons keep their finished runs on disk.
 """
@@ -30,6 +32,7 @@ Everything resumes: comparisons keep their finished runs on disk.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -41,7 +44,7 @@ import numpy as np
 from mincam_render.analysis.comparison import Design, run_comparison
 from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
-from mincam_render.studies.design_protocol.config import DesignProtocolConfig
+from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
 from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 
 #: A comparison run for the study: ``(config, out_dir) -> its result``.
@@ -148,6 +151,31 @@ class Selection:
     designs_spearman: float
 
 
+class FloorVerdict(enum.StrEnum):
+    """Where a floor's paired interval lies against its margin."""
+
+    MET = "met"  # the whole interval below the margin
+    MISSED = "missed"  # the whole interval at or above it
+    UNDECIDED = "undecided"  # the interval holds the margin: the test episodes cannot tell
+
+
+@dataclass(frozen=True)
+class FloorCheck:
+    """A floor on the learning curves' largest training set (section 8).
+
+    Args:
+        floor: the design, baseline and margin.
+        episodes: training episodes of the comparison it was measured on.
+        paired: ``design - baseline`` on the same test episodes.
+        verdict: met, missed or undecided.
+    """
+
+    floor: Floor
+    episodes: int
+    paired: Paired
+    verdict: FloorVerdict
+
+
 @dataclass(frozen=True)
 class DesignProtocolResult:
     """Every section's figures (:mod:`~mincam_render.studies.design_protocol.study`)."""
@@ -164,6 +192,7 @@ class DesignProtocolResult:
     oracle: LadderPoint | None = None
     restarts: Sequence[Restarts] = ()
     selection: Selection | None = None
+    floors: Sequence[FloorCheck] = ()
     versions: Mapping[str, str] = field(default_factory=dict)
 
     def as_json(self) -> dict[str, Any]:
@@ -304,6 +333,23 @@ def learning_curves(
         for name in a.designs
     ]
     return points, doublings
+
+
+def floor_checks(cfg: DesignProtocolConfig, point: LadderPoint) -> list[FloorCheck]:
+    """Every configured floor on ``point`` (the learning curves' largest training set)."""
+    checks = []
+    for f in cfg.floors:
+        paired = Paired.of(point.designs[f.design], point.designs[f.baseline])
+        low, high = paired.ci95
+        verdict = (
+            FloorVerdict.MET
+            if high < f.margin
+            else FloorVerdict.MISSED
+            if low >= f.margin
+            else FloorVerdict.UNDECIDED
+        )
+        checks.append(FloorCheck(f, point.episodes, paired, verdict))
+    return checks
 
 
 def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> LadderPoint:
@@ -480,6 +526,7 @@ def run(
         parts["recipes"], parts["chosen_recipe"] = recipe_table(cfg, compare, out)
     if "ladder" in sections:
         parts["ladder"], parts["doublings"] = learning_curves(cfg, compare, out, seconds)
+        parts["floors"] = floor_checks(cfg, parts["ladder"][-1])
     if "references" in sections:
         parts["references"] = reference_table(cfg, compare, out)
     if "oracle" in sections:
