@@ -300,3 +300,33 @@ def test_uniforms_outside_the_unit_interval_are_refused(bad):
 def test_camera_texel_size_is_what_the_fabrication_uses():
     cam = FreeformCamera(mask_resolution=(32, 32), layout=DetectorLayout.row(count=1, pitch_m=0.02))
     assert cam.texel_size_m == pytest.approx(TEXEL_M)
+
+
+def test_no_rotation_and_no_shift_place_every_texel_where_it_was(rng):
+    m = torch.from_numpy(rng.uniform(0.1, 0.6, (3, 7, 5)))
+    out = place_masks(m, np.zeros((3, 2)), np.zeros(3), fill=0.01)
+    torch.testing.assert_close(out, m, rtol=0, atol=1e-15)
+
+
+def test_gamma_one_and_no_dot_gain_print_the_design_exactly():
+    y = torch.linspace(0, 1, 101, dtype=torch.float64)
+    assert torch.equal(print_tone(y, 1.0, 0.0), y)
+
+
+@pytest.mark.parametrize("dot_gain", [-0.25, -0.1, 0.05, 0.25])
+def test_dot_gain_darkens_mid_tones_by_its_value_and_leaves_film_and_full_ink(dot_gain):
+    """Dot gain g is the ink coverage gained at 50 %: bare film and full ink keep their tone.
+
+    Tones ``y`` 0, 1/4, 1/2, 3/4, 1 (coverage ``c = 1 - y``) print as
+    ``y - 4 g y (1 - y)``: 0, 1/4 - 3g/4, 1/2 - g, 3/4 - 3g/4, 1.
+    """
+    stripes = torch.tensor([[[0.0, 0.25, 0.5, 0.75, 1.0]]], dtype=torch.float64)
+    logits = torch.logit(stripes.clamp(1e-300, 1.0))  # sigmoid(logit(1)) = 1 in float64
+    draw = dataclasses.replace(PerturbationDraw.identity(1), dot_gain=dot_gain)
+    m = fabricated_transmittance(logits, RANGE, draw, TEXEL_M)
+    lo, hi = RANGE
+    g = dot_gain
+    expected = torch.tensor(
+        [[[0.0, 0.25 - 0.75 * g, 0.5 - g, 0.75 - 0.75 * g, 1.0]]], dtype=torch.float64
+    )
+    torch.testing.assert_close(m, lo + (hi - lo) * expected, rtol=0, atol=1e-14)
