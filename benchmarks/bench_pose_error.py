@@ -52,8 +52,8 @@ from provenance import machine, write_result  # noqa: E402
 
 from mincam_render.optics.camera import FreeformCamera  # noqa: E402
 from mincam_render.optics.fabrication import posed_masks  # noqa: E402
-from mincam_render.optics.perturbation import PerturbationModel  # noqa: E402
-from mincam_render.optics.pose import CM, pose_warp, posed_camera  # noqa: E402
+from mincam_render.optics.perturbation import CM, DEG, PerturbationModel  # noqa: E402
+from mincam_render.optics.pose import pose_warp, posed_camera  # noqa: E402
 from mincam_render.render.fidelity import depth_map_m  # noqa: E402
 from mincam_render.render.precision import measurement_relative_error  # noqa: E402
 from mincam_render.scenes import load_family  # noqa: E402
@@ -130,7 +130,7 @@ def splat_cost_ms(cam: FreeformCamera, repeats: int = 200) -> dict[str, float]:
     for _ in range(repeats):
         d = model.draw(8, rng)
         t0 = time.perf_counter()
-        warp = pose_warp(cam, d.pose_rotation_deg, d.pose_offset_cm * CM, d.pose_depth_m)
+        warp = pose_warp(cam, d.pose_rotation_rad, d.pose_offset_m, d.pose_depth_m)
         t1 = time.perf_counter()
         posed_masks(mask, warp).sum().backward()
         t2 = time.perf_counter()
@@ -163,7 +163,7 @@ def main() -> None:
     rotations = []
     for a in ANGLES_DEG:
         for axis, unit in AXES.items():
-            rot = a * np.asarray(unit)
+            rot = a * DEG * np.asarray(unit)  # rad
             moved = render(fam, scene, posed_camera(cam, rot, np.zeros(3)), frames, args.spp, 0)
             approx, extra = approximated(nominal, cam, rot, np.zeros(3), [2.0] * len(frames))
             r = condition(

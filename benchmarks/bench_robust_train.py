@@ -190,7 +190,7 @@ def main() -> None:
         "machine": machine(),
         "steps": args.steps,
         "repeats": args.repeats,
-        "perturbation": PerturbationModel().__dict__,
+        "perturbation": PerturbationModel().to_record(),  # mm, deg, %, cm
         "rows": rows,
         "worst_slowdown": worst,
         "budget": BUDGET,

@@ -36,7 +36,12 @@ import numpy as np
 from mincam_render.analysis.statistics import EpisodeErrors, Pooling, bootstrap_interval
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.core.seeds import stream_seed
-from mincam_render.optics.perturbation import TERM_FIELDS, PerturbationModel, PerturbationTerm
+from mincam_render.optics.perturbation import (
+    TERM_FIELDS,
+    PerturbationModel,
+    PerturbationTerm,
+    record_name,
+)
 
 if TYPE_CHECKING:
     from mincam_render.learn.models import MincamCamera
@@ -203,11 +208,11 @@ def design_record(
         tol = tolerance(
             config.levels, [v["mean_increase"] for v in levels], config.allowed_increase
         )
-        base = curve_model(config.perturbation, curve)
+        base = curve_model(config.perturbation, curve).to_record()  # in mm, deg, %, cm
         fields_ = _curve_fields(curve)
-        tol["values"] = {f: getattr(base, f) * tol["factor"] for f in fields_}
+        tol["values"] = {f: base[f] * tol["factor"] for f in fields_}
         curves[curve] = {
-            "default": {f: getattr(base, f) for f in fields_},
+            "default": {f: base[f] for f in fields_},
             "levels": levels,
             "tolerance": tol,
             "spec": fabrication_spec(curve, tol),
@@ -218,7 +223,7 @@ def design_record(
         "runs": len(nominal_errors),
         "nominal_error": float(np.mean(nominal_errors)),
         "nominal_errors": [float(e) for e in nominal_errors],
-        "config": asdict(config),
+        "config": {**asdict(config), "perturbation": config.perturbation.to_record()},
         "curves": curves,
     }
 
@@ -242,7 +247,7 @@ def pool_curves(records: Sequence[Mapping[str, Any]], name: str) -> dict[str, An
     if len(configs) != 1:
         raise ValueError(f"{name}: the records were measured with different configurations")
     c = dict(records[0]["config"])
-    c["perturbation"] = PerturbationModel(**c["perturbation"])
+    c["perturbation"] = PerturbationModel.from_record(c["perturbation"])
     c["levels"] = tuple(c["levels"])
     config = RobustnessConfig(**c)
     increases = {curve: [run for r in records for run in _runs_of(r, curve)] for curve in CURVES}
@@ -257,9 +262,10 @@ def _runs_of(record: Mapping[str, Any], curve: str) -> list[list[list[float]]]:
 
 
 def _curve_fields(curve: str) -> tuple[str, ...]:
+    """The record names (mm, deg, %, cm) of the model fields a curve varies."""
     if curve == MIX:
-        return tuple(f for fs in TERM_FIELDS.values() for f in fs)
-    return TERM_FIELDS[PerturbationTerm(curve)]
+        return tuple(record_name(f) for fs in TERM_FIELDS.values() for f in fs)
+    return tuple(record_name(f) for f in TERM_FIELDS[PerturbationTerm(curve)])
 
 
 def tolerance(

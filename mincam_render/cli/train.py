@@ -125,7 +125,8 @@ def _recipe_option(name: str) -> Callable[[Callable[..., Any]], Callable[..., An
     )
 
 
-#: PerturbationModel field -> help of the ``train`` option filling it (with --robust).
+#: PerturbationModel record field -> help of the ``train`` option filling it (with --robust):
+#: the options take the record's units (mm, deg, %, cm), converted by ``from_record``.
 _PERTURBATION_HELP = {
     "mask_shift_mm": "mask position error per axis per detector (mm)",
     "mask_rotation_deg": "mask rotation error per detector (deg)",
@@ -140,7 +141,7 @@ _PERTURBATION_HELP = {
     "pose_position_cm": "camera position error per axis: right, up, forward (cm)",
     "pose_depth_m": "scene depth at which the position error is modelled exactly (m)",
 }
-#: PerturbationModel fields whose options take other values than [0, 100].
+#: PerturbationModel record fields whose options take other values than [0, 100].
 _PERTURBATION_TYPES = {"pose_depth_m": FiniteFloat(0, 1e4, min_open=True)}
 
 #: --robust and the perturbation model's half-ranges (defaults: the dataclass's).
@@ -165,23 +166,24 @@ robust_options = apply_options(
     ]
     + [
         click.option(
-            "--" + f.name.replace("_", "-"),
-            f.name,
-            type=_PERTURBATION_TYPES.get(f.name, FiniteFloat(0, 100)),
-            default=field_default(PerturbationModel, f.name),
+            "--" + name.replace("_", "-"),
+            name,
+            type=_PERTURBATION_TYPES.get(name, FiniteFloat(0, 100)),
+            default=default,
             show_default=True,
-            help=f"With --robust: {_PERTURBATION_HELP[f.name]}.",
+            help=f"With --robust: {_PERTURBATION_HELP[name]}.",
         )
-        for f in dataclasses.fields(PerturbationModel)
+        for name, default in PerturbationModel().to_record().items()
     ]
 )
 
 
 def _recipe_with_perturbation(recipe: dict[str, Any], robust: bool) -> TrainConfig:
     """The TrainConfig of the options; with ``robust``, its perturbation model's."""
-    names = [f.name for f in dataclasses.fields(PerturbationModel)]
-    halves = {name: recipe.pop(name) for name in names}
-    return TrainConfig(**recipe, perturbation=PerturbationModel(**halves) if robust else None)
+    halves = {name: recipe.pop(name) for name in PerturbationModel().to_record()}
+    return TrainConfig(
+        **recipe, perturbation=PerturbationModel.from_record(halves) if robust else None
+    )
 
 
 #: Options shared by train, sweep and prune (the paper's recipe as defaults), the

@@ -238,8 +238,9 @@ def _run_metrics(
 def config_record(config: TrainConfig) -> dict[str, Any]:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
-    ``head`` appears only when not the paper's MLP, ``perturbation`` and
-    ``robust_validation_draws`` only when training is robust, ``privacy_weight``
+    ``head`` appears only when not the paper's MLP, ``perturbation`` (in its
+    record's units, :meth:`~mincam_render.optics.perturbation.PerturbationModel.to_record`)
+    and ``robust_validation_draws`` only when training is robust, ``privacy_weight``
     and the masks' priors and the transport noise only when not 0, ``mask_block``
     only above 1. Runs written before any was a choice then resume (their recipe
     compares equal).
@@ -252,6 +253,8 @@ def config_record(config: TrainConfig) -> dict[str, Any]:
         del record["mask_block"]
     if config.perturbation is None:
         del record["perturbation"], record["robust_validation_draws"]
+    else:  # in the record's units (mm, deg, %, cm), as the options take them
+        record["perturbation"] = config.perturbation.to_record()
     if not config.privacy_weight:
         del record["privacy_weight"]
     if config.head is HeadKind.MLP:

@@ -9,7 +9,7 @@ mask is made:
    ``y' = 1 - c'`` with ``c = 1 - y^gamma`` the ink coverage and
    ``c' = c + 4 g c (1 - c)``;
 3. the printed range: ``M = lo' + (hi' - lo') y'``;
-4. the print's blur, a Gaussian of ``blur_sigma_mm`` (:func:`blur_mask`);
+4. the print's blur, a Gaussian of ``blur_sigma_m`` (:func:`blur_mask`);
 5. the mount: each mask shifted and rotated about its centre (:func:`place_masks`,
    bilinear resampling);
 6. the camera's pose: the whole camera turned and moved against the pose the
@@ -36,9 +36,8 @@ from torch.nn import functional as F
 
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.perturbation import PerturbationDraw
-from mincam_render.optics.pose import CM, PoseWarp, pose_warp
+from mincam_render.optics.pose import PoseWarp, pose_warp
 
-MM = 1e-3  #: metres per millimetre
 #: Gaussian kernels reach this many sigmas on each side.
 _KERNEL_SIGMAS = 3.0
 
@@ -268,16 +267,48 @@ def fabricated_transmittance(
             error and no camera was given.
 
     """
-    check_draw(logits, draw, camera)
-    y = print_tone(torch.sigmoid(logits), draw.gamma, draw.dot_gain)
+    return printed_transmittance(
+        torch.sigmoid(logits), transmittance_range, draw, texel_size_m, camera
+    )
+
+
+def printed_transmittance(
+    fraction: torch.Tensor,
+    transmittance_range: tuple[float, float],
+    draw: PerturbationDraw,
+    texel_size_m: tuple[float, float],
+    camera: FreeformCamera | None = None,
+) -> torch.Tensor:
+    """:func:`fabricated_transmittance` of designs given as their place in the printable range.
+
+    Steps 2-6 above, for designs that are transmittances rather than logits
+    (``fraction = (M - lo) / (hi - lo)``; the SURROGATE's printed masks).
+
+    Args:
+        fraction: ``y[pixel, row, col]``, the design's place in the nominal
+            printable range, in [0, 1].
+        transmittance_range: nominal printable ``(lo, hi)``.
+        draw: the built camera; ``draw.num_pixels`` must equal the number of masks.
+        texel_size_m: ``(rows, cols)`` texel size (m).
+        camera: the camera's geometry; needed only when the draw has a pose error.
+
+    Returns:
+        ``M[pixel, row, col]``; ``lo + (hi - lo) y`` for an identity draw.
+
+    Raises:
+        ValueError: as :func:`fabricated_transmittance`.
+
+    """
+    check_draw(fraction, draw, camera)
+    y = print_tone(fraction, draw.gamma, draw.dot_gain)
     lo, hi = draw.transmittance_range(transmittance_range)
     m = lo + (hi - lo) * y
-    texel_mm = (texel_size_m[0] / MM, texel_size_m[1] / MM)
-    if draw.blur_sigma_mm > 0:
-        m = blur_mask(m, (draw.blur_sigma_mm / texel_mm[0], draw.blur_sigma_mm / texel_mm[1]), lo)
-    if draw.shift_mm.any() or draw.rotation_deg.any():
-        m = place_masks(m, draw.shift_mm / texel_mm, np.radians(draw.rotation_deg), lo)
+    if draw.blur_sigma_m > 0:
+        sigma = (draw.blur_sigma_m / texel_size_m[0], draw.blur_sigma_m / texel_size_m[1])
+        m = blur_mask(m, sigma, lo)
+    if draw.shift_m.any() or draw.rotation_rad.any():
+        m = place_masks(m, draw.shift_m / np.asarray(texel_size_m), draw.rotation_rad, lo)
     if draw.has_pose_error and camera is not None:
-        rot, off, depth = draw.pose_rotation_deg, draw.pose_offset_cm * CM, draw.pose_depth_m
-        m = posed_masks(m, pose_warp(camera, rot, off, depth))
+        warp = pose_warp(camera, draw.pose_rotation_rad, draw.pose_offset_m, draw.pose_depth_m)
+        m = posed_masks(m, warp)
     return m

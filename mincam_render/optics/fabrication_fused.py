@@ -42,13 +42,12 @@ from torch.autograd.function import once_differentiable
 
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.fabrication import (
-    MM,
     check_draw,
     gaussian_matrix,
     sampling_grid,
 )
 from mincam_render.optics.perturbation import PerturbationDraw
-from mincam_render.optics.pose import CM, angular_weight, pose_warp, texel_directions
+from mincam_render.optics.pose import angular_weight, pose_warp, texel_directions
 
 #: ``grid_sampler_2d`` codes: bilinear interpolation; zero and border padding.
 _BILINEAR, _ZEROS, _BORDER = 0, 0, 1
@@ -100,7 +99,7 @@ def _pose_constants(
     camera: FreeformCamera, draw: PerturbationDraw, dtype: torch.dtype, device: torch.device
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(grid[1, row, col, 2], G_a, 1 / G)`` of the draw's camera pose (torch)."""
-    warp = pose_warp(camera, draw.pose_rotation_deg, draw.pose_offset_cm * CM, draw.pose_depth_m)
+    warp = pose_warp(camera, draw.pose_rotation_rad, draw.pose_offset_m, draw.pose_depth_m)
     g, inverse_g = _angular_weights(camera, dtype, device)
     if not warp.ahead.all():  # content behind the designed camera: dropped
         g = _to_torch(warp.angular_weight * warp.ahead, dtype, device)
@@ -118,17 +117,17 @@ def _plan(
     lo, hi = draw.transmittance_range(transmittance_range)
     rows, cols = logits.shape[1:]
     dtype, device = logits.dtype, logits.device
-    texel_mm = (texel_size_m[0] / MM, texel_size_m[1] / MM)
     blur = mount = pose = None
-    if draw.blur_sigma_mm > 0:
-        sigma = (draw.blur_sigma_mm / texel_mm[0], draw.blur_sigma_mm / texel_mm[1])
+    if draw.blur_sigma_m > 0:
+        sigma = (draw.blur_sigma_m / texel_size_m[0], draw.blur_sigma_m / texel_size_m[1])
         b_rows = _to_torch(gaussian_matrix(rows, sigma[0]), dtype, device)
         # B_cols^T = B_cols: the matrices are symmetric; square texels share one
         same = sigma[0] == sigma[1] and rows == cols
         b_cols = b_rows if same else _to_torch(gaussian_matrix(cols, sigma[1]), dtype, device)
         blur = (b_rows, b_cols)
-    if draw.shift_mm.any() or draw.rotation_deg.any():
-        grid = sampling_grid((rows, cols), draw.shift_mm / texel_mm, np.radians(draw.rotation_deg))
+    if draw.shift_m.any() or draw.rotation_rad.any():
+        shift_texels = draw.shift_m / np.asarray(texel_size_m)
+        grid = sampling_grid((rows, cols), shift_texels, draw.rotation_rad)
         mount = _to_torch(grid, dtype, device)
     if camera is not None and draw.has_pose_error:
         pose = _pose_constants(camera, draw, dtype, device)

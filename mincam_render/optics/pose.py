@@ -63,21 +63,19 @@ import numpy as np
 
 from mincam_render.optics.camera import FreeformCamera
 
-CM = 1e-2  #: metres per centimetre
-
 
 def _check_pose(
-    rotation_deg: object, offset_m: object, depth_m: float | None = None
+    rotation_rad: object, offset_m: object, depth_m: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(rotation, offset)`` as float64 vectors, else a ValueError naming the value."""
     try:
-        rot = np.asarray(rotation_deg, dtype=np.float64)
+        rot = np.asarray(rotation_rad, dtype=np.float64)
         off = np.asarray(offset_m, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ValueError(f"pose {rotation_deg!r} deg, {offset_m!r} m: need numbers") from None
+        raise ValueError(f"pose {rotation_rad!r} rad, {offset_m!r} m: need numbers") from None
     if rot.shape != (3,) or not np.isfinite(rot).all():
         raise ValueError(
-            f"pose rotation {rotation_deg!r} deg: need 3 finite angles (pan, tilt, roll)"
+            f"pose rotation {rotation_rad!r} rad: need 3 finite angles (pan, tilt, roll)"
         )
     if off.shape != (3,) or not np.isfinite(off).all():
         raise ValueError(f"pose offset {offset_m!r} m: need 3 finite numbers (right, up, forward)")
@@ -89,14 +87,14 @@ def _check_pose(
     return rot, off
 
 
-def pose_rotation(rotation_deg: object) -> np.ndarray:
+def pose_rotation(rotation_rad: object) -> np.ndarray:
     """``R`` (3x3): the moved camera's axes in the designed camera's ``(right, up, forward)``.
 
     Column ``i`` is the moved camera's axis ``i``: pan (turning forward toward
     right), then tilt (forward toward up), then roll (up toward right:
     clockwise as seen from the camera), each about the camera's current axes.
     """
-    pan, tilt, roll = np.radians(np.asarray(rotation_deg, dtype=np.float64)).tolist()
+    pan, tilt, roll = np.asarray(rotation_rad, dtype=np.float64).tolist()
     cp, sp, ct, st, cr, sr = (f(x) for x in (pan, tilt, roll) for f in (math.cos, math.sin))
     # R_pan R_tilt R_roll multiplied out (one small array per training draw), with
     # R_pan = [[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]], R_tilt = [[1, 0, 0], [0, ct, st],
@@ -111,14 +109,14 @@ def pose_rotation(rotation_deg: object) -> np.ndarray:
     )
 
 
-def content_homography(rotation_deg: object, offset_m: object, depth_m: float) -> np.ndarray:
+def content_homography(rotation_rad: object, offset_m: object, depth_m: float) -> np.ndarray:
     """``H`` (3x3): a moved camera's direction ``(a, b, 1)`` -> the designed camera's.
 
     Both in their own ``(right, up, forward)`` coordinates, for scene points on
     the plane ``forward = depth_m`` of the designed camera (any depth when the
     offset is 0).
     """
-    rot, off = _check_pose(rotation_deg, offset_m, depth_m)
+    rot, off = _check_pose(rotation_rad, offset_m, depth_m)
     r = pose_rotation(rot)
     # (I - t n^T / D)^-1 = I + t n^T / (D - t_z) (Sherman-Morrison), n the forward axis
     return r + np.outer(off / (depth_m - off[2]), r[2])
@@ -209,7 +207,7 @@ def _inside(index: np.ndarray, n: int) -> np.ndarray:
 
 
 def _content_directions(
-    rays: np.ndarray, rotation_deg: object, offset_m: object, depth_m: float | np.ndarray
+    rays: np.ndarray, rotation_rad: object, offset_m: object, depth_m: float | np.ndarray
 ) -> np.ndarray:
     """``x[3, texel]``: the designed camera's direction of what each moved texel sees.
 
@@ -220,8 +218,8 @@ def _content_directions(
     unrotated texel).
     """
     if np.ndim(depth_m) == 0:
-        return content_homography(rotation_deg, offset_m, float(depth_m)) @ rays
-    rot, off = _check_pose(rotation_deg, offset_m)
+        return content_homography(rotation_rad, offset_m, float(depth_m)) @ rays
+    rot, off = _check_pose(rotation_rad, offset_m)
     z = np.asarray(depth_m, dtype=np.float64).ravel()
     if z.size != rays.shape[1] or np.isnan(z).any() or not np.all(z > max(off[2], 0.0)):
         raise ValueError(
@@ -233,15 +231,15 @@ def _content_directions(
 
 def pose_warp(
     camera: FreeformCamera,
-    rotation_deg: object,
+    rotation_rad: object,
     offset_m: object,
     depth_m: float | np.ndarray,
 ) -> PoseWarp:
-    """The :class:`PoseWarp` of a camera moved by ``rotation_deg`` and ``offset_m``.
+    """The :class:`PoseWarp` of a camera moved by ``rotation_rad`` and ``offset_m``.
 
     Args:
         camera: mask geometry (size, distance, texels) and directional response.
-        rotation_deg: ``(pan, tilt, roll)`` (deg).
+        rotation_rad: ``(pan, tilt, roll)`` (rad).
         offset_m: ``(right, up, forward)`` (m), in the designed camera's frame.
         depth_m: depth of the scene plane the offset is exact for (m), > 0; or
             the designed view's depth map ``[rows, cols]`` (m, ``inf`` where a
@@ -253,7 +251,7 @@ def pose_warp(
     """
     rows, cols = camera.mask_resolution
     rays, g = _texel_rays(camera)
-    x = _content_directions(rays, rotation_deg, offset_m, depth_m)
+    x = _content_directions(rays, rotation_rad, offset_m, depth_m)
     ahead = x[2] > 0
     # tangent coordinates over the half field (a_max = w / 2d), y down: grid_sample's units
     half = 0.5 * camera.mask_size_m / camera.mask_distance_m
@@ -269,13 +267,13 @@ def pose_warp(
     )
 
 
-def posed_camera(camera: FreeformCamera, rotation_deg: object, offset_m: object) -> FreeformCamera:
-    """``camera`` turned by ``rotation_deg`` about its board origin and moved by ``offset_m``.
+def posed_camera(camera: FreeformCamera, rotation_rad: object, offset_m: object) -> FreeformCamera:
+    """``camera`` turned by ``rotation_rad`` about its board origin and moved by ``offset_m``.
 
     The offset ``(right, up, forward)`` (m) is in the designed camera's frame.
     What :func:`pose_warp` approximates; renders of it are the reference.
     """
-    rot, off = _check_pose(rotation_deg, offset_m)
+    rot, off = _check_pose(rotation_rad, offset_m)
     frame = camera.frame  # rows: right, up, forward (world)
     axes = frame.T @ pose_rotation(rot)  # columns: the moved camera's axes (world)
     position = np.asarray(camera.position) + frame.T @ off

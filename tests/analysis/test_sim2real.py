@@ -3,13 +3,17 @@ JSON schema, and bad-input errors."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import typing
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
+from mincam_render.analysis.robustness import RobustnessConfig
 from mincam_render.analysis.sim2real import (
     THRESHOLDS,
     Sim2RealError,
@@ -20,17 +24,21 @@ from mincam_render.analysis.sim2real import (
     make_surrogate,
     write_sim2real_report,
 )
+from mincam_render.analysis.sim2real.surrogate import (
+    SURROGATE_PERTURBATION,
+    UNIFORM_HALF_RANGE_PER_SIGMA,
+    print_masks,
+)
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.optics.fabrication_fused import fused_fabricated_transmittance
+from mincam_render.optics.perturbation import PerturbationModel
 
 #: Only electronics perturbations: real = gain * sim + offset holds exactly.
 ELECTRONICS_ONLY = SurrogatePerturbations(
-    mask_shift_m=0.0,
-    mask_rotation_deg=0.0,
-    printer_gamma=1.0,
-    dot_gain=0.0,
-    board_position_m=0.0,
-    board_rotation_deg=0.0,
-    gain_sigma=0.15,
-    offset_sigma_v=0.02,
+    perturbation=dataclasses.replace(
+        PerturbationModel.zero(), gain_mismatch_fraction=0.26, dark_offset_v=0.035
+    ),
     stray_light_fraction=0.05,
     dark_current_a=2e-10,
     read_noise=True,
@@ -252,3 +260,59 @@ def test_counts_are_converted_to_volts(electronics_only, tmp_path):
         conv.append(",".join(vals[:2] + [repr(float(v) / (3.2 / 2**16)) for v in vals[2:]]))
     (out / "measurements.csv").write_text("\n".join(conv) + "\n")
     np.testing.assert_allclose(load_recording(out).volts, rec_v.volts, rtol=1e-12)
+
+
+def test_the_surrogate_draws_its_built_camera_from_the_model_robust_training_uses():
+    """One model of a built camera: the SURROGATE's is an optics.perturbation instance."""
+    pert = SurrogatePerturbations()
+    assert isinstance(pert.perturbation, PerturbationModel)
+    # robust training, the robustness report and the SURROGATE declare the same class
+    assert typing.get_type_hints(TrainConfig)["perturbation"] == PerturbationModel | None
+    assert typing.get_type_hints(RobustnessConfig)["perturbation"] is PerturbationModel
+    assert typing.get_type_hints(SurrogatePerturbations)["perturbation"] is PerturbationModel
+    assert pert.perturbation is SURROGATE_PERTURBATION and pert.geometric
+    assert not ELECTRONICS_ONLY.geometric
+    # the former normal spreads, kept as the uniform draws' standard deviations
+    assert SURROGATE_PERTURBATION.mask_shift_m / UNIFORM_HALF_RANGE_PER_SIGMA == pytest.approx(
+        0.15 * MM, rel=1e-12
+    )
+    assert pert.to_record()["perturbation"] == SURROGATE_PERTURBATION.to_record()
+
+
+def test_the_surrogate_prints_masks_as_robust_training_measures_them(rng):
+    """print_masks is training's fused mask plane (logits = logit of the design's place)."""
+    cam = FreeformCamera(mask_resolution=(8, 8), layout=DetectorLayout.row(count=3, pitch_m=0.02))
+    lo, hi = cam.transmittance_range
+    fraction = rng.uniform(0.02, 0.98, (3, 8, 8))
+    draw = SURROGATE_PERTURBATION.scaled(2.0).draw(3, rng).without_pose()
+    printed = print_masks(lo + (hi - lo) * fraction, cam, draw)
+    logits = torch.from_numpy(np.log(fraction / (1.0 - fraction)))
+    trained = fused_fabricated_transmittance(logits, (lo, hi), draw, cam.texel_size_m)
+    np.testing.assert_allclose(printed, trained.numpy(), rtol=1e-12, atol=1e-14)
+    assert not np.allclose(printed, lo + (hi - lo) * fraction, atol=1e-3)  # it did perturb
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"perturbation": {"mask_shift_mm": 0.3}}, "SurrogatePerturbations.perturbation"),
+        ({"stray_light_fraction": -0.1}, "SurrogatePerturbations.stray_light_fraction"),
+        ({"dark_current_a": float("nan")}, "SurrogatePerturbations.dark_current_a"),
+    ],
+)
+def test_bad_surrogate_perturbations_are_refused_naming_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        SurrogatePerturbations(**kwargs)
+
+
+def test_the_injected_values_are_the_draw_of_the_shared_model(electronics_only):
+    rec_dir, _ = electronics_only
+    injected = json.loads((rec_dir / "injected.json").read_text())
+    record = injected["perturbations"]["perturbation"]
+    assert record == ELECTRONICS_ONLY.perturbation.to_record()
+    assert record["gain_mismatch_percent"] == pytest.approx(26.0)
+    gain = np.asarray(injected["per_pixel"]["gain"])
+    assert np.all(np.abs(gain - 1.0) <= 0.26) and np.any(gain != 1.0)
+    assert np.all(np.abs(injected["per_pixel"]["offset_v"]) <= 0.035)
+    assert injected["per_pixel"]["mask_shift_m"] == [[0.0, 0.0]] * len(gain)
+    assert injected["board"]["position_error_m"] == [0.0, 0.0, 0.0]

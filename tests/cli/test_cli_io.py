@@ -213,6 +213,15 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
     assert [r["pixels"] for r in records] == sorted((r["pixels"] for r in records), reverse=True)
 
 
+def test_robust_options_are_the_perturbation_record_with_its_defaults():
+    """--mask-shift-mm and the rest fill PerturbationModel's record (mm, deg, %, cm)."""
+    params = main.commands["train"].make_context("train", []).params
+    record = PerturbationModel().to_record()
+    filled = {name: value for name, value in params.items() if name in record}
+    assert filled == record
+    assert PerturbationModel.from_record(filled) == PerturbationModel()
+
+
 @pytest.mark.parametrize(
     ("names", "args", "config", "count"),
     [
@@ -220,7 +229,6 @@ def test_cli_prune_writes_its_own_files_only(variant, tmp_path):
         (("train",), [], TrainConfig, 12),
         (("sweep",), [], TrainConfig, 11),
         (("prune",), ["--run", "r"], TrainConfig, 11),
-        (("train",), [], PerturbationModel, 12),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),

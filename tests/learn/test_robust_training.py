@@ -26,8 +26,8 @@ def test_every_batch_gets_its_own_draw_reproducibly():
     a = [batch_draw(model, PerturbationModel(), g1) for _ in range(3)]
     b = [batch_draw(model, PerturbationModel(), g2) for _ in range(3)]
     assert all(x is not None for x in a + b)
-    assert [x.shift_mm.tolist() for x in a] == [x.shift_mm.tolist() for x in b]  # type: ignore[union-attr]
-    assert not np.array_equal(a[0].shift_mm, a[1].shift_mm)  # type: ignore[union-attr]
+    assert [x.shift_m.tolist() for x in a] == [x.shift_m.tolist() for x in b]  # type: ignore[union-attr]
+    assert not np.array_equal(a[0].shift_m, a[1].shift_m)  # type: ignore[union-attr]
     assert batch_draw(model, None, g1) is None
 
 
@@ -77,10 +77,10 @@ VAL_CFG = dataclasses.replace(CFG, robust_validation_draws=4)
 def test_validation_draws_are_fixed_by_the_seed_and_absent_when_validating_the_design():
     model = tr.build_mincam(linear_task(40, k=3), 3)
     a, b = validation_draws(model, VAL_CFG), validation_draws(model, VAL_CFG)
-    assert len(a) == 4 and [d.shift_mm.tolist() for d in a] == [d.shift_mm.tolist() for d in b]
-    assert not np.array_equal(a[0].shift_mm, a[1].shift_mm)
+    assert len(a) == 4 and [d.shift_m.tolist() for d in a] == [d.shift_m.tolist() for d in b]
+    assert not np.array_equal(a[0].shift_m, a[1].shift_m)
     other = validation_draws(model, dataclasses.replace(VAL_CFG, seed=1))
-    assert not np.array_equal(a[0].shift_mm, other[0].shift_mm)
+    assert not np.array_equal(a[0].shift_m, other[0].shift_m)
     assert validation_draws(model, dataclasses.replace(VAL_CFG, robust_validation_draws=0)) == []
     assert validation_draws(model, dataclasses.replace(VAL_CFG, perturbation=None)) == []
 

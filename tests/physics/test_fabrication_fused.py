@@ -84,12 +84,12 @@ def test_content_behind_the_camera_and_a_directional_response_fused_equals_the_r
     cam = _camera((9, 9), mask_distance_m=0.002, directional_response=response)
     draw = dataclasses.replace(
         PerturbationModel().draw(2, rng),
-        pose_rotation_deg=np.array([28.0, -25.0, 10.0]),
-        pose_offset_cm=np.array([3.0, -2.0, 5.0]),
+        pose_rotation_rad=np.radians([28.0, -25.0, 10.0]),
+        pose_offset_m=np.array([0.03, -0.02, 0.05]),
     )
-    from mincam_render.optics.pose import CM, pose_warp
+    from mincam_render.optics.pose import pose_warp
 
-    warp = pose_warp(cam, draw.pose_rotation_deg, draw.pose_offset_cm * CM, draw.pose_depth_m)
+    warp = pose_warp(cam, draw.pose_rotation_rad, draw.pose_offset_m, draw.pose_depth_m)
     assert 0.0 < warp.ahead.mean() < 1.0
     _compare(draw, cam, rng, torch.float64, k=2)
 
@@ -98,15 +98,15 @@ def test_fused_gradient_matches_central_differences(rng):
     cam = _camera((6, 5))
     logits = torch.from_numpy(rng.normal(0, 2, (2, 6, 5))).requires_grad_(True)
     draw = PerturbationDraw(
-        shift_mm=[[0.31, -0.17], [-0.4, 0.2]],
-        rotation_deg=[3.0, -1.5],
+        shift_m=[[0.31e-3, -0.17e-3], [-0.4e-3, 0.2e-3]],
+        rotation_rad=np.radians([3.0, -1.5]),
         gamma=0.8,
         dot_gain=0.12,
         min_transmittance_error=0.003,
         max_transmittance_error=-0.04,
-        blur_sigma_mm=0.9,
-        pose_rotation_deg=[1.5, -2.0, 3.0],
-        pose_offset_cm=[1.0, -2.0, 1.5],
+        blur_sigma_m=0.9e-3,
+        pose_rotation_rad=np.radians([1.5, -2.0, 3.0]),
+        pose_offset_m=[0.01, -0.02, 0.015],
     )
     weights = torch.from_numpy(rng.normal(size=(2, 6, 5)))
 
@@ -132,7 +132,7 @@ def test_the_fused_node_refuses_what_the_reference_refuses():
         fused_fabricated_transmittance(
             torch.zeros(2, 4, 4), RANGE, PerturbationDraw.identity(3), cam.texel_size_m
         )
-    moved = dataclasses.replace(PerturbationDraw.identity(1), pose_rotation_deg=[1.0, 0.0, 0.0])
+    moved = dataclasses.replace(PerturbationDraw.identity(1), pose_rotation_rad=[0.02, 0.0, 0.0])
     with pytest.raises(ValueError, match="camera's geometry"):
         fused_fabricated_transmittance(torch.zeros(1, 4, 4), RANGE, moved, cam.texel_size_m)
 

@@ -11,9 +11,8 @@ import torch
 from mincam_render.optics.camera import MM, DetectorLayout, DirectionalResponse, FreeformCamera
 from mincam_render.optics.fabrication import fabricated_transmittance, place_masks, posed_masks
 from mincam_render.optics.maskplane import transmittance
-from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel
+from mincam_render.optics.perturbation import CM, DEG, PerturbationDraw, PerturbationModel
 from mincam_render.optics.pose import (
-    CM,
     angular_weight,
     content_homography,
     pose_warp,
@@ -38,8 +37,8 @@ def _camera(res: int = 8, **kw: object) -> FreeformCamera:
 def _pose(rotation_deg=(0.0, 0.0, 0.0), offset_cm=(0.0, 0.0, 0.0), depth_m=2.0, k=1):
     return dataclasses.replace(
         PerturbationDraw.identity(k),
-        pose_rotation_deg=np.asarray(rotation_deg, float),
-        pose_offset_cm=np.asarray(offset_cm, float),
+        pose_rotation_rad=np.asarray(rotation_deg, float) * DEG,
+        pose_offset_m=np.asarray(offset_cm, float) * CM,
         pose_depth_m=depth_m,
     )
 
@@ -64,10 +63,10 @@ def test_the_homography_maps_what_the_moved_camera_sees_to_where_the_design_saw_
 ):
     """Against the camera's own projection: a moved camera built independently."""
     cam = _camera(32)
-    moved = posed_camera(cam, rotation_deg, offset_m)
+    moved = posed_camera(cam, np.radians(rotation_deg), offset_m)
     right, up, fwd = cam.frame
     for depth in depths:
-        h = content_homography(rotation_deg, offset_m, depth if any(offset_m) else 2.5)
+        h = content_homography(np.radians(rotation_deg), offset_m, depth if any(offset_m) else 2.5)
         for a, b in rng.uniform(-0.5, 0.5, (6, 2)):
             x = np.asarray(cam.position) + depth * (fwd + a * right + b * up)
             q = _tangent(cam, cam.project_to_texel(x, 0))
@@ -79,11 +78,11 @@ def test_the_homography_maps_what_the_moved_camera_sees_to_where_the_design_saw_
 def test_pan_turns_the_view_right_tilt_up_and_roll_clockwise():
     cam = _camera()
     right, up, fwd = cam.frame
-    panned = posed_camera(cam, (10.0, 0.0, 0.0), (0.0, 0.0, 0.0)).frame
+    panned = posed_camera(cam, (10.0 * DEG, 0.0, 0.0), (0.0, 0.0, 0.0)).frame
     assert np.dot(panned[2], right) == pytest.approx(np.sin(np.radians(10.0)))
-    tilted = posed_camera(cam, (0.0, 10.0, 0.0), (0.0, 0.0, 0.0)).frame
+    tilted = posed_camera(cam, (0.0, 10.0 * DEG, 0.0), (0.0, 0.0, 0.0)).frame
     assert np.dot(tilted[2], up) == pytest.approx(np.sin(np.radians(10.0)))
-    rolled = posed_camera(cam, (0.0, 0.0, 10.0), (0.0, 0.0, 0.0)).frame
+    rolled = posed_camera(cam, (0.0, 0.0, 10.0 * DEG), (0.0, 0.0, 0.0)).frame
     assert np.dot(rolled[1], right) == pytest.approx(np.sin(np.radians(10.0)))
     moved = posed_camera(cam, (0.0, 0.0, 0.0), (0.01, 0.02, 0.03))
     np.testing.assert_allclose(
@@ -119,7 +118,7 @@ def test_a_uniform_scene_measures_the_same_from_any_pose(rotation_deg, offset_cm
     cam = _camera(16, directional_response=dr)
     g = angular_weight(cam, *texel_directions(cam))
     mask = torch.from_numpy(rng.uniform(0.01, 0.67, (2, 16, 16)))
-    warp = pose_warp(cam, rotation_deg, np.asarray(offset_cm) * CM, 2.0)
+    warp = pose_warp(cam, np.radians(rotation_deg), np.asarray(offset_cm) * CM, 2.0)
     assert warp.extrapolated_fraction() > 0.01
     t = torch.from_numpy(g)
     moved = (posed_masks(mask, warp) * t).sum(dim=(1, 2))
@@ -130,7 +129,7 @@ def test_a_quarter_roll_rotates_every_mask_like_a_quarter_turn_of_the_mask(rng):
     """Roll 90 deg (clockwise from the camera) = every mask turned clockwise by 90 deg."""
     cam = _camera(6)
     mask = torch.from_numpy(rng.uniform(0.1, 0.6, (3, 6, 6)))
-    warp = pose_warp(cam, (0.0, 0.0, 90.0), np.zeros(3), 2.0)
+    warp = pose_warp(cam, (0.0, 0.0, np.pi / 2), np.zeros(3), 2.0)
     assert warp.extrapolated_fraction() == 0.0  # the square field maps onto itself
     expected = torch.rot90(mask, k=-1, dims=(1, 2))
     torch.testing.assert_close(posed_masks(mask, warp), expected, rtol=0, atol=1e-12)
@@ -168,7 +167,7 @@ def test_a_sideways_move_of_one_texel_at_the_plane_depth_shifts_the_content_one_
 def test_the_guessed_share_grows_with_the_angle():
     cam = _camera(32)
     shares = [
-        pose_warp(cam, (a, 0.0, 0.0), np.zeros(3), 2.0).extrapolated_fraction()
+        pose_warp(cam, (a * DEG, 0.0, 0.0), np.zeros(3), 2.0).extrapolated_fraction()
         for a in (0, 1, 2, 4)
     ]
     assert shares[0] == pytest.approx(0.0, abs=1e-12)
@@ -182,9 +181,9 @@ def test_gradient_through_a_camera_off_its_pose_matches_central_differences(rng)
     logits = torch.from_numpy(rng.normal(0, 2, (2, 6, 6))).requires_grad_(True)
     draw = dataclasses.replace(
         _pose((1.5, -2.0, 3.0), (1.0, -2.0, 1.5), k=2),
-        shift_mm=[[0.31, -0.17], [-0.4, 0.2]],
-        rotation_deg=[3.0, -1.5],
-        blur_sigma_mm=0.4,
+        shift_m=np.array([[0.31, -0.17], [-0.4, 0.2]]) * MM,
+        rotation_rad=np.radians([3.0, -1.5]),
+        blur_sigma_m=0.4 * MM,
         gamma=0.8,
     )
     weights = torch.from_numpy(rng.normal(size=(2, 6, 6)))
@@ -213,8 +212,8 @@ def test_the_camera_model_measures_through_its_pose(rng):
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"pose_rotation_deg": [1.0, 2.0]}, "pose_rotation_deg"),
-        ({"pose_offset_cm": [0.0, np.nan, 0.0]}, "pose_offset_cm"),
+        ({"pose_rotation_rad": [1.0, 2.0]}, "PerturbationDraw.pose_rotation_rad"),
+        ({"pose_offset_m": [0.0, np.nan, 0.0]}, "PerturbationDraw.pose_offset_m"),
         ({"pose_depth_m": 0.0}, "pose_depth_m"),
     ],
 )
@@ -239,7 +238,7 @@ def test_a_uniform_depth_map_is_the_plane_and_a_rotation_ignores_depth(rng):
     plane = pose_warp(cam, np.zeros(3), off, 2.0)
     mapped = pose_warp(cam, np.zeros(3), off, np.full((8, 8), 2.0))
     np.testing.assert_allclose(plane.grid, mapped.grid, rtol=0, atol=1e-12)
-    rot = (1.5, -2.0, 3.0)
+    rot = np.radians((1.5, -2.0, 3.0))
     depths = rng.uniform(0.5, 8.0, (8, 8))
     a, b = pose_warp(cam, rot, np.zeros(3), 2.0), pose_warp(cam, rot, np.zeros(3), depths)
     np.testing.assert_allclose(a.grid, b.grid, rtol=0, atol=1e-12)

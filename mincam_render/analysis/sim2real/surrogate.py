@@ -2,10 +2,14 @@
 
 :func:`make_surrogate` (for tests and demos; no prototype data exist here)
 renders a family through a perturbed camera the way hardware deviates from its
-design (mask misalignment and rotation, printer transmittance curve and dot
-gain, detector gain and offset mismatch, board pose error, stray light, dark
-current, read noise and ADC quantization) and records every injected value in
-``injected.json``. Its output is labelled SURROGATE in the files and in every
+design and records every injected value in ``injected.json``. The camera as
+built is drawn from :class:`~mincam_render.optics.perturbation.PerturbationModel`,
+the model robust training and the robustness report use (mask misalignment and
+rotation, printer tone curve, dot gain, printable range and blur, detector gain
+and offset mismatch, board pose error), printed by the same mask plane
+(:func:`~mincam_render.optics.fabrication.printed_transmittance`), the board's
+pose rendered exactly; stray light, dark current, read noise and ADC
+quantization are the SURROGATE's own. Its output is labelled SURROGATE in the files and in every
 report made from it.
 
 Arrays are numpy float64 unless a docstring says torch; lengths in metres, angles
@@ -31,6 +35,8 @@ from mincam_render.analysis.sim2real.recording import (
 from mincam_render.analysis.sim2real.simulation import simulate_volts
 from mincam_render.core.checks import check_number
 from mincam_render.core.seeds import stream_seed
+from mincam_render.optics.camera import MM
+from mincam_render.optics.perturbation import DEG, MAGNITUDES, PerturbationDraw, PerturbationModel
 
 if TYPE_CHECKING:
     from mincam_render.optics.camera import DetectorElectronics, FreeformCamera
@@ -39,23 +45,42 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 
+#: Half-range of a uniform draw per standard deviation: the former SURROGATE drew
+#: normal errors of standard deviation sigma; the shared model draws uniformly in
+#: ``[-a, a]``, and ``a = sqrt(3) sigma`` keeps the spread.
+UNIFORM_HALF_RANGE_PER_SIGMA = math.sqrt(3.0)
+
+#: The SURROGATE's built camera: the former ``SurrogatePerturbations`` defaults
+#: mapped onto the shared model (:mod:`mincam_render.optics.perturbation` lists
+#: the mapping): sigma 0.15 mm shift, 1 deg rotation, 10 % gain, 10 mV offset,
+#: 5 mm and 0.5 deg board pose; printer gamma 1.15; dot gain 0.05 (its darkening
+#: 5 % of the prototype's printable range 0.01-0.67, its blur 0.5 texel of the
+#: prototype's 0.5-mm texels).
+SURROGATE_PERTURBATION = PerturbationModel(
+    mask_shift_m=UNIFORM_HALF_RANGE_PER_SIGMA * 0.15 * MM,
+    mask_rotation_rad=UNIFORM_HALF_RANGE_PER_SIGMA * 1.0 * DEG,
+    gamma_deviation=0.15,
+    dot_gain_deviation=0.05,
+    min_transmittance_error=0.05 * 0.01,
+    max_transmittance_error=0.05 * 0.67,
+    mask_blur_m=0.25 * MM,
+    gain_mismatch_fraction=UNIFORM_HALF_RANGE_PER_SIGMA * 0.1,
+    dark_offset_v=UNIFORM_HALF_RANGE_PER_SIGMA * 0.01,
+    pose_orientation_rad=UNIFORM_HALF_RANGE_PER_SIGMA * 0.5 * DEG,
+    pose_position_m=UNIFORM_HALF_RANGE_PER_SIGMA * 5.0 * MM,
+)
+
+
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class SurrogatePerturbations:
-    """How the SURROGATE deviates from the design; 0 switches a perturbation off.
-
-    Random values are drawn per pixel (or per board) from the stated spreads.
+    """How the SURROGATE deviates from the design.
 
     Args:
-        mask_shift_m: standard deviation of the mask's in-plane misalignment (m).
-        mask_rotation_deg: standard deviation of the mask's in-plane rotation (deg).
-        printer_gamma: printer transmittance curve ``m' = lo + (hi-lo) x^gamma`` on
-            the normalised design ``x``; 1 = linear.
-        dot_gain: printed dots grow: transmittance x ``(1 - dot_gain)`` and a blur
-            of ``dot_gain * 10`` texels (sigma).
-        gain_sigma: standard deviation of the per-pixel gain around 1 (fraction).
-        offset_sigma_v: standard deviation of the per-pixel voltage offset (V).
-        board_position_m: standard deviation of the board's position error (m).
-        board_rotation_deg: standard deviation of the board's pointing error (deg).
+        perturbation: the built camera's deviations from its design (mask
+            shift and rotation, print tone, dot gain, printable range and blur,
+            detector gain and offset, board pose), the model robust training and
+            the robustness report draw from; one camera is drawn per recording.
+            :meth:`PerturbationModel.zero` switches them all off.
         stray_light_fraction: constant stray power per pixel, uniform in
             ``[0, fraction] x`` the pixel's mean designed power (W).
         dark_current_a: per-pixel dark current, uniform in ``[0, value]`` (A).
@@ -63,162 +88,104 @@ class SurrogatePerturbations:
         common_random_numbers: render with the analysis's seeds, so that without
             geometric perturbations the rendered power is identical and only the
             injected electronics differ (for exact recovery tests).
+
+    Raises:
+        ValueError: ``perturbation`` is no :class:`PerturbationModel`, or a
+            number is negative or not finite (the message names the field).
     """
 
-    mask_shift_m: float = 0.15e-3
-    mask_rotation_deg: float = 1.0
-    printer_gamma: float = 1.15
-    dot_gain: float = 0.05
-    gain_sigma: float = 0.1
-    offset_sigma_v: float = 0.01
-    board_position_m: float = 5e-3
-    board_rotation_deg: float = 0.5
+    perturbation: PerturbationModel = SURROGATE_PERTURBATION
     stray_light_fraction: float = 0.05
     dark_current_a: float = 2e-10
     read_noise: bool = True
     common_random_numbers: bool = False
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if not isinstance(v, bool):  # the switches
-                check_number(f"SurrogatePerturbations.{f.name}", v, 0)
-        if self.printer_gamma <= 0:
-            raise ValueError("SurrogatePerturbations.printer_gamma must be > 0")
-        if self.dot_gain >= 1:
-            raise ValueError("SurrogatePerturbations.dot_gain must be < 1 (fraction)")
+        if not isinstance(self.perturbation, PerturbationModel):
+            raise ValueError(
+                f"SurrogatePerturbations.perturbation = {self.perturbation!r}: allowed a "
+                "mincam_render.optics.perturbation.PerturbationModel"
+            )
+        for name in ("stray_light_fraction", "dark_current_a"):
+            check_number(f"SurrogatePerturbations.{name}", getattr(self, name), 0)
 
     @property
     def geometric(self) -> bool:
-        """True when masks or board differ from the design (fits are then approximate)."""
-        return (
-            any(
-                v
-                for v in (
-                    self.mask_shift_m,
-                    self.mask_rotation_deg,
-                    self.dot_gain,
-                    self.board_position_m,
-                    self.board_rotation_deg,
-                )
-            )
-            or self.printer_gamma != 1.0
-        )
+        """True when masks, print or board differ from the design (fits are then approximate)."""
+        electronic = ("gain_mismatch_fraction", "dark_offset_v")
+        return any(getattr(self.perturbation, n) for n in MAGNITUDES if n not in electronic)
+
+    def to_record(self) -> dict[str, Any]:
+        """``injected.json``'s ``perturbations``, the model in its record's units (mm, deg, %)."""
+        return {**dataclasses.asdict(self), "perturbation": self.perturbation.to_record()}
 
 
-def print_masks(
-    masks: np.ndarray,
-    transmittance_range: tuple[float, float],
-    *,
-    gamma: float,
-    dot_gain: float,
-    shift_texels: np.ndarray,
-    rotation_rad: np.ndarray,
-) -> np.ndarray:
+def print_masks(masks: np.ndarray, camera: FreeformCamera, draw: PerturbationDraw) -> np.ndarray:
     """What a printer and a slightly misplaced mask make of designs ``M[pixel, row, col]``.
 
-    Printer curve, then dot gain (darkening and blur), then per-pixel shift
-    ``(d_row, d_col)`` in texels and rotation (rad) about the mask centre;
-    texels uncovered by the shift see the mask's frame (minimum transmittance).
-    Uses torch's ``grid_sample`` (bilinear).
+    The shared fabricated mask plane
+    (:func:`mincam_render.optics.fabrication.printed_transmittance`): tone
+    curve and dot gain, printed range, blur, then each mask's shift and
+    rotation, the printed border entering; the board's pose is left to the
+    render of the moved camera.
+
+    Args:
+        masks: designs ``M[pixel, row, col]``, transmittance in ``camera``'s printable range.
+        camera: the designed camera (printable range, texel size).
+        draw: the built camera.
+
+    Returns:
+        The printed transmittance ``M[pixel, row, col]`` (numpy float64).
     """
     import torch
-    import torch.nn.functional as F
 
-    lo, hi = transmittance_range
-    x = np.clip((masks - lo) / (hi - lo), 0.0, 1.0)
-    m = lo + (hi - lo) * x**gamma
-    m = m * (1.0 - dot_gain)
-    t = torch.from_numpy(m[:, None]).double()
-    sigma = 10.0 * dot_gain
-    if sigma > 0:
-        r = max(1, int(math.ceil(3 * sigma)))
-        k = torch.exp(-0.5 * (torch.arange(-r, r + 1, dtype=torch.float64) / sigma) ** 2)
-        k = k / k.sum()
-        t = F.conv2d(F.pad(t, (r, r, 0, 0), mode="replicate"), k.view(1, 1, 1, -1))
-        t = F.conv2d(F.pad(t, (0, 0, r, r), mode="replicate"), k.view(1, 1, -1, 1))
-    p, rows, cols = masks.shape
-    theta = torch.zeros(p, 2, 3, dtype=torch.float64)
-    c, s = torch.cos(torch.from_numpy(rotation_rad)), torch.sin(torch.from_numpy(rotation_rad))
-    theta[:, 0, 0], theta[:, 0, 1], theta[:, 1, 0], theta[:, 1, 1] = c, -s, s, c
-    # normalised coordinates span 2 over the mask: a shift of one texel is 2 / cols
-    theta[:, 0, 2] = -torch.from_numpy(shift_texels[:, 1]) * 2.0 / cols
-    theta[:, 1, 2] = -torch.from_numpy(shift_texels[:, 0]) * 2.0 / rows
-    grid = F.affine_grid(theta, [p, 1, rows, cols], align_corners=False)
-    out = (
-        F.grid_sample(t - lo, grid, mode="bilinear", padding_mode="zeros", align_corners=False) + lo
+    from mincam_render.optics.fabrication import printed_transmittance
+
+    lo, hi = camera.transmittance_range
+    fraction = torch.from_numpy(np.clip((masks - lo) / (hi - lo), 0.0, 1.0))
+    printed = printed_transmittance(
+        fraction, camera.transmittance_range, draw.without_pose(), camera.texel_size_m
     )
-    return out[:, 0].numpy().clip(0.0, 1.0)
+    return printed.numpy()
 
 
 def _mount_masks(
-    design: np.ndarray,
-    camera: FreeformCamera,
-    pert: SurrogatePerturbations,
-    rng: np.random.Generator,
-) -> tuple[np.ndarray, dict[str, list]]:
-    """Designs ``M[pixel, row, col]`` as printed and mounted.
-
-    Draws the shifts, then the rotations, from ``rng``.
+    design: np.ndarray, camera: FreeformCamera, draw: PerturbationDraw
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Designs ``M[pixel, row, col]`` as printed and mounted by ``draw``.
 
     Returns:
         ``(printed M[pixel, row, col], {"mask_shift_m": [pixel][row, col] (m),
-        "mask_rotation_deg": [pixel]})``: the masks and what was injected.
+        "mask_rotation_deg": [pixel], "print": {...}})``: the masks and what was injected.
     """
-    k, _, cols = design.shape
-    texel_m = camera.mask_size_m / cols
-    shift_m = (
-        rng.normal(0.0, pert.mask_shift_m, size=(k, 2)) if pert.mask_shift_m else np.zeros((k, 2))
-    )
-    rot = (
-        np.radians(rng.normal(0.0, pert.mask_rotation_deg, size=k))
-        if pert.mask_rotation_deg
-        else np.zeros(k)
-    )
-    printed = print_masks(
-        design,
-        camera.transmittance_range,
-        gamma=pert.printer_gamma,
-        dot_gain=pert.dot_gain,
-        shift_texels=shift_m / texel_m,
-        rotation_rad=rot,
-    )
+    printed = print_masks(design, camera, draw)
     return printed, {
-        "mask_shift_m": shift_m.tolist(),
-        "mask_rotation_deg": np.degrees(rot).tolist(),
+        "mask_shift_m": draw.shift_m.tolist(),
+        "mask_rotation_deg": np.degrees(draw.rotation_rad).tolist(),
+        "print": {
+            "gamma": draw.gamma,
+            "dot_gain": draw.dot_gain,
+            "min_transmittance_error": draw.min_transmittance_error,
+            "max_transmittance_error": draw.max_transmittance_error,
+            "blur_sigma_m": draw.blur_sigma_m,
+        },
     }
 
 
-def _rotate_about(v: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
-    axis = axis / np.linalg.norm(axis)
-    return (
-        v * math.cos(angle)
-        + np.cross(axis, v) * math.sin(angle)
-        + axis * np.dot(axis, v) * (1 - math.cos(angle))
-    )
-
-
 def _misplace_board(
-    camera: FreeformCamera, pert: SurrogatePerturbations, rng: np.random.Generator
+    camera: FreeformCamera, draw: PerturbationDraw
 ) -> tuple[FreeformCamera, dict[str, list[float]]]:
     """The camera as mounted, and ``injected.json``'s ``board`` (pose error in m and deg).
 
-    Draws the position error, then the pointing error (about up, then right), from ``rng``.
+    The designed camera turned by the draw's ``(pan, tilt, roll)`` and moved by
+    its ``(right, up, forward)`` (:func:`mincam_render.optics.pose.posed_camera`).
     """
-    right, up, _ = camera.frame
-    dpos = rng.normal(0.0, pert.board_position_m, size=3) if pert.board_position_m else np.zeros(3)
-    angles = (
-        np.radians(rng.normal(0.0, pert.board_rotation_deg, size=2))
-        if pert.board_rotation_deg
-        else np.zeros(2)
-    )
-    aim = np.subtract(camera.look_at, camera.position)
-    aim = _rotate_about(_rotate_about(aim, up, angles[0]), right, angles[1])
-    real_pos = np.asarray(camera.position) + dpos
-    real_cam = dataclasses.replace(camera, position=tuple(real_pos), look_at=tuple(real_pos + aim))
+    from mincam_render.optics.pose import posed_camera
+
+    real_cam = posed_camera(camera, draw.pose_rotation_rad, draw.pose_offset_m)
     board = {
-        "position_error_m": dpos.tolist(),
-        "rotation_error_deg": np.degrees(angles).tolist(),
+        "position_error_m": draw.pose_offset_m.tolist(),
+        "rotation_error_deg": np.degrees(draw.pose_rotation_rad).tolist(),
         "real_position_m": list(real_cam.position),
         "real_look_at_m": list(real_cam.look_at),
     }
@@ -230,6 +197,7 @@ def _measure(
     power_design: np.ndarray,
     e: DetectorElectronics,
     pert: SurrogatePerturbations,
+    draw: PerturbationDraw,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Voltages ``V[N, P]`` the perturbed electronics make of powers ``P[N, P]`` (W).
@@ -239,20 +207,21 @@ def _measure(
         power_design: ``[n, P]`` power of the design, whose mean scales the stray light (W).
         e: the designed electronics.
         pert: the perturbations.
-        rng: draws gain, offset, stray light, dark current, then read noise, in that order.
+        draw: the built camera: its gain acts on each detector's power, its
+            offset on the output voltage (as in training).
+        rng: draws stray light, dark current, then read noise, in that order.
 
     Returns:
         ``(volts[N, P] (V), {"gain", "offset_v", "stray_light_w", "dark_current_a"}: [P]
         each)``.
     """
     k = power.shape[1]
-    gain = 1.0 + rng.normal(0.0, pert.gain_sigma, size=k) if pert.gain_sigma else np.ones(k)
-    offset = rng.normal(0.0, pert.offset_sigma_v, size=k) if pert.offset_sigma_v else np.zeros(k)
+    gain, offset = draw.gain, draw.offset_v
     stray_w = rng.uniform(0.0, pert.stray_light_fraction, size=k) * power_design.mean(axis=0)
     dark_a = rng.uniform(0.0, pert.dark_current_a, size=k)
-    # photocurrent -> transimpedance -> per-pixel gain mismatch and offset
-    clean = e.gain_v_per_a * (e.responsivity_a_per_w * (power + stray_w) + dark_a)
-    volts = gain * clean + offset
+    # power (stray light included) -> photocurrent -> transimpedance, then the offset
+    clean = e.gain_v_per_a * (e.responsivity_a_per_w * gain * (power + stray_w) + dark_a)
+    volts = clean + offset
     if pert.read_noise:
         volts = volts + rng.normal(0.0, e.read_noise_v, size=volts.shape)
         volts = np.floor(volts / e.lsb_v) * e.lsb_v + 0.5 * e.lsb_v  # ADC quantization
@@ -301,17 +270,18 @@ def make_surrogate(
     camera, design = _design(family, mask_resolution, seed)
     pixels = np.arange(camera.num_detectors)
     rng = np.random.default_rng(stream_seed(seed, "sim2real/surrogate"))
-    printed, mounted = _mount_masks(design, camera, pert, rng)
-    real_cam, board = _misplace_board(camera, pert, rng)
+    draw = pert.perturbation.draw(camera.num_detectors, rng)
+    printed, mounted = _mount_masks(design, camera, draw)
+    real_cam, board = _misplace_board(camera, draw)
     frame_index = np.arange(num_frames)
     stream = 0 if pert.common_random_numbers else 1
     power, power_design = _powers(
         family, camera, real_cam, design, printed, frame_index, spp, seed, stream, progress
     )
-    volts, electronics = _measure(power, power_design, camera.electronics, pert, rng)
+    volts, electronics = _measure(power, power_design, camera.electronics, pert, draw, rng)
     injected = {
         "surrogate": True,
-        "perturbations": dataclasses.asdict(pert),
+        "perturbations": pert.to_record(),
         "render_seed_stream": stream,
         "per_pixel": {**{name: v.tolist() for name, v in electronics.items()}, **mounted},
         "board": board,
@@ -397,15 +367,15 @@ def _expected_fit(
 ) -> dict[str, Any]:
     """The gain and offset (V) per pixel a fit of ``real = gain * sim + offset`` should find.
 
-    Stray light and dark current pass the same gains as the signal, so a fit sees
-    them as offset.
+    Stray light passes the same gain as the signal and the dark current the
+    transimpedance, so a fit sees them as offset.
     """
     gain, offset = electronics["gain"], electronics["offset_v"]
     stray_w, dark_a = electronics["stray_light_w"], electronics["dark_current_a"]
     g_e = e.gain_v_per_a
     return {
         "gain": gain.tolist(),
-        "offset_v": (gain * g_e * (e.responsivity_a_per_w * stray_w + dark_a) + offset).tolist(),
+        "offset_v": (g_e * (e.responsivity_a_per_w * gain * stray_w + dark_a) + offset).tolist(),
         "exact": not pert.geometric,
         "note": "real = gain * sim + offset holds exactly only without geometric or "
         "printing perturbations; otherwise these are the electronics' share",
