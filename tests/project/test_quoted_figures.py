@@ -52,3 +52,16 @@ def test_the_design_protocols_learning_curve_at_its_largest_size_is_the_jsons():
         quoted = _interval({"mean": d["error"], "ci95": d["ci95"]})
         assert quoted in row, f"docs/design_protocol.md: {name} at {ladder['episodes']} episodes"
     assert f"| {round(ladder['render_s'])} |" in row
+
+
+@pytest.mark.parametrize("entry", ["workspace-10test", "lighting"])
+def test_the_design_protocols_floors_are_the_jsons(entry):
+    floors = json.loads(_read(DESIGN_PROTOCOL))[entry]["floors"]
+    doc = _read(REPO / "docs" / "design_protocol.md")
+    assert floors, f"{entry} has no floors"
+    for check in floors:
+        (lo, hi), mean = check["paired"]["ci95"], check["paired"]["mean"]
+        quoted = f"{mean:+.3f} [{lo:+.3f}, {hi:+.3f}] | {check['verdict']} |"
+        name = f"{check['floor']['design']} − {check['floor']['baseline']}"
+        row = next((ln for ln in doc.splitlines() if ln.startswith(f"| {name} <")), "")
+        assert quoted in row, f"docs/design_protocol.md: {entry}'s floor {name}"

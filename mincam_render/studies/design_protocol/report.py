@@ -126,7 +126,13 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
         "",
     ]
     for d in result.doublings:
-        gain = "" if d.pays else ", no measurable gain"
+        gain = (
+            ""
+            if d.pays
+            else ", measurably worse"
+            if d.change.ci95[0] > 0
+            else ", no measurable change"
+        )
         lines.append(
             f"- {d.design}, {d.episodes[0]} -> {d.episodes[1]} episodes: "
             f"{_interval(d.change.mean, d.change.ci95, '+')} ({d.relative:+.1%}){gain}"
