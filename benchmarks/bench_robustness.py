@@ -10,7 +10,7 @@ batch, early stopping on the loss under ``robust_validation_draws`` fixed built
 cameras), same recipe otherwise. Then, for every run, the error increase under
 each perturbation alone (camera pose included) and all at once at 0, 0.5, 1, 1.5
 and 2 x the default ranges, ``--draws`` built cameras per level (the same draws
-for every run) (:func:`mincam_render.analysis.robustness.robustness_curves`);
+for every run) (:func:`mincam_render.studies.robustness.study.robustness_curves`);
 runs of one kind are pooled (intervals resample training seeds and draws), and
 tolerances for a <= 10 % increase are derived.
 
@@ -48,27 +48,27 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from provenance import machine, write_result  # noqa: E402
 
-from mincam_render.analysis.comparison import (  # noqa: E402
-    episode_record,
-    keep_run_masks,
-    render_episodes,
-    trivial_metrics,
-)
-from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol  # noqa: E402
-from mincam_render.analysis.robustness import (  # noqa: E402
-    MIX,
-    RobustnessConfig,
-    pool_curves,
-    pool_episode_metrics,
-    robustness_curves,
-)
-from mincam_render.analysis.robustness_report import write_robustness_report  # noqa: E402
 from mincam_render.core import strict_json
 from mincam_render.core.package_data import shipped_path  # noqa: E402
 from mincam_render.core.seeds import stream_seed  # noqa: E402
 from mincam_render.learn import train as tr  # noqa: E402
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20  # noqa: E402
 from mincam_render.optics.perturbation import PerturbationModel  # noqa: E402
+from mincam_render.studies.comparison.config import ComparisonConfig, Protocol  # noqa: E402
+from mincam_render.studies.comparison.study import (  # noqa: E402
+    episode_record,
+    keep_run_masks,
+    render_episodes,
+    trivial_metrics,
+)
+from mincam_render.studies.robustness.report import write_robustness_report  # noqa: E402
+from mincam_render.studies.robustness.study import (  # noqa: E402
+    MIX,
+    RobustnessConfig,
+    pool_curves,
+    pool_episode_metrics,
+    robustness_curves,
+)
 
 RESULTS = Path(__file__).parent / "results"
 PIXELS = 8

@@ -7,8 +7,8 @@ from typing import TYPE_CHECKING
 
 import click
 
-from mincam_render.analysis.privacy.config import AUDIT_DETECTORS, AUDIT_TEXELS, AttackConfig
-from mincam_render.analysis.robustness import RobustnessConfig
+from mincam_render.studies.privacy.config import AUDIT_DETECTORS, AUDIT_TEXELS, AttackConfig
+from mincam_render.studies.robustness.study import RobustnessConfig
 
 from .errors import InputError, user_error
 from .options import (
@@ -81,13 +81,13 @@ def report_sim2real_cmd(
       mincam-render report sim2real --surrogate patches --frames 300 --out runs/s2r
       mincam-render report sim2real runs/s2r/surrogate_input --out runs/s2r-again
     """
-    from mincam_render.analysis.sim2real import (
+    from mincam_render.core.config import ConfigError
+    from mincam_render.studies.sim2real import (
         Sim2RealError,
         analyze_sim2real,
         make_surrogate,
         write_sim2real_report,
     )
-    from mincam_render.core.config import ConfigError
 
     if (measurements is None) == (surrogate_family is None):
         raise InputError("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
@@ -159,13 +159,13 @@ def report_energy_cmd(
       mincam-render report energy --family workspace --spp 1024 --out runs/energy
       mincam-render report energy --studies benchmarks/results --out runs/energy
     """
-    from mincam_render.analysis.energy import (
+    from mincam_render.core.config import ConfigError
+    from mincam_render.studies.energy import (
         analyze_energy,
         headline,
         load_energy_config,
         write_energy_report,
     )
-    from mincam_render.core.config import ConfigError
 
     try:
         overrides = {"render": {"spp": spp}} if spp is not None else None
@@ -245,9 +245,9 @@ def report_robustness_cmd(
       mincam-render report robustness runs/ws8 runs/ws8-robust --data runs/ws/test \\
           --draws 20 --out runs/robustness
     """
-    from mincam_render.analysis.robustness import robustness_curves
-    from mincam_render.analysis.robustness_report import write_robustness_report
     from mincam_render.learn.train import open_run, restore_mincam
+    from mincam_render.studies.robustness.report import write_robustness_report
+    from mincam_render.studies.robustness.study import robustness_curves
 
     try:
         cfg = RobustnessConfig(**config)  # type: ignore[arg-type]
@@ -381,16 +381,16 @@ def report_privacy_cmd(
 
     import numpy as np
 
-    from mincam_render.analysis.privacy import (
+    from mincam_render.data.ray_cluster import RayError
+    from mincam_render.data.render_job import RenderError
+    from mincam_render.data.run_dispatch import TrainingError
+    from mincam_render.studies.privacy import (
         PrivacyConfig,
         analyze_privacy,
         default_comparison,
         headline,
         write_privacy_report,
     )
-    from mincam_render.analysis.run_dispatch import TrainingError
-    from mincam_render.data.ray_cluster import RayError
-    from mincam_render.data.render_job import RenderError
 
     try:
         other = -(-2 * train_frames // 3)

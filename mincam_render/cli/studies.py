@@ -1,7 +1,7 @@
 """``pipeline`` and ``study``: camera designs compared on independent episodes.
 
 The episode options fill
-:class:`~mincam_render.analysis.comparison_config.ComparisonConfig`, whose
+:class:`~mincam_render.studies.comparison.config.ComparisonConfig`, whose
 defaults they show.
 """
 
@@ -13,10 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mincam_render.analysis.comparison_config import ComparisonConfig as C
-from mincam_render.analysis.comparison_config import Protocol
 from mincam_render.core import strict_json
 from mincam_render.learn.train_config import HeadKind
+from mincam_render.studies.comparison.config import ComparisonConfig as C
+from mincam_render.studies.comparison.config import Protocol
 
 from .errors import user_error
 from .options import (
@@ -32,7 +32,7 @@ from .options import (
 )
 
 if TYPE_CHECKING:
-    from mincam_render.analysis.comparison_config import Design
+    from mincam_render.studies.comparison.config import Design
 
 #: Options of the commands that render independent episodes and compare designs;
 #: named like the ComparisonConfig fields they fill, except --steps (the training
@@ -156,13 +156,13 @@ def _compare(
     **episode: Any,
 ) -> dict[str, Any]:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
-    from mincam_render.analysis.comparison import run_comparison
-    from mincam_render.analysis.run_dispatch import TrainingError
     from mincam_render.core.config import ConfigError
     from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
+    from mincam_render.data.run_dispatch import TrainingError
     from mincam_render.learn.train_config import TrainConfig
     from mincam_render.render.mitsuba_scene import SceneError
+    from mincam_render.studies.comparison.study import run_comparison
 
     t0 = time.perf_counter()
     # a bad description fails here, on one line, before anything is printed or written
@@ -276,7 +276,7 @@ def pipeline_cmd(
       mincam-render pipeline --out runs/main
       mincam-render pipeline --family patches --pixels 4 --baseline-grid 2x2
     """
-    from mincam_render.analysis.comparison import Design
+    from mincam_render.studies.comparison.study import Design
 
     pixels = pixels or _family_detectors(episode)
     _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
@@ -343,8 +343,8 @@ def study_cmd(
       mincam-render study --family traffic --fps 30 --train-episodes 1 --pixels 1,2,4,8 \\
           --baseline-grids 2x4,4x7,8x14 --heads mlp,tcn --out runs/study-traffic
     """
-    from mincam_render.analysis.comparison import Design, study_table, summarise_study
     from mincam_render.learn.train import default_pixel_counts
+    from mincam_render.studies.comparison.study import Design, study_table, summarise_study
 
     pixels = pixels or default_pixel_counts(_family_detectors(episode))
     if reference_pixels not in pixels:

@@ -96,7 +96,7 @@ def test_headless_screenshot_is_not_blank(tmp_path):
 
 
 def test_fidelity_rows_tiny(variant, tmp_path):
-    from mincam_render.analysis.fidelity_bench import (
+    from mincam_render.studies.fidelity.study import (
         KNOBS,
         FidelityBenchConfig,
         bench_fidelity,
@@ -136,7 +136,7 @@ def test_fidelity_rows_tiny(variant, tmp_path):
 
 @pytest.fixture(scope="module")
 def energy_page(tmp_path_factory, variant):
-    from mincam_render.analysis.energy import (
+    from mincam_render.studies.energy import (
         analyze_energy,
         load_energy_config,
         write_energy_report,
@@ -174,8 +174,8 @@ def _interval(mean: float, half: float) -> dict:
 
 def _privacy_result() -> dict:
     """A privacy audit's result of two designs (the structure ``analyze_privacy`` writes)."""
-    from mincam_render.analysis.privacy import corner_verdicts, default_comparison
-    from mincam_render.analysis.privacy.config import AttackConfig, PrivacyConfig
+    from mincam_render.studies.privacy import corner_verdicts, default_comparison
+    from mincam_render.studies.privacy.config import AttackConfig, PrivacyConfig
 
     conv = {"decoder": {"converged": True}, "reid": {"converged": False}}
     image = {
@@ -213,7 +213,7 @@ def _privacy_result() -> dict:
 
 @pytest.fixture(scope="module")
 def privacy_page(tmp_path_factory):
-    from mincam_render.analysis.privacy import write_privacy_report
+    from mincam_render.studies.privacy import write_privacy_report
 
     rng = np.random.default_rng(0)
     examples = {

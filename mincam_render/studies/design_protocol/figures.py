@@ -1,6 +1,6 @@
 """Typed figures read from a comparison's result: a design's error, a paired difference.
 
-A comparison (:func:`~mincam_render.analysis.comparison.run_comparison`) writes
+A comparison (:func:`~mincam_render.studies.comparison.study.run_comparison`) writes
 its figures as JSON-ready dicts; the study reads what it reports into these
 frozen records once, so its tables and checks work on named fields.
 """

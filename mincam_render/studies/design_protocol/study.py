@@ -1,7 +1,7 @@
 """The design protocol: how to train masks that generalise, and what they must beat.
 
 Every section is a set of comparisons
-(:func:`~mincam_render.analysis.comparison.run_comparison`) on one shared set
+(:func:`~mincam_render.studies.comparison.study.run_comparison`) on one shared set
 of episodes: validation and test episodes are the same everywhere, training
 sets are the first ``n`` training episodes, so every figure of a section is
 measured on the same test episodes and pairs with the others.
@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.comparison import Design, run_comparison
-from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
+from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
+from mincam_render.studies.comparison.study import Design, run_comparison
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig
 from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 
@@ -310,7 +310,7 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
     """The ladder's designs on the most episodes, with the background known exactly (oracle).
 
     Every frame's converged background replaced by one fixed background
-    (:attr:`~mincam_render.analysis.comparison_config.ComparisonConfig.oracle_background`):
+    (:attr:`~mincam_render.studies.comparison.config.ComparisonConfig.oracle_background`):
     what remains of the error is the people's own signal, its render noise and
     the data, not the light changing around them.
     """

@@ -154,11 +154,11 @@ def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, Any
     measured) with frames' and backgrounds' samples scaled, the level's depth
     and seeds (per-window seeds leave the request's field open).
     """
-    from mincam_render.analysis.comparison import episode_requests
     from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
     from mincam_render.data.render_job import plan_render
     from mincam_render.render.differential import DifferenceSeeds
     from mincam_render.render.fidelity import Fidelity
+    from mincam_render.studies.comparison.study import episode_requests
 
     requests = episode_requests(cfg.comparison)
     if level.planned:
@@ -220,12 +220,12 @@ def level_figures(
 
     Runs go to ``out/<level>/runs`` (kept: a second call reads them back).
     """
-    from mincam_render.analysis.comparison import comparison_splits, task_comparison
     from mincam_render.analysis.mask_structure import view_and_label_map
-    from mincam_render.analysis.run_dispatch import task_splits, train_runs
     from mincam_render.core.labels import label_tasks
     from mincam_render.data.dataset import open_dataset
+    from mincam_render.data.run_dispatch import task_splits, train_runs
     from mincam_render.learn.train import TrainingData
+    from mincam_render.studies.comparison.study import comparison_splits, task_comparison
 
     comparison = cfg.comparison
     names = episode_names(cfg)
@@ -264,7 +264,7 @@ def level_figures(
 
 def episode_names(cfg: TaskFidelityConfig) -> list[str]:
     """The episodes of the check (``train-*``, ``val-*``, ``test-*``)."""
-    from mincam_render.analysis.comparison import episode_requests
+    from mincam_render.studies.comparison.study import episode_requests
 
     return list(episode_requests(cfg.comparison))
 

@@ -1,0 +1,1 @@
+"""A trained design under fabrication and detector perturbations: error, tolerance, spec."""
