@@ -26,8 +26,8 @@ from typing import Any
 
 from provenance import cpu_times, machine, write_result
 
-from mincam_render.data.run_dispatch import train_runs
 from mincam_render.learn.train_config import TrainConfig
+from mincam_render.studies.comparison.runs import train_runs
 from mincam_render.studies.comparison.study import (
     ComparisonConfig,
     Design,

@@ -9,10 +9,10 @@ from support import linear_task
 from mincam_render.analysis.mask_structure import view_and_label_map
 from mincam_render.core.labels import LabelKind, LabelSpec, label_tasks
 from mincam_render.core.seeds import stream_seed
-from mincam_render.data.run_dispatch import comparison_tasks, task_splits, train_runs
 from mincam_render.learn import train as tr
 from mincam_render.scenes.registry import load_family
 from mincam_render.studies.comparison.config import ComparisonConfig, Design, Protocol
+from mincam_render.studies.comparison.runs import comparison_tasks, task_splits, train_runs
 from mincam_render.studies.comparison.study import combined_cameras, task_comparison
 
 SIDE = LabelSpec(name="bright_left", kind=LabelKind.BINARY, median_filter_s=0.0)

@@ -16,14 +16,14 @@ from click.testing import CliRunner
 
 from mincam_render.cli.main import main
 from mincam_render.data import run_dispatch
-from mincam_render.data.run_dispatch import (
-    TrainingError,
-    check_executor,
+from mincam_render.data.run_dispatch import TrainingError, check_executor, run_files
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.studies.comparison.runs import (
     comparison_tasks,
-    run_files,
+    relocate_run,
+    train_design_run,
     train_runs,
 )
-from mincam_render.learn.train_config import TrainConfig
 from mincam_render.studies.comparison.study import (
     ComparisonConfig,
     Design,
@@ -116,10 +116,14 @@ def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_pr
     out, runs = sequential
     task = comparison_tasks(CFG)[0]  # the ablation: its head's run.json names its masks' run
     assert task.name == "mincam-2px-nosensor-seed0"
-    result, files, worker_runs = run_dispatch._ray_train(rendered_splits, task, {})
+    result, files, worker_runs = run_dispatch._ray_train(
+        train_design_run, rendered_splits, task, {}
+    )
     assert not Path(worker_runs).exists()  # the task's directory is gone with the task
     assert any(worker_runs.encode() in data for data in files.values())
-    written = run_dispatch._write_run(tmp_path / "runs", task, result, files, worker_runs)
+    written = run_dispatch._write_run(
+        tmp_path / "runs", task, result, files, worker_runs, relocate=relocate_run
+    )
     assert _figures({"d": [written]}) == _figures({"d": [runs["mincam-2px-nosensor"][0]]})
     run = tmp_path / "runs" / task.name
     assert written["run_dir"] == str(run / "head-with-sensor")
@@ -140,12 +144,11 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
     (unfinished / "metrics.json").unlink()  # killed after its last checkpoint
     dispatched = []
 
-    def pool(workers, tasks, splits, runs_dir, done):  # where the workers would start
+    def pool(workers, train, tasks, splits, runs_dir, done):  # where the workers would start
         dispatched.extend(t.name for t in tasks)
         for t in tasks:  # what a Ray task does with the run's files
-            done(t, run_dispatch._write_run(
-                runs_dir, t, *run_dispatch._ray_train(splits, t, run_files(runs_dir / t.name))
-            ))  # fmt: skip
+            returned = run_dispatch._ray_train(train, splits, t, run_files(runs_dir / t.name))
+            done(t, run_dispatch._write_run(runs_dir, t, *returned, relocate=relocate_run))
 
     monkeypatch.setattr(run_dispatch, "_on_pool", pool)
     again = _one_task(train_runs(CFG, rendered_splits, tmp_path, train_workers=2, progress=False))

@@ -64,7 +64,7 @@ from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
 from mincam_render.data.ray_cluster import ray_session
 from mincam_render.data.render_job import RenderRequest, package_versions, render_dataset
-from mincam_render.data.run_dispatch import check_executor, task_splits, train_runs
+from mincam_render.data.run_dispatch import check_executor
 from mincam_render.export.masks import export_masks
 from mincam_render.learn.train import TrainingData, metrics, run_masks
 from mincam_render.learn.train_config import ModelKind
@@ -72,6 +72,7 @@ from mincam_render.learn.train_config import ModelKind
 # Design is re-exported: callers build designs and comparisons from this module
 from mincam_render.studies.comparison.config import ComparisonConfig
 from mincam_render.studies.comparison.config import Design as Design
+from mincam_render.studies.comparison.runs import task_splits, train_runs
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
 SHARDS_PER_EPISODE = 4

@@ -223,8 +223,8 @@ def level_figures(
     from mincam_render.analysis.mask_structure import view_and_label_map
     from mincam_render.core.labels import label_tasks
     from mincam_render.data.dataset import open_dataset
-    from mincam_render.data.run_dispatch import task_splits, train_runs
     from mincam_render.learn.train import TrainingData
+    from mincam_render.studies.comparison.runs import task_splits, train_runs
     from mincam_render.studies.comparison.study import comparison_splits, task_comparison
 
     comparison = cfg.comparison
