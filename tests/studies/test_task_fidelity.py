@@ -10,7 +10,7 @@ import pytest
 
 from mincam_render.data import dataset as ds
 from mincam_render.render.differential import DifferenceSeeds
-from mincam_render.studies.design_protocol.figures import DesignFigure
+from mincam_render.studies.comparison.figures import DesignFigure
 from mincam_render.studies.task_fidelity import SampleLevel, TaskFidelityConfig, noise_figures
 from mincam_render.studies.task_fidelity.study import (
     LevelFigures,

@@ -1,11 +1,11 @@
 """The design protocol: per-task cameras, recipes by measurement, learning curves, references."""
 
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.design_protocol.config import (
     DesignProtocolConfig,
     RecipeVariant,
     default_recipes,
 )
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 from mincam_render.studies.design_protocol.report import write_report
 from mincam_render.studies.design_protocol.study import DesignProtocolResult, run
 

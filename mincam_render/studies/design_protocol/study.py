@@ -40,9 +40,9 @@ import numpy as np
 
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
 from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.comparison.study import Design, run_comparison
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 
 #: A comparison run for the study: ``(config, out_dir) -> its result``.
 Compare = Callable[[ComparisonConfig, Path], dict[str, Any]]

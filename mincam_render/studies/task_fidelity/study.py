@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.task_fidelity.config import SampleLevel, TaskFidelityConfig
 from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figures
 
