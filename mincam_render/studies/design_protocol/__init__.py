@@ -1,6 +1,5 @@
 """The design protocol: per-task cameras, recipes by measurement, learning curves, references."""
 
-from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.design_protocol.config import (
     DesignProtocolConfig,
     RecipeVariant,
@@ -10,10 +9,8 @@ from mincam_render.studies.design_protocol.report import write_report
 from mincam_render.studies.design_protocol.study import DesignProtocolResult, run
 
 __all__ = [
-    "DesignFigure",
     "DesignProtocolConfig",
     "DesignProtocolResult",
-    "Paired",
     "RecipeVariant",
     "default_recipes",
     "run",

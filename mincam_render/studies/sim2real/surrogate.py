@@ -289,7 +289,7 @@ def make_surrogate(
     """Write a SURROGATE-real recording of a family to ``out_dir`` (returned).
 
     The printed masks are trained-like smooth designs
-    (:func:`mincam_render.studies.fidelity.study.smooth_masks`); the family's camera is
+    (:func:`mincam_render.render.precision.smooth_masks`); the family's camera is
     the design. ``injected.json`` records every injected value and, per pixel,
     the gain and offset a fit of ``real = gain * sim + offset`` should find
     (exact when :attr:`SurrogatePerturbations.geometric` is False).
@@ -381,7 +381,7 @@ def _design(
     Returns:
         ``(camera, M[pixel, row, col])``: trained-like smooth masks in the printable range.
     """
-    from mincam_render.studies.fidelity.study import smooth_masks
+    from mincam_render.render.precision import smooth_masks
 
     camera = family.camera()
     if mask_resolution is not None:
