@@ -106,14 +106,15 @@ def run_level(cfg: ComparisonConfig, work: Path, lux: float, workers: int) -> di
         episodes_dir=work / "episodes",
         progress=False,
     )
-    with_, without = (res["designs"][d.name] for d in cfg.designs)
+    block = res.headline
+    with_, without = (block.designs[d.name] for d in cfg.designs)
     return {
         "lux": lux,
         "light_scale": cfg.light_scale,
         "with_sensor_model": _design_record(with_),
         "without_sensor_model": _design_record(without),
-        "trivial": res["trivial"]["error"],
-        "verdict": res["verdict"],
+        "trivial": block.trivial["error"],
+        "verdict": block.verdict,
         "seconds": time.perf_counter() - t0,
     }
 

@@ -115,16 +115,13 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(two_task_splits
     for t, by_design in runs.items():
         task = task_splits(two_task_splits, (t,))
         blocks[t] = task_comparison(cfg, by_design, task, view_and_label_map(task["train"]))
-    assert blocks["count"]["error_name"] == "count RMSE"
-    assert blocks["bright_left"]["error_name"] == "bright_left error rate"
-    assert set(blocks["count"]["labels"]) == {"count"}
+    assert blocks["count"].error_name == "count RMSE"
+    assert blocks["bright_left"].error_name == "bright_left error rate"
+    assert set(blocks["count"].labels) == {"count"}
     combined = combined_cameras(cfg, blocks)
-    assert combined["mincam-2px"]["pixels"] == 4  # two tasks, two freeform pixels each
-    assert combined["baseline-2x2"]["pixels"] == 4  # one sensor read by two heads
-    assert (
-        combined["mincam-2px"]["tasks"]["count"]
-        == blocks["count"]["designs"]["mincam-2px"]["error"]
-    )
+    assert combined["mincam-2px"].pixels == 4  # two tasks, two freeform pixels each
+    assert combined["baseline-2x2"].pixels == 4  # one sensor read by two heads
+    assert combined["mincam-2px"].tasks["count"] == blocks["count"].designs["mincam-2px"]["error"]
     # a joint camera learns both labels at once
     joint = train_runs(
         ComparisonConfig(designs=designs, seeds=1, train=recipe, protocol="joint"),

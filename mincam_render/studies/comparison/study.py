@@ -58,7 +58,6 @@ from mincam_render.analysis.statistics import (
     paired_statement,
     verdict,
 )
-from mincam_render.core import strict_json
 from mincam_render.core.labels import LabelKind, label_tasks
 from mincam_render.core.seeds import stream_seed
 from mincam_render.data.dataset import MANIFEST_NAME, open_dataset, sha256_file
@@ -72,6 +71,13 @@ from mincam_render.learn.train_config import ModelKind
 # Design is re-exported: callers build designs and comparisons from this module
 from mincam_render.studies.comparison.config import ComparisonConfig
 from mincam_render.studies.comparison.config import Design as Design
+from mincam_render.studies.comparison.result import (
+    CombinedCamera,
+    ComparisonResult,
+    ReductionFactor,
+    StudySummary,
+    TaskComparison,
+)
 from mincam_render.studies.comparison.runs import task_splits, train_runs
 
 #: Shards of every episode dataset (balanced on 1, 2 or 4 render workers).
@@ -401,8 +407,8 @@ def run_comparison(
     masks_dir: str | os.PathLike | None = None,
     episodes_dir: str | os.PathLike | None = None,
     progress: bool = True,
-) -> dict[str, Any]:
-    """Render, train, test and compare (module docstring); ``metrics.json`` contents.
+) -> ComparisonResult:
+    """Render, train, test and compare (module docstring); ``metrics.json`` is its JSON.
 
     Writes the episodes into ``episodes_dir`` (default ``out_dir/episodes/``; a
     shared directory lets comparisons at other light scales reuse one render),
@@ -445,7 +451,7 @@ def _run_comparison(
     masks_dir: str | os.PathLike | None,
     episodes_dir: str | os.PathLike | None,
     progress: bool,
-) -> dict[str, Any]:
+) -> ComparisonResult:
     from mincam_render.analysis.plots import plot_comparison
 
     out.mkdir(parents=True, exist_ok=True)
@@ -470,37 +476,37 @@ def _run_comparison(
         task: task_comparison(cfg, by_design, task_data[task], maps[task])
         for task, by_design in runs.items()
     }
-    headline = blocks[next(iter(blocks))]
-    result: dict[str, Any] = {
-        "task": family,
-        "protocol": cfg.protocol.value,
-        "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
-        "episodes": {k: episode_record(d) for k, d in data.items()},
-        **headline,
-        "labels": {label: lab for b in blocks.values() for label, lab in b["labels"].items()},
-        "tasks": blocks,
-        "combined": combined_cameras(cfg, blocks),
-        "element_names": {s.name: list(s.element_names) for s in train.label_specs},
-        "coverage": coverage,
-        "figure": str(out / "comparison.png"),
-        "versions": package_versions(),
-    }
-    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
-    plot_comparison(result, out / "comparison.png")
+    result = ComparisonResult(
+        family=family,
+        protocol=cfg.protocol,
+        config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
+        episodes={k: episode_record(d) for k, d in data.items()},
+        labels={label: lab for b in blocks.values() for label, lab in b.labels.items()},
+        tasks=blocks,
+        combined=combined_cameras(cfg, blocks),
+        element_names={s.name: tuple(s.element_names) for s in train.label_specs},
+        coverage=coverage,
+        figure=str(out / "comparison.png"),
+        versions=package_versions(),
+    )
+    result.write(out / "metrics.json")
+    plot_comparison(result.as_json(), out / "comparison.png")
     if masks_dir is not None:
-        result["masks"] = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family, maps)
+        masks = _keep_all_masks(cfg, runs, result, Path(masks_dir) / family, maps)
+        result = dataclasses.replace(result, masks=masks)
     run_dirs = [r["run_dir"] for designs in runs.values() for rs in designs.values() for r in rs]
-    result["not_of_this_comparison"] = others_in_folders(
+    others = others_in_folders(
         {
             "episodes": (episodes, set(data)),
             "runs": (out / "runs", {_entry_in(out / "runs", d) for d in run_dirs}),
             "masks": (
                 Path(masks_dir or out / "masks") / family,
-                {name.split("/")[0] for name in result.get("masks", {})},
+                {name.split("/")[0] for name in result.masks or {}},
             ),
         }
     )
-    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
+    result = dataclasses.replace(result, not_of_this_comparison=others)
+    result.write(out / "metrics.json")
     return result
 
 
@@ -509,7 +515,7 @@ def task_comparison(
     runs: Mapping[str, list[dict[str, Any]]],
     splits: Mapping[str, Any],
     view_map: tuple[np.ndarray, np.ndarray],
-) -> dict[str, Any]:
+) -> TaskComparison:
     """One task's figures: every design, the trivial predictor, verdicts, every label.
 
     Args:
@@ -521,8 +527,7 @@ def task_comparison(
             (:func:`~mincam_render.analysis.mask_structure.view_and_label_map`).
 
     Returns:
-        ``{"error_name", "designs", "trivial", "verdict", "versus_trivial",
-        "paired", "labels"}``.
+        The task's figures.
     """
     train, tests = splits["train"], splits["tests"]
     trivial = {k: trivial_metrics(train, d) for k, d in tests.items()}
@@ -531,37 +536,37 @@ def task_comparison(
     intervals = {name: bootstrap_interval(e, seed=cfg.seed) for name, e in errors.items()}
     trivial_iv = intervals.pop("trivial")
     names = [d.name for d in cfg.designs]
-    return {
-        "error_name": next(iter(trivial.values()))["error_name"],
-        "designs": {
+    return TaskComparison(
+        error_name=next(iter(trivial.values()))["error_name"],
+        designs={
             name: _design_summary(rs, intervals[name], errors[name], view_map)
             for name, rs in runs.items()
         },
-        "trivial": {
+        trivial={
             "error": trivial_iv.as_dict(),
             "episode_errors": errors["trivial"].as_dict(),
             "episodes": trivial,
         },
-        "verdict": (
+        verdict=(
             verdict(names[0], intervals[names[0]], names[1], intervals[names[1]])
             if len(names) == 2
             else None
         ),
-        "versus_trivial": {
+        versus_trivial={
             name: verdict(name, iv, "trivial", trivial_iv) for name, iv in intervals.items()
         },
-        "paired": paired_differences(errors, names[:2], cfg.seed),
-        "labels": label_intervals(
+        paired=paired_differences(errors, names[:2], cfg.seed),
+        labels=label_intervals(
             {name: [r["episodes"] for r in rs] for name, rs in runs.items()}
             | {"trivial": [trivial]},
             seed=cfg.seed,
         ),
-    }
+    )
 
 
 def combined_cameras(
-    cfg: ComparisonConfig, blocks: Mapping[str, Mapping[str, Any]]
-) -> dict[str, dict[str, Any]]:
+    cfg: ComparisonConfig, blocks: Mapping[str, TaskComparison]
+) -> dict[str, CombinedCamera]:
     """Each design as one camera for every task trained: its pixels and each task's figure.
 
     A minimalist camera for several tasks is the union of its tasks' freeform
@@ -570,18 +575,18 @@ def combined_cameras(
     """
     out = {}
     for d in cfg.designs:
-        first = blocks[next(iter(blocks))]["designs"][d.name]["model"]["pixels"]
-        out[d.name] = {
-            "pixels": first * len(blocks) if d.is_mincam else first,
-            "tasks": {t: b["designs"][d.name]["error"] for t, b in blocks.items()},
-        }
+        first = blocks[next(iter(blocks))].designs[d.name]["model"]["pixels"]
+        out[d.name] = CombinedCamera(
+            pixels=first * len(blocks) if d.is_mincam else first,
+            tasks={t: b.designs[d.name]["error"] for t, b in blocks.items()},
+        )
     return out
 
 
 def _keep_all_masks(
     cfg: ComparisonConfig,
     runs: Mapping[str, Mapping[str, list[dict[str, Any]]]],
-    result: Mapping[str, Any],
+    result: ComparisonResult,
     family_dir: Path,
     maps: Mapping[str, tuple[np.ndarray, np.ndarray]],
 ) -> dict[str, Any]:
@@ -592,13 +597,13 @@ def _keep_all_masks(
     """
     kept: dict[str, Any] = {}
     for task, by_design in runs.items():
-        block = result["tasks"][task]
+        block = result.tasks[task]
         for d in (d for d in cfg.designs if d.is_mincam):
             several = len(runs) > 1
             where = family_dir / d.name / task if several else family_dir / d.name
-            title = f"{result['task']} {task}" if several else result["task"]
+            title = f"{result.family} {task}" if several else result.family
             record = _keep_masks(
-                by_design[d.name], block["designs"][d.name], result["episodes"], where, title,
+                by_design[d.name], block.designs[d.name], result.episodes, where, title,
                 maps[task],
             )  # fmt: skip
             kept[f"{d.name}/{task}" if len(runs) > 1 else d.name] = record
@@ -816,12 +821,15 @@ def reference_verdicts(result: Mapping[str, Any], reference: str) -> list[str]:
     return lines
 
 
-def summarise_study(result: dict[str, Any], reference: str) -> dict[str, Any]:
-    """Add a study's reduction factor, per-configuration summary and reference verdicts."""
-    result["reduction_factor"] = reduction_factor(result, reference)
-    result["configurations"] = study_summary(result)
-    result["reference_verdicts"] = reference_verdicts(result, reference)
-    return result
+def summarise_study(result: ComparisonResult, reference: str) -> ComparisonResult:
+    """``result`` with a study's reduction factor, per-design summary and reference verdicts."""
+    figures = result.as_json()
+    study = StudySummary(
+        reduction_factor=ReductionFactor(**reduction_factor(figures, reference)),
+        configurations=study_summary(figures),
+        reference_verdicts=tuple(reference_verdicts(figures, reference)),
+    )
+    return dataclasses.replace(result, study=study)
 
 
 def _hidden(path: Path) -> bool:

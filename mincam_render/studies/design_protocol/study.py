@@ -41,11 +41,12 @@ import numpy as np
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
 from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
+from mincam_render.studies.comparison.result import ComparisonResult
 from mincam_render.studies.comparison.study import Design, run_comparison
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig
 
 #: A comparison run for the study: ``(config, out_dir) -> its result``.
-Compare = Callable[[ComparisonConfig, Path], dict[str, Any]]
+Compare = Callable[[ComparisonConfig, Path], ComparisonResult]
 
 
 @dataclass(frozen=True)
@@ -171,12 +172,6 @@ class DesignProtocolResult:
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
 
 
-def headline(result: Mapping[str, Any], task: str) -> Mapping[str, Any]:
-    """The block of ``task`` in a comparison's result (the joint block if it was joint)."""
-    tasks = result["tasks"]
-    return tasks[task] if task in tasks else next(iter(tasks.values()))
-
-
 def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ProtocolRow]:
     """Each label under per-task cameras and joint cameras (module docstring, section 1).
 
@@ -188,16 +183,16 @@ def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> li
         cfg.comparison(n, _minimalist(cfg.protocol_pixels), protocol=Protocol.PER_TASK),
         out / "protocol" / "per-task",
     )
-    tasks = len(per_task["tasks"])
+    tasks = len(per_task.tasks)
     joint_px = sorted({p for k in cfg.protocol_pixels for p in (k, k * tasks)})
     joint = compare(
         cfg.comparison(n, _minimalist(joint_px), protocol=Protocol.JOINT),
         out / "protocol" / "joint",
     )
     rows = []
-    for label, lab in per_task["labels"].items():
+    for label, lab in per_task.labels.items():
         figures = {f"per-task {d}": _mean_ci(c) for d, c in lab["configs"].items()}
-        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint["labels"][label]["configs"].items()}
+        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint.labels[label]["configs"].items()}
         rows.append(ProtocolRow(label=label, metric=lab["metric"], figures=figures))
     return rows
 
@@ -230,8 +225,8 @@ def recipe_table(
             cfg.comparison(cfg.recipe_episodes, designs, train=variant.apply(base_cfg)),
             out / "recipes" / variant.name,
         )
-        block = headline(result, cfg.task)
-        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        block = result.block(cfg.task)
+        figures = {d.name: block.figure(d.name) for d in designs}
         base = rows[0].designs if rows else figures
         rows.append(
             RecipeRow(
@@ -281,16 +276,14 @@ def learning_curves(
     points = []
     for n in cfg.ladder:
         result = compare(cfg.comparison(n, cfg.ladder_designs), out / "ladder" / f"episodes-{n}")
-        block = headline(result, cfg.task)
+        block = result.block(cfg.task)
         points.append(
             LadderPoint(
                 episodes=n,
                 frames=n * cfg.episodes.train_frames,
                 render_s=render_seconds(n),
-                designs={
-                    d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs
-                },
-                trivial=float(block["trivial"]["error"]["mean"]),
+                designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
+                trivial=block.trivial_error.mean,
             )
         )
     doublings = [
@@ -319,13 +312,13 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
         cfg.comparison(n, cfg.ladder_designs, oracle_background=True),
         out / "oracle" / f"episodes-{n}",
     )
-    block = headline(result, cfg.task)
+    block = result.block(cfg.task)
     return LadderPoint(
         episodes=n,
         frames=n * cfg.episodes.train_frames,
         render_s=0.0,
-        designs={d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs},
-        trivial=float(block["trivial"]["error"]["mean"]),
+        designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
+        trivial=block.trivial_error.mean,
     )
 
 
@@ -345,10 +338,10 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
     result = compare(
         _replace(cfg.comparison(n, designs), seeds=seeds * r), out / "restarts" / f"episodes-{n}"
     )
-    block = headline(result, cfg.task)
+    block = result.block(cfg.task)
     rows = []
     for d in designs:
-        every = DesignFigure.from_block(block, d.name)
+        every = block.figure(d.name)
         test, val = every.errors(), every.val()
         if val is None:
             raise ValueError(f"{d.name}: the runs kept no validation-episode errors")
@@ -398,8 +391,8 @@ def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> l
         result = compare(
             cfg.comparison(cfg.reference_episodes, tuple(designs)), out / "references" / f"{k}px"
         )
-        block = headline(result, cfg.task)
-        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        block = result.block(cfg.task)
+        figures = {d.name: block.figure(d.name) for d in designs}
         e2e = figures[designs[0].name]
         rows.append(
             ReferenceRow(
@@ -466,10 +459,10 @@ def run(
 
     error_names: dict[str, str] = {}
 
-    def compare(comparison: ComparisonConfig, where: Path) -> dict[str, Any]:
+    def compare(comparison: ComparisonConfig, where: Path) -> ComparisonResult:
         result = run_comparison(comparison, where, episodes_dir=episodes, masks_dir=None,
                                 train_workers=train_workers, progress=progress)  # fmt: skip
-        error_names.setdefault("task", headline(result, cfg.task)["error_name"])
+        error_names.setdefault("task", result.block(cfg.task).error_name)
         return result
 
     seconds = render_seconds or (lambda n: training_render_seconds(episodes, n))

@@ -376,11 +376,12 @@ def analyze_privacy(
         progress=progress,
     )
     data = render_episodes(cfg.comparison, out / "episodes", workers=workers, progress=False)
-    paths = {k: v["dataset"] for k, v in result["episodes"].items()}
+    paths = {k: v["dataset"] for k, v in result.episodes.items()}
     episodes = load_episodes(paths, out / "views", cfg, progress)
     trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     designs, examples = {}, {}
-    todo = tqdm(result["designs"].items(), desc="attacks", unit="design", disable=not progress)
+    block = result.headline
+    todo = tqdm(block.designs.items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
         references = {"trivial": trivial, "prior": prior}
         attack, ex = attack_design(d, data, episodes, cfg, name, references)
@@ -394,15 +395,13 @@ def analyze_privacy(
         examples[name] = ex["test-0"]
     frames = {k: len(episodes[k].views) for k in trivial}
     privacy = {
-        "task": result["task"],
-        "error_name": result["error_name"],
+        "task": result.family,
+        "error_name": block.error_name,
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         "roster": int(episodes["test-0"].present.shape[1]),
-        "episodes": result["episodes"],
+        "episodes": result.episodes,
         "designs": designs,
-        "trivial": _trivial_record(
-            trivial, frames, result["trivial"]["error"], cfg.comparison.seed
-        ),
+        "trivial": _trivial_record(trivial, frames, block.trivial["error"], cfg.comparison.seed),
         "prior": _prior_record(prior, trivial, frames, cfg.comparison.seed),
         "comparison": str(out / "metrics.json"),
     }

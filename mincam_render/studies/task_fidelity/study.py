@@ -248,18 +248,18 @@ def level_figures(
     if cfg.replicate_seeds:
         others = {d: rs[n:] for d, rs in runs[task].items()}
         rep = task_comparison(comparison, others, task_data, view_map)
-        replicate = {d.name: DesignFigure.from_block(rep, d.name) for d in comparison.designs}
+        replicate = {d.name: rep.figure(d.name) for d in comparison.designs}
     figures = LevelFigures(
         level=level.name,
         factor=level.factor,
         difference_seeds=level.difference_seeds.value,
         render_s_per_frame=render_seconds_per_frame([level.episodes / n for n in names]),
-        designs={d.name: DesignFigure.from_block(block, d.name) for d in comparison.designs},
-        trivial=float(block["trivial"]["error"]["mean"]),
+        designs={d.name: block.figure(d.name) for d in comparison.designs},
+        trivial=block.trivial_error.mean,
         noise=None,
         replicate=replicate,
     )
-    return figures, str(block["error_name"])
+    return figures, block.error_name
 
 
 def episode_names(cfg: TaskFidelityConfig) -> list[str]:
