@@ -13,7 +13,7 @@ from mincam_render.optics.perturbation import PerturbationModel
 from mincam_render.studies.comparison.config import ComparisonConfig
 from mincam_render.studies.fidelity.study import FidelityBenchConfig
 from mincam_render.studies.privacy.config import AttackConfig
-from mincam_render.studies.robustness.study import RobustnessConfig
+from mincam_render.studies.robustness.config import RobustnessConfig
 
 
 def test_exr_round_trip_is_exact(tmp_path, rng):

@@ -7,11 +7,10 @@ import re
 
 import numpy as np
 import pytest
-from support import linear_task
-from test_report import _chromium, needs_chromium
+from support import chromium, linear_task, needs_chromium
 
 from mincam_render.learn import train as tr
-from mincam_render.studies.robustness.report import write_robustness_report
+from mincam_render.studies.robustness.report import write_report
 from mincam_render.studies.robustness.study import (
     CURVES,
     MIX,
@@ -126,7 +125,7 @@ def _report(tmp_path):
         _synthetic_record("nominal", False, 0.2, 0),
         _synthetic_record("robust", True, 0.03, 1),
     ]
-    return write_robustness_report(designs, tmp_path / "rep", notes=["synthetic records"])
+    return write_report(designs, tmp_path / "rep", notes=["synthetic records"])
 
 
 def test_report_files_and_specs(tmp_path):
@@ -151,7 +150,7 @@ def test_report_files_and_specs(tmp_path):
 @needs_chromium
 def test_report_renders_in_a_headless_browser(tmp_path):
     path = _report(tmp_path)["html"]
-    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", path.as_uri())
+    proc = chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", path.as_uri())
     loaded = re.search(r'data-figures-loaded="(\d+)"', proc.stdout)
     assert loaded and int(loaded.group(1)) == 1, proc.stderr[-2000:]
     assert "Fabrication specs" in proc.stdout

@@ -1,6 +1,6 @@
 """The robustness report: designs' error under each perturbation, tolerances, fabrication specs.
 
-:func:`write_robustness_report` takes design records of
+:func:`write_report` takes design records of
 :mod:`mincam_render.studies.robustness.study` (one per run, or pooled over training
 seeds) and writes ``robustness.json``, ``robustness.png`` (error increase
 against magnitude, one panel per term and one for the mix) and
@@ -18,7 +18,7 @@ from typing import Any
 
 from mincam_render.analysis.report import Report, figure_png
 from mincam_render.core import strict_json
-from mincam_render.studies.robustness.study import CURVES, MIX
+from mincam_render.studies.robustness.config import CURVES, MIX
 
 #: Panel titles of the curves.
 TITLES = {
@@ -117,7 +117,7 @@ def _lead(d: Mapping[str, Any]) -> list[Any]:
     return [d["name"], kind, d["runs"], f"{d['nominal_error']:.4g}"]
 
 
-def write_robustness_report(
+def write_report(
     designs: Sequence[Mapping[str, Any]],
     out_dir: str | os.PathLike,
     *,

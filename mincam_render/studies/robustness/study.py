@@ -26,17 +26,17 @@ written as a fabrication spec (:func:`fabrication_spec`).
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from mincam_render.analysis.statistics import EpisodeErrors, Pooling, bootstrap_interval
-from mincam_render.core.checks import check_int, check_number
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.perturbation import TERM_FIELDS, PerturbationModel, PerturbationTerm
+from mincam_render.studies.robustness.config import CURVES, MIX, RobustnessConfig
 
 if TYPE_CHECKING:
     from mincam_render.learn.models import MincamCamera
@@ -44,50 +44,6 @@ if TYPE_CHECKING:
     from mincam_render.optics.perturbation import PerturbationDraw
 
 log = logging.getLogger(__name__)
-
-#: The curve of every term at once.
-MIX = "mix"
-#: Curves in order: every term alone, then the mix.
-CURVES = (*(t.value for t in PerturbationTerm), MIX)
-
-
-@dataclass(frozen=True, kw_only=True)
-class RobustnessConfig:
-    """What :func:`robustness_curves` measures.
-
-    Args:
-        perturbation: the default half-ranges (level 1).
-        levels: magnitudes as multiples of the defaults, increasing from 0.
-        draws: built cameras per level (Monte Carlo), >= 2.
-        seed: root seed of the draws.
-        allowed_increase: relative error increase a tolerance allows, (0, 10).
-    """
-
-    perturbation: PerturbationModel = field(default_factory=PerturbationModel)
-    levels: tuple[float, ...] = (0.0, 0.5, 1.0, 1.5, 2.0)
-    draws: int = 20
-    seed: int = 0
-    allowed_increase: float = 0.10
-
-    def __post_init__(self) -> None:
-        levels = tuple(float(v) for v in self.levels)
-        ok = len(levels) >= 2 and levels[0] == 0.0 and all(map(math.isfinite, levels))
-        if not ok or any(b <= a for a, b in zip(levels, levels[1:], strict=False)):
-            raise ValueError(
-                f"RobustnessConfig.levels = {self.levels!r}: allowed at least 2 finite "
-                "multiples of the defaults, increasing from 0"
-            )
-        object.__setattr__(self, "levels", levels)
-        check_int("RobustnessConfig.draws", self.draws, 2)
-        check_number(
-            "RobustnessConfig.allowed_increase",
-            self.allowed_increase,
-            0,
-            10,
-            lo_open=True,
-            hi_open=True,
-            numpy=True,
-        )
 
 
 def curve_model(base: PerturbationModel, curve: str) -> PerturbationModel:
@@ -129,7 +85,7 @@ def _draws(
 def robustness_curves(
     model: MincamCamera,
     tests: Mapping[str, TrainingData],
-    config: RobustnessConfig = RobustnessConfig(),
+    config: RobustnessConfig = RobustnessConfig(),  # noqa: B008 (frozen, so shared safely)
     *,
     name: str = "design",
     robust: bool = False,
@@ -310,3 +266,55 @@ def fabrication_spec(curve: str, tol: Mapping[str, Any]) -> str:
     if not tol["bounded"]:
         text += " (or looser: within the measured range the error never rose by the limit)"
     return text
+
+
+def run(
+    runs: Sequence[Path],
+    data_dirs: Sequence[Path],
+    config: RobustnessConfig,
+    *,
+    allow_unfinished: bool = False,
+) -> list[dict[str, Any]]:
+    """Every trained minimalist run under the perturbations: one record per run.
+
+    Args:
+        runs: run directories (``mincam-render train``, nominal or robust).
+        data_dirs: test datasets (each one's test split); empty: each run's own.
+        config: what is measured.
+        allow_unfinished: measure runs whose training did not finish (their
+            best state so far), named ``(unfinished)``.
+
+    Raises:
+        ValueError: a run is not a minimalist camera's, is unfinished, or has no
+            test dataset on disk while ``data_dirs`` is empty.
+    """
+    from mincam_render.learn.train import open_run, restore_mincam
+
+    designs = []
+    for run_dir in runs:
+        trained = open_run(run_dir, allow_unfinished=allow_unfinished)
+        tests = evaluation_data(trained.record, data_dirs)
+        use = "a robustness report (it perturbs masks and diodes)"
+        model = restore_mincam(trained, next(iter(tests.values())), use)
+        robust = trained.record["config"].get("perturbation") is not None
+        name = run_dir.name if trained.finished else f"{run_dir.name} (unfinished)"
+        designs.append(robustness_curves(model, tests, config, name=name, robust=robust))
+    return designs
+
+
+def evaluation_data(
+    record: Mapping[str, Any], data_dirs: Sequence[Path]
+) -> dict[str, TrainingData]:
+    """``{name: TrainingData}``: each of ``data_dirs``' test split, or the run dataset's."""
+    from mincam_render.data.dataset import open_dataset
+    from mincam_render.learn.training_data import TrainingData
+
+    if not data_dirs:
+        test = record["data"].get("test") or {}
+        if not test.get("dataset"):
+            raise ValueError(
+                "the run has no test dataset on disk (trained in memory or on episodes): "
+                "give --data DIRECTORY"
+            )
+        data_dirs = (Path(test["dataset"]),)
+    return {p.name: TrainingData.from_dataset(open_dataset(p), "test") for p in data_dirs}
