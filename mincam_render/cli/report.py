@@ -347,8 +347,6 @@ def report_privacy_cmd(
       mincam-render report privacy --out runs/privacy
       mincam-render report privacy --train-frames 60 --attack-steps 200 --out runs/privacy-tiny
     """
-    import dataclasses
-
     import numpy as np
 
     from mincam_render.data.ray_cluster import RayError
@@ -357,22 +355,14 @@ def report_privacy_cmd(
     from mincam_render.studies.privacy import (
         PrivacyConfig,
         analyze_privacy,
-        default_comparison,
         headline,
         write_privacy_report,
     )
 
     try:
-        other = -(-2 * train_frames // 3)
-        comparison = dataclasses.replace(
-            default_comparison(detectors, mask_res),
-            train_frames=train_frames,
-            val_frames=other,
-            test_frames=other,
-            seeds=task_seeds,
-        )
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
-        cfg = PrivacyConfig(comparison=comparison, attack=attack)
+        cfg = PrivacyConfig.sized(train_frames=train_frames, task_seeds=task_seeds,
+                                  detectors=detectors, texels=mask_res, attack=attack)  # fmt: skip
         privacy = analyze_privacy(
             cfg,
             out,

@@ -154,3 +154,33 @@ class PrivacyConfig:
 
     comparison: ComparisonConfig = field(default_factory=default_comparison)
     attack: AttackConfig = field(default_factory=AttackConfig)
+
+    @classmethod
+    def sized(
+        cls,
+        *,
+        train_frames: int,
+        task_seeds: int,
+        detectors: int = AUDIT_DETECTORS[0],
+        texels: int = AUDIT_TEXELS[0],
+        attack: AttackConfig | None = None,
+    ) -> PrivacyConfig:
+        """The default audit with ``train_frames`` per training episode and ``task_seeds``.
+
+        Validation and test episodes are 2/3 of a training episode (rounded up).
+
+        Raises:
+            ValueError: sizes outside :func:`default_comparison`'s or
+                :class:`ComparisonConfig`'s ranges.
+        """
+        import dataclasses
+
+        other = -(-2 * train_frames // 3)
+        comparison = dataclasses.replace(
+            default_comparison(detectors, texels),
+            train_frames=train_frames,
+            val_frames=other,
+            test_frames=other,
+            seeds=task_seeds,
+        )
+        return cls(comparison=comparison, attack=attack or AttackConfig())
