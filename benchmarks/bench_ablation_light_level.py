@@ -9,7 +9,7 @@ multiplies every emitter's radiance by a factor (transport is linear in it,
 :meth:`TrainingData.with_light_scaled`), so the levels differ only in how much
 light reaches the detectors against their fixed noise, gain and full scale.
 
-At each level a study (:func:`mincam_render.analysis.comparison.run_comparison`)
+At each level a study (:func:`mincam_render.studies.comparison.study.run_comparison`)
 trains ``mincam-4px`` (with the model) and ``mincam-4px-nosensor`` (masks
 without it, head retrained with it) with ``--seeds`` training seeds, tests both
 with the model on independent test episodes, and reports the mean and the 95 %
@@ -47,8 +47,6 @@ from pathlib import Path
 import numpy as np
 from provenance import machine
 
-from mincam_render.analysis.comparison import Design, run_comparison
-from mincam_render.analysis.comparison_config import ComparisonConfig
 from mincam_render.core import strict_json
 from mincam_render.core.photometry import (
     WHITE_LIGHT_EFFICACY_LM_PER_W,
@@ -58,6 +56,8 @@ from mincam_render.core.photometry import (
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20, TrainConfig
 from mincam_render.scenes import load_family
+from mincam_render.studies.comparison.config import ComparisonConfig
+from mincam_render.studies.comparison.study import Design, run_comparison
 
 #: The paper's single point (supplement A), count RMSE of 4 freeform pixels.
 PAPER = {"with_sensor_model": 0.93, "without_sensor_model": 2.28, "light_level": "not stated"}
@@ -106,14 +106,15 @@ def run_level(cfg: ComparisonConfig, work: Path, lux: float, workers: int) -> di
         episodes_dir=work / "episodes",
         progress=False,
     )
-    with_, without = (res["designs"][d.name] for d in cfg.designs)
+    block = res.headline
+    with_, without = (block.designs[d.name] for d in cfg.designs)
     return {
         "lux": lux,
         "light_scale": cfg.light_scale,
         "with_sensor_model": _design_record(with_),
         "without_sensor_model": _design_record(without),
-        "trivial": res["trivial"]["error"],
-        "verdict": res["verdict"],
+        "trivial": block.trivial["error"],
+        "verdict": block.verdict,
         "seconds": time.perf_counter() - t0,
     }
 

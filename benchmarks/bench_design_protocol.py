@@ -36,8 +36,8 @@ from provenance import machine, write_result
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mincam_render.analysis.comparison_config import ComparisonConfig, Design  # noqa: E402
 from mincam_render.learn.train_config import TrainConfig  # noqa: E402
+from mincam_render.studies.comparison.config import ComparisonConfig, Design  # noqa: E402
 from mincam_render.studies.design_protocol import (  # noqa: E402
     DesignProtocolConfig,
     Floor,

@@ -39,9 +39,9 @@ DEPTHS = (3, 6, 12, 24)
 
 def depth_check(family: str, config) -> dict:
     """Irradiance of one light alone (and noon daylight) at several depths, vs the deepest."""
-    from mincam_render.analysis.energy.panel import day_family, panel_pose
     from mincam_render.render.irradiance import measure_irradiance
     from mincam_render.render.mitsuba_scene import irradiance_meter
+    from mincam_render.studies.energy.panel import day_family, panel_pose
 
     rows = []
     for depth in DEPTHS:
@@ -80,9 +80,9 @@ def depth_check(family: str, config) -> dict:
 def main() -> None:
     import logging
 
-    from mincam_render.analysis.energy import analyze_energy, headline, load_energy_config
-    from mincam_render.analysis.energy.figures import summary_figure
     from mincam_render.analysis.report import figure_png
+    from mincam_render.studies.energy import analyze_energy, headline, load_energy_config
+    from mincam_render.studies.energy.figures import summary_figure
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -16,13 +16,13 @@ from __future__ import annotations
 import argparse
 import logging
 
-from mincam_render.analysis.fidelity_bench import (
+from mincam_render.scenes import FAMILY_NAMES
+from mincam_render.studies.fidelity.study import (
     FidelityBenchConfig,
     bench_fidelity,
     pareto_table,
     write_fidelity_report,
 )
-from mincam_render.scenes import FAMILY_NAMES
 
 
 def main() -> None:

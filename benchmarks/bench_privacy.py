@@ -61,7 +61,7 @@ def machine() -> dict:
 
 def table(privacy: dict) -> str:
     """Markdown: every design's task error and attack success, the trivial row, the verdicts."""
-    from mincam_render.analysis.privacy.report import (
+    from mincam_render.studies.privacy.report import (
         DESIGN_COLUMNS,
         PAIRED_HEADER,
         decoder_rows,
@@ -92,7 +92,7 @@ def table(privacy: dict) -> str:
 
 def rederive_verdicts(path: Path) -> None:
     """Derive the corner verdicts again from a kept ``privacy.json``; rewrite it and its table."""
-    from mincam_render.analysis.privacy import corner_verdicts
+    from mincam_render.studies.privacy import corner_verdicts
 
     record = json.loads(path.read_text())
     record["corner"] = corner_verdicts(record)
@@ -115,7 +115,7 @@ def main() -> None:
 
     import numpy as np
 
-    from mincam_render.analysis.privacy import PrivacyConfig, analyze_privacy, write_privacy_report
+    from mincam_render.studies.privacy import PrivacyConfig, analyze_privacy, write_privacy_report
 
     t0 = time.perf_counter()
     privacy = analyze_privacy(PrivacyConfig(), args.work, workers=args.workers, progress=True)

@@ -26,14 +26,14 @@ from typing import Any
 
 from provenance import cpu_times, machine, write_result
 
-from mincam_render.analysis.comparison import (
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.studies.comparison.runs import train_runs
+from mincam_render.studies.comparison.study import (
     ComparisonConfig,
     Design,
     comparison_splits,
     render_episodes,
 )
-from mincam_render.analysis.run_dispatch import train_runs
-from mincam_render.learn.train_config import TrainConfig
 
 QUICK = {"spp": 4, "max_depth": 0, "shared_render": False, "differential": False}
 #: What must not depend on where a run trained.

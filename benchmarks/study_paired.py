@@ -25,12 +25,12 @@ from typing import Any
 
 from bench_patches_paper import machine
 
-from mincam_render.analysis.comparison import (
+from mincam_render.core import strict_json
+from mincam_render.studies.comparison.study import (
     episode_errors,
     paired_differences,
     reference_verdicts,
 )
-from mincam_render.core import strict_json
 
 
 def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:

@@ -34,7 +34,7 @@ def main() -> None:
         family, _, frames = item.partition(":")
         requests[item] = RenderRequest(family=family, num_frames=int(frames))
     if args.main_job:
-        from mincam_render.analysis.comparison import ComparisonConfig, episode_requests
+        from mincam_render.studies.comparison.study import ComparisonConfig, episode_requests
 
         for name, request in episode_requests(ComparisonConfig()).items():
             key = f"main job {request.family}:{request.num_frames}"

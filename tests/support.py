@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.learn import train as tr
@@ -99,4 +100,36 @@ def temporal_task(
         fps=30.0,
         history=history,
         source={"family": "synthetic-temporal"},
+    )
+
+
+#: Debian's Chromium, for the reports' headless-browser checks.
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+needs_chromium = pytest.mark.skipif(
+    not CHROMIUM.is_file(),
+    reason="Debian's Chromium is not installed at /usr/bin/chromium "
+    "(apt-get install -y chromium) : the headless-browser check cannot run",
+)
+
+
+def chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    """Run Debian's headless Chromium with ``args`` and a fresh profile in ``tmp_path``."""
+    profile = tmp_path / "chromium-profile"
+    profile.mkdir(exist_ok=True)
+    return subprocess.run(
+        [str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
     )

@@ -78,7 +78,7 @@ def _series_name(design: str) -> str:
 def plot_comparison(result: dict, path: str | os.PathLike) -> Path:
     """Save a PNG: the task's headline against pixel count, and every label with its interval.
 
-    ``result`` is :func:`mincam_render.analysis.comparison.run_comparison`'s
+    ``result`` is :func:`mincam_render.studies.comparison.study.run_comparison`'s
     output. Top: one point per design (mean over seeds, bootstrap interval as
     error bar, each seed as a faint dot), designs of one kind joined by a line
     (minimalist cameras, their no-sensor-model ablation, baselines, each head),

@@ -1,7 +1,7 @@
 """``mincam-render bench``: benchmarks of measured error against run time.
 
 The options of ``bench fidelity`` fill
-:class:`~mincam_render.analysis.fidelity_bench.FidelityBenchConfig`: each
+:class:`~mincam_render.studies.fidelity.study.FidelityBenchConfig`: each
 option's parameter name is the field's name and its default the field's default
 (``--no-auto`` is ``include_auto=False``).
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 import click
 
-from mincam_render.analysis.fidelity_bench import FidelityBenchConfig
+from mincam_render.studies.fidelity.study import FidelityBenchConfig
 
 from .errors import user_error
 from .options import field_default, out_option
@@ -73,12 +73,12 @@ def bench_fidelity_cmd(families: tuple[str, ...], out: Path, no_auto: bool, **fi
     Example:
       mincam-render bench fidelity workspace --out runs/bench-fidelity
     """
-    from mincam_render.analysis.fidelity_bench import (
+    from mincam_render.core.config import ConfigError
+    from mincam_render.studies.fidelity.study import (
         bench_fidelity,
         pareto_table,
         write_fidelity_report,
     )
-    from mincam_render.core.config import ConfigError
 
     try:
         cfg = FidelityBenchConfig(include_auto=not no_auto, **fields)

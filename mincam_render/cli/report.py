@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import click
 
-from mincam_render.analysis.privacy.config import AUDIT_DETECTORS, AUDIT_TEXELS, AttackConfig
-from mincam_render.analysis.robustness import RobustnessConfig
+from mincam_render.studies.privacy.config import AUDIT_DETECTORS, AUDIT_TEXELS, AttackConfig
+from mincam_render.studies.robustness.config import RobustnessConfig
 
 from .errors import InputError, user_error
 from .options import (
@@ -19,9 +18,6 @@ from .options import (
     float_list,
     out_option,
 )
-
-if TYPE_CHECKING:
-    from mincam_render.learn.training_data import TrainingData
 
 
 @click.group("report")
@@ -81,13 +77,13 @@ def report_sim2real_cmd(
       mincam-render report sim2real --surrogate patches --frames 300 --out runs/s2r
       mincam-render report sim2real runs/s2r/surrogate_input --out runs/s2r-again
     """
-    from mincam_render.analysis.sim2real import (
+    from mincam_render.core.config import ConfigError
+    from mincam_render.studies.sim2real import (
         Sim2RealError,
         analyze_sim2real,
         make_surrogate,
         write_sim2real_report,
     )
-    from mincam_render.core.config import ConfigError
 
     if (measurements is None) == (surrogate_family is None):
         raise InputError("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
@@ -159,13 +155,13 @@ def report_energy_cmd(
       mincam-render report energy --family workspace --spp 1024 --out runs/energy
       mincam-render report energy --studies benchmarks/results --out runs/energy
     """
-    from mincam_render.analysis.energy import (
+    from mincam_render.core.config import ConfigError
+    from mincam_render.studies.energy import (
         analyze_energy,
         headline,
         load_energy_config,
         write_energy_report,
     )
-    from mincam_render.core.config import ConfigError
 
     try:
         overrides = {"render": {"spp": spp}} if spp is not None else None
@@ -245,22 +241,12 @@ def report_robustness_cmd(
       mincam-render report robustness runs/ws8 runs/ws8-robust --data runs/ws/test \\
           --draws 20 --out runs/robustness
     """
-    from mincam_render.analysis.robustness import robustness_curves
-    from mincam_render.analysis.robustness_report import write_robustness_report
-    from mincam_render.learn.train import open_run, restore_mincam
+    from mincam_render.studies.robustness import run, write_report
 
     try:
         cfg = RobustnessConfig(**config)  # type: ignore[arg-type]
-        designs = []
-        for run_dir in runs:
-            run = open_run(run_dir, allow_unfinished=allow_unfinished)
-            tests = _test_data(run.record, data_dirs)
-            use = "a robustness report (it perturbs masks and diodes)"
-            model = restore_mincam(run, next(iter(tests.values())), use)
-            robust = run.record["config"].get("perturbation") is not None
-            name = run_dir.name if run.finished else f"{run_dir.name} (unfinished)"
-            designs.append(robustness_curves(model, tests, cfg, name=name, robust=robust))
-        paths = write_robustness_report(designs, out)
+        designs = run(runs, data_dirs, cfg, allow_unfinished=allow_unfinished)
+        paths = write_report(designs, out)
     except (ValueError, KeyError, OSError) as err:
         raise user_error(err) from None
     for d in designs:
@@ -271,22 +257,6 @@ def report_robustness_cmd(
             f"{'>= ' if not mix['bounded'] else ''}{mix['factor']:.2g}x the default ranges"
         )
     click.echo(f"wrote {paths['html']}, {paths['png'].name}, {paths['json'].name}")
-
-
-def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData]:
-    """``{name: TrainingData}``: the test split of each ``--data``, or of the run's dataset."""
-    from mincam_render.data.dataset import open_dataset
-    from mincam_render.learn.train import TrainingData
-
-    if not data_dirs:
-        test = run["data"].get("test") or {}
-        if not test.get("dataset"):
-            raise InputError(
-                "the run has no test dataset on disk (trained in memory or on episodes): "
-                "give --data DIRECTORY"
-            )
-        data_dirs = (Path(test["dataset"]),)
-    return {p.name: TrainingData.from_dataset(open_dataset(p), "test") for p in data_dirs}
 
 
 @report_group.command("privacy")
@@ -377,32 +347,22 @@ def report_privacy_cmd(
       mincam-render report privacy --out runs/privacy
       mincam-render report privacy --train-frames 60 --attack-steps 200 --out runs/privacy-tiny
     """
-    import dataclasses
-
     import numpy as np
 
-    from mincam_render.analysis.privacy import (
+    from mincam_render.data.ray_cluster import RayError
+    from mincam_render.data.render_job import RenderError
+    from mincam_render.data.run_dispatch import TrainingError
+    from mincam_render.studies.privacy import (
         PrivacyConfig,
         analyze_privacy,
-        default_comparison,
         headline,
         write_privacy_report,
     )
-    from mincam_render.analysis.run_dispatch import TrainingError
-    from mincam_render.data.ray_cluster import RayError
-    from mincam_render.data.render_job import RenderError
 
     try:
-        other = -(-2 * train_frames // 3)
-        comparison = dataclasses.replace(
-            default_comparison(detectors, mask_res),
-            train_frames=train_frames,
-            val_frames=other,
-            test_frames=other,
-            seeds=task_seeds,
-        )
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
-        cfg = PrivacyConfig(comparison=comparison, attack=attack)
+        cfg = PrivacyConfig.sized(train_frames=train_frames, task_seeds=task_seeds,
+                                  detectors=detectors, texels=mask_res, attack=attack)  # fmt: skip
         privacy = analyze_privacy(
             cfg,
             out,

@@ -1,7 +1,7 @@
 """``pipeline`` and ``study``: camera designs compared on independent episodes.
 
 The episode options fill
-:class:`~mincam_render.analysis.comparison_config.ComparisonConfig`, whose
+:class:`~mincam_render.studies.comparison.config.ComparisonConfig`, whose
 defaults they show.
 """
 
@@ -13,10 +13,9 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from mincam_render.analysis.comparison_config import ComparisonConfig as C
-from mincam_render.analysis.comparison_config import Protocol
-from mincam_render.core import strict_json
 from mincam_render.learn.train_config import HeadKind
+from mincam_render.studies.comparison.config import ComparisonConfig as C
+from mincam_render.studies.comparison.config import Protocol
 
 from .errors import user_error
 from .options import (
@@ -32,7 +31,8 @@ from .options import (
 )
 
 if TYPE_CHECKING:
-    from mincam_render.analysis.comparison_config import Design
+    from mincam_render.studies.comparison.config import Design
+    from mincam_render.studies.comparison.result import ComparisonResult, TaskComparison
 
 #: Options of the commands that render independent episodes and compare designs;
 #: named like the ComparisonConfig fields they fill, except --steps (the training
@@ -154,15 +154,15 @@ def _compare(
     overrides: dict[str, Any],
     detectors: int | None,
     **episode: Any,
-) -> dict[str, Any]:
+) -> ComparisonResult:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
-    from mincam_render.analysis.comparison import run_comparison
-    from mincam_render.analysis.run_dispatch import TrainingError
     from mincam_render.core.config import ConfigError
     from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
+    from mincam_render.data.run_dispatch import TrainingError
     from mincam_render.learn.train_config import TrainConfig
     from mincam_render.render.mitsuba_scene import SceneError
+    from mincam_render.studies.comparison.study import run_comparison
 
     t0 = time.perf_counter()
     # a bad description fails here, on one line, before anything is printed or written
@@ -196,46 +196,45 @@ def _compare(
         raise user_error(err) from None
     _echo_comparison(result, cfg.seeds)
     click.echo(
-        f"  {time.perf_counter() - t0:.0f} s; figure {result['figure']}; masks in "
-        f"{out / 'masks' / result['task']}/; metrics {out / 'metrics.json'}"
+        f"  {time.perf_counter() - t0:.0f} s; figure {result.figure}; masks in "
+        f"{out / 'masks' / result.family}/; metrics {out / 'metrics.json'}"
     )
     return result
 
 
-def _echo_comparison(result: dict[str, Any], seeds: int) -> None:
+def _echo_comparison(result: ComparisonResult, seeds: int) -> None:
     """Per task: each design's test error [95 % CI], the trivial predictor's, verdicts."""
-    tasks = result["tasks"]
-    click.echo(f"[2/2] test error, mean over {seeds} seeds [95 % CI] ({result['protocol']})")
+    tasks = result.tasks
+    click.echo(f"[2/2] test error, mean over {seeds} seeds [95 % CI] ({result.protocol.value})")
     for task, block in tasks.items():
         if len(tasks) > 1:
             click.echo(f"  task {task}:")
         _echo_task(block)
     if len(tasks) > 1:
-        for name, c in result["combined"].items():
-            click.echo(f"  {name} for every task: {c['pixels']} pixels")
-    if n := len(result["coverage"]["warnings"]):
+        for name, c in result.combined.items():
+            click.echo(f"  {name} for every task: {c.pixels} pixels")
+    if n := len(result.coverage["warnings"]):
         # each was logged before training; the summary only points at them
         click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")
 
 
-def _echo_task(result: dict[str, Any]) -> None:
+def _echo_task(block: TaskComparison) -> None:
     """One task's designs, trivial predictor, verdict and paired differences."""
-    click.echo(f"  {result['error_name']}:")
-    for name, d in result["designs"].items():
-        e = d["error"]
-        state = d["state"]
+    click.echo(f"  {block.error_name}:")
+    for name in block.designs:
+        f = block.figure(name)
         click.echo(
-            f"  {name:18s} {e['mean']:.3f} [{e['ci95'][0]:.3f}, {e['ci95'][1]:.3f}]  "
-            f"({state}; {sum(d['train_wall_time_s']):.0f} s training)"
+            f"  {name:18s} {f.error:.3f} [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}]  "
+            f"({f.state}; {block.train_seconds(name):.0f} s training)"
         )
-    t = result["trivial"]["error"]
-    click.echo(f"  {'trivial':18s} {t['mean']:.3f} [{t['ci95'][0]:.3f}, {t['ci95'][1]:.3f}]")
-    if result["verdict"]:
-        click.echo(f"  verdict: {result['verdict']}")
-    for name, against in result["versus_trivial"].items():
+    t = block.trivial_error
+    click.echo(f"  {'trivial':18s} {t.mean:.3f} [{t.low:.3f}, {t.high:.3f}]")
+    if block.verdict:
+        click.echo(f"  verdict: {block.verdict}")
+    for name, against in block.versus_trivial.items():
         click.echo(f"  {name} against the trivial predictor: {against}")
-    for paired in result["paired"].values():
-        click.echo(f"  {paired['statement']}")
+    for statement in block.paired_statements:
+        click.echo(f"  {statement}")
 
 
 @click.command("pipeline")
@@ -276,7 +275,7 @@ def pipeline_cmd(
       mincam-render pipeline --out runs/main
       mincam-render pipeline --family patches --pixels 4 --baseline-grid 2x2
     """
-    from mincam_render.analysis.comparison import Design
+    from mincam_render.studies.comparison.study import Design
 
     pixels = pixels or _family_detectors(episode)
     _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
@@ -343,8 +342,8 @@ def study_cmd(
       mincam-render study --family traffic --fps 30 --train-episodes 1 --pixels 1,2,4,8 \\
           --baseline-grids 2x4,4x7,8x14 --heads mlp,tcn --out runs/study-traffic
     """
-    from mincam_render.analysis.comparison import Design, study_table, summarise_study
     from mincam_render.learn.train import default_pixel_counts
+    from mincam_render.studies.comparison.study import Design, study_table, summarise_study
 
     pixels = pixels or default_pixel_counts(_family_detectors(episode))
     if reference_pixels not in pixels:
@@ -359,6 +358,7 @@ def study_cmd(
         designs += [Design(grid=g, head=head) for g in baseline_grids]
     reference = Design(pixels=reference_pixels, head=heads[0]).name
     result = summarise_study(_compare(out, tuple(designs), **episode), reference)
-    (out / "metrics.json").write_text(strict_json.dumps(result) + "\n")
-    (out / "study.md").write_text(study_table(result) + "\n")
-    click.echo(study_table(result))
+    result.write(out / "metrics.json")
+    table = study_table(result.as_json())
+    (out / "study.md").write_text(table + "\n")
+    click.echo(table)

@@ -194,34 +194,6 @@ training_options = apply_options(
 )
 
 
-def _splits(
-    dataset: Path | None, family: str | None, frames: int, spp: int, seed: int
-) -> tuple[TrainingData, ...]:
-    """(train, val, test) TrainingData from a dataset directory or an in-memory render."""
-    from mincam_render.learn.train import TrainingData
-
-    if dataset is not None:
-        from mincam_render.data.dataset import open_dataset
-
-        ds = open_dataset(dataset)
-        sizes = {name: stop - start for name, (start, stop) in ds.splits.items()}
-        empty = [name for name in ("train", "val") if sizes.get(name, 0) == 0]
-        if empty:
-            raise InputError(
-                f"{dataset} has no {' and no '.join(empty)} frames (split sizes {sizes}): "
-                "training needs both; render it with e.g. --splits 0.7,0.1,0.2"
-            )
-        return tuple(TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
-    if family is None:
-        raise InputError("give a DATASET directory (mincam-render render) or --family")
-    from mincam_render.scenes import load_family
-
-    fam = load_family(family, seed=seed, num_frames=frames)
-    log.info("rendering %d frames of %s in memory (%d spp)", frames, fam.name, spp)
-    data = TrainingData.render(fam, range(frames), spp=spp, seed=seed, progress=True)
-    return data.split((0.7, 0.1, 0.2))
-
-
 @click.command("train")
 @training_options
 @out_option(
@@ -293,12 +265,13 @@ def train_cmd(
           --robust --mask-shift-mm 0.5 --out runs/patches4-robust
     """
     from mincam_render.learn.train import train_run
+    from mincam_render.learn.training_data import training_splits
 
     try:
         if robust and baseline is not None:
             raise InputError("--robust perturbs masks and diodes: not with --baseline")
         config = _recipe_with_perturbation(recipe, robust)
-        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        train, val, test = training_splits(dataset, family, frames, spp, config.seed)
         metrics = train_run(
             train,
             val,
@@ -406,10 +379,11 @@ def sweep_cmd(
           --baselines 2x2,8x8 --out runs/sweep_patches
     """
     from mincam_render.learn.train import sweep, sweep_table
+    from mincam_render.learn.training_data import training_splits
 
     try:
         config = TrainConfig(**recipe)
-        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        train, val, test = training_splits(dataset, family, frames, spp, config.seed)
         rows = sweep(
             train,
             val,
@@ -469,12 +443,13 @@ def prune_cmd(
         plot_sweep,
         restore_mincam,
     )
+    from mincam_render.learn.training_data import training_splits
 
     try:
         config = TrainConfig(**recipe)
         run = open_run(run_dir, allow_unfinished=allow_unfinished)
         run.require(ModelKind.MINCAM, "prune")  # before the data are read
-        train, val, test = _splits(dataset, family, frames, spp, config.seed)
+        train, val, test = training_splits(dataset, family, frames, spp, config.seed)
         model = restore_mincam(run, train, "prune")
         records = greedy_prune(model, train, val, test, config, progress=True)
     except _TRAIN_ERRORS as err:

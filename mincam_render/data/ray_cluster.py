@@ -1,7 +1,7 @@
 """Ray: a session on a cluster (or one started here), this package shipped, results collected.
 
 Rendering (:mod:`mincam_render.data.render_job.executors`) and a comparison's
-training runs (:mod:`mincam_render.analysis.run_dispatch`) both run as Ray tasks
+training runs (:mod:`mincam_render.data.run_dispatch`) both run as Ray tasks
 through these pieces: :func:`ray_session` connects (``"local"`` starts a cluster
 in this process's machine) and ships the package (:func:`ray_runtime_env`), and
 :func:`collect` hands each task's result to the caller as it arrives, naming a

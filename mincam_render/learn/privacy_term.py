@@ -18,7 +18,7 @@ The adversary's target is the scene as the first detector sees it with an open
 mask: its transport box-summed to ``grid x grid`` pixels and divided by the
 frame's mean (the layout of light, not the overall brightness, which any light
 meter reveals). It is a proxy of the privacy audit's attacker
-(:mod:`mincam_render.analysis.privacy`), which reconstructs a rendered
+(:mod:`mincam_render.studies.privacy`), which reconstructs a rendered
 perspective view instead; the audit measures whether the proxy helps.
 """
 

@@ -4,7 +4,7 @@ A run directory (:func:`~mincam_render.learn.runs.train_run`) holds ``run.json``
 (what was trained, on what data, with which recipe), ``checkpoint.pt`` (the state
 of the lowest validation loss so far) and, once training has finished,
 ``metrics.json``: written last, it marks a finished run (as for the comparisons'
-resume, :mod:`mincam_render.analysis.run_dispatch`). A run trained again starts
+resume, :mod:`mincam_render.data.run_dispatch`). A run trained again starts
 by removing it.
 
 :func:`open_run` reads a run and refuses an unfinished one unless asked;

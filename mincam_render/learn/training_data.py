@@ -12,7 +12,9 @@ float32 once. Arrays are numpy unless a docstring says torch.
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -25,6 +27,8 @@ from mincam_render.core.labels import LabelSpec
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.capabilities import history_frames
+
+log = logging.getLogger(__name__)
 
 #: Float16 transport is widened once to float32 in RAM up to this size (bytes of
 #: the float32 copy, 2 GiB): 10,000 frames of 8 detectors at 64x64 take 1.3 GB.
@@ -492,3 +496,47 @@ def _manifest_sha256(ds: Any) -> str | None:
 
     path = Path(getattr(ds, "path", "")) / MANIFEST_NAME
     return sha256_file(path) if path.is_file() else None
+
+
+#: Fractions of an in-memory render that train, validate and test (in time order).
+IN_MEMORY_SPLITS = (0.7, 0.1, 0.2)
+
+
+def training_splits(
+    dataset: str | os.PathLike | None, family: str | None, frames: int, spp: int, seed: int
+) -> tuple[TrainingData, TrainingData, TrainingData]:
+    """``(train, val, test)`` of a dataset directory, or of ``frames`` of ``family`` rendered here.
+
+    Args:
+        dataset: a dataset directory (``mincam-render render``); None: render ``family``.
+        family: a family name or description, rendered in memory when ``dataset`` is None.
+        frames: frames rendered, split :data:`IN_MEMORY_SPLITS` in time.
+        spp: samples per texel of that render.
+        seed: the family's and the render's seed.
+
+    Raises:
+        ValueError: the dataset has no training or no validation frames, or
+            neither a dataset nor a family is given.
+    """
+    if dataset is not None:
+        from mincam_render.data.dataset import open_dataset
+
+        ds = open_dataset(dataset)
+        sizes = {name: stop - start for name, (start, stop) in ds.splits.items()}
+        empty = [name for name in ("train", "val") if sizes.get(name, 0) == 0]
+        if empty:
+            raise ValueError(
+                f"{dataset} has no {' and no '.join(empty)} frames (split sizes {sizes}): "
+                "training needs both; render it with e.g. --splits 0.7,0.1,0.2"
+            )
+        train, val, test = (TrainingData.from_dataset(ds, s) for s in ("train", "val", "test"))
+        return train, val, test
+    if family is None:
+        raise ValueError("give a DATASET directory (mincam-render render) or --family")
+    from mincam_render.scenes import load_family
+
+    fam = load_family(family, seed=seed, num_frames=frames)
+    log.info("rendering %d frames of %s in memory (%d spp)", frames, fam.name, spp)
+    data = TrainingData.render(fam, range(frames), spp=spp, seed=seed, progress=True)
+    train, val, test = data.split(IN_MEMORY_SPLITS)
+    return train, val, test

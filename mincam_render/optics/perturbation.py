@@ -9,8 +9,8 @@ directly as a fabrication tolerance ("align masks to +-0.3 mm").
 
 This is the one model of a built camera's deviations: robust training
 (``TrainConfig.perturbation``), the robustness report
-(:mod:`mincam_render.analysis.robustness`) and the SURROGATE-real recordings of
-the sim-to-real study (:mod:`mincam_render.analysis.sim2real.surrogate`) all
+(:mod:`mincam_render.studies.robustness`) and the SURROGATE-real recordings of
+the sim-to-real study (:mod:`mincam_render.studies.sim2real.surrogate`) all
 draw from it, and the masks as built are made by one mask plane
 (:mod:`mincam_render.optics.fabrication`; the fused copy training uses,
 :mod:`mincam_render.optics.fabrication_fused`).

@@ -123,6 +123,30 @@ def printable_masks(
     return np.concatenate([uniform, binary])
 
 
+def smooth_masks(
+    num: int, shape: tuple[int, int, int], transmittance_range: tuple[float, float], seed: int
+) -> np.ndarray:
+    """Trained-like masks ``M[mask, detector, row, col]``: smooth random fields in range.
+
+    White noise low-pass filtered in the Fourier domain (cut-off a quarter of the
+    mask's width), standardised, and squashed by a logistic function into the
+    printable range, so masks have blobs of open and dark regions like trained ones.
+    """
+    k, rows, cols = shape
+    lo, hi = transmittance_range
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((num, k, rows, cols))
+    fy = np.fft.fftfreq(rows)[:, None]
+    fx = np.fft.fftfreq(cols)[None, :]
+    cutoff = 4.0 / max(rows, cols)  # about four blobs across the mask
+    filt = np.exp(-0.5 * (fx**2 + fy**2) / cutoff**2)
+    field = np.fft.ifft2(np.fft.fft2(noise) * filt).real
+    field = (field - field.mean(axis=(-2, -1), keepdims=True)) / (
+        field.std(axis=(-2, -1), keepdims=True) + 1e-12
+    )
+    return lo + (hi - lo) / (1.0 + np.exp(-2.0 * field))
+
+
 def box_measurements(transport_w: np.ndarray, box_texels: int) -> np.ndarray:
     """Box pixels' measurements ``P[frame, detector, row, col]`` (W): sums of texel blocks.
 

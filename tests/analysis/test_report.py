@@ -5,31 +5,14 @@ from __future__ import annotations
 import json
 import math
 import re
-import subprocess
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import pytest
+from support import chromium, needs_chromium
 
 from mincam_render.analysis.report import Report
-
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-needs_chromium = pytest.mark.skipif(
-    not CHROMIUM.is_file(),
-    reason="Debian's Chromium is not installed at /usr/bin/chromium "
-    "(apt-get install -y chromium) : the headless-browser check cannot run",
-)
 
 
 def _page(tmp_path: Path) -> Path:
@@ -57,22 +40,10 @@ def test_page_is_self_contained_and_escaped(tmp_path):
     assert not re.search(r'src="(?!data:)', text), "external resources would break the page"
 
 
-def _chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    profile = tmp_path / "chromium-profile"
-    profile.mkdir(exist_ok=True)
-    return subprocess.run(
-        [str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
-
-
 @needs_chromium
 def test_headless_browser_loads_figures(tmp_path):
     path = _page(tmp_path)
-    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", path.as_uri())
+    proc = chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", path.as_uri())
     dom = proc.stdout
     assert "<h1>Test report</h1>" in dom, proc.stderr[-2000:]
     loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
@@ -88,7 +59,7 @@ def test_headless_screenshot_is_not_blank(tmp_path):
 
     path = _page(tmp_path)
     shot = tmp_path / "shot.png"
-    _chromium(tmp_path, f"--screenshot={shot}", "--window-size=900,1200", path.as_uri())
+    chromium(tmp_path, f"--screenshot={shot}", "--window-size=900,1200", path.as_uri())
     assert shot.is_file()
     img = np.asarray(Image.open(shot).convert("L"), dtype=np.float64)
     # text, tables and plots: many grey levels, not a uniform page
@@ -96,7 +67,7 @@ def test_headless_screenshot_is_not_blank(tmp_path):
 
 
 def test_fidelity_rows_tiny(variant, tmp_path):
-    from mincam_render.analysis.fidelity_bench import (
+    from mincam_render.studies.fidelity.study import (
         KNOBS,
         FidelityBenchConfig,
         bench_fidelity,
@@ -136,7 +107,7 @@ def test_fidelity_rows_tiny(variant, tmp_path):
 
 @pytest.fixture(scope="module")
 def energy_page(tmp_path_factory, variant):
-    from mincam_render.analysis.energy import (
+    from mincam_render.studies.energy import (
         analyze_energy,
         load_energy_config,
         write_energy_report,
@@ -158,7 +129,7 @@ def energy_page(tmp_path_factory, variant):
 def test_energy_report_loads_its_figures_in_a_headless_browser(tmp_path, energy_page):
     text = energy_page.read_text()
     assert not re.search(r'src="(?!data:)', text), "external resources would break the page"
-    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", energy_page.as_uri())
+    proc = chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", energy_page.as_uri())
     dom = proc.stdout
     assert "Self-powered budget" in dom, proc.stderr[-2000:]
     loaded = re.search(r'data-figures-loaded="(\d+)"', dom)
@@ -174,8 +145,8 @@ def _interval(mean: float, half: float) -> dict:
 
 def _privacy_result() -> dict:
     """A privacy audit's result of two designs (the structure ``analyze_privacy`` writes)."""
-    from mincam_render.analysis.privacy import corner_verdicts, default_comparison
-    from mincam_render.analysis.privacy.config import AttackConfig, PrivacyConfig
+    from mincam_render.studies.privacy import corner_verdicts, default_comparison
+    from mincam_render.studies.privacy.config import AttackConfig, PrivacyConfig
 
     conv = {"decoder": {"converged": True}, "reid": {"converged": False}}
     image = {
@@ -213,7 +184,7 @@ def _privacy_result() -> dict:
 
 @pytest.fixture(scope="module")
 def privacy_page(tmp_path_factory):
-    from mincam_render.analysis.privacy import write_privacy_report
+    from mincam_render.studies.privacy import write_privacy_report
 
     rng = np.random.default_rng(0)
     examples = {
@@ -232,7 +203,7 @@ def privacy_page(tmp_path_factory):
 def test_privacy_report_loads_its_figures_in_a_headless_browser(tmp_path, privacy_page):
     html = Path(privacy_page["html"])
     assert not re.search(r'src="(?!data:)', html.read_text()), "external resources"
-    proc = _chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", html.as_uri())
+    proc = chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", html.as_uri())
     dom = proc.stdout
     assert "Privacy audit" in dom, proc.stderr[-2000:]
     loaded = re.search(r'data-figures-loaded="(\d+)"', dom)

@@ -5,15 +5,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mincam_render.analysis.comparison_config import ComparisonConfig
-from mincam_render.analysis.fidelity_bench import FidelityBenchConfig
-from mincam_render.analysis.privacy.config import AttackConfig
-from mincam_render.analysis.robustness import RobustnessConfig
 from mincam_render.cli.main import main
 from mincam_render.data.exr import read_transport_exr, write_transport_exr
 from mincam_render.data.render_job import RenderRequest
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.optics.perturbation import PerturbationModel
+from mincam_render.studies.comparison.config import ComparisonConfig
+from mincam_render.studies.fidelity.study import FidelityBenchConfig
+from mincam_render.studies.privacy.config import AttackConfig
+from mincam_render.studies.robustness.config import RobustnessConfig
 
 
 def test_exr_round_trip_is_exact(tmp_path, rng):

@@ -163,7 +163,7 @@ def test_shipped_plans_match_the_shipped_descriptions_and_this_renderer(path, va
     assert fields["planner_version"] == plan_cache.PLANNER_VERSION, "re-ship: scripts/ship_plans.py"
     family = load_family(fields["family_name"], seed=0, num_frames=fields["num_frames"])
     # a plain render of the shipped description, or an episode of the main job's default
-    from mincam_render.analysis.comparison import ComparisonConfig, episode_requests
+    from mincam_render.studies.comparison.study import ComparisonConfig, episode_requests
 
     requests = [RenderRequest(family=fields["family_name"], num_frames=fields["num_frames"])]
     requests += [

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from support import linear_task, temporal_task
 
-from mincam_render.analysis.robustness import RobustnessConfig, robustness_curves
 from mincam_render.learn import train as tr
 from mincam_render.learn.runs import data_identity, describe_run
 from mincam_render.optics.perturbation import PerturbationModel
+from mincam_render.studies.robustness.config import RobustnessConfig
+from mincam_render.studies.robustness.study import robustness_curves
 
 CFG = tr.TrainConfig(max_steps=20, batch_size=16, eval_every=10, patience=100)
 

@@ -54,6 +54,19 @@ def test_layers_are_the_subpackages_of_the_package():
     assert not [p.name for p in (REPO / "mincam_render").glob("*.py") if p.name != "__init__.py"]
 
 
+def test_every_study_is_in_the_contract_that_keeps_studies_apart():
+    contracts = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["importlinter"][
+        "contracts"
+    ]
+    (studies,) = [c for c in contracts if c.get("containers") == ["mincam_render.studies"]]
+    named = {name.strip() for layer in studies["layers"] for name in layer.split("|")}
+    packages = {p.parent.name for p in (REPO / "mincam_render" / "studies").glob("*/__init__.py")}
+    assert named == packages, "every study is a sibling, or the comparison they build on"
+    assert not [
+        p.name for p in (REPO / "mincam_render" / "studies").glob("*.py") if p.name != "__init__.py"
+    ]
+
+
 def test_the_wheel_lists_every_package_and_maps_the_scene_folder():
     """pyproject lists the packages (find cannot add the mapped scenes/): none forgotten."""
     tool = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]

@@ -8,10 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-from mincam_render.analysis.energy import config as energy_config
 from mincam_render.core.package_data import shipped_path
 from mincam_render.data import plan_cache
 from mincam_render.data.render_job import package_versions, source_revision
+from mincam_render.studies.energy import config as energy_config
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from mincam_render.analysis.privacy.identities import presence
 from mincam_render.data.dataset import json_bytes
 from mincam_render.scenes.indoor import PeopleConfig
 from mincam_render.scenes.indoor.people import draw_roster
 from mincam_render.scenes.registry import load_family
+from mincam_render.studies.privacy.identities import presence
 
 FRAMES = 150
 ROSTER = {"fps": 1.0, "burn_in_s": 60.0, "max_people": 4, "people": {"roster": 4}}

@@ -6,7 +6,6 @@ from mincam_render.studies.design_protocol.config import (
     RecipeVariant,
     default_recipes,
 )
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 from mincam_render.studies.design_protocol.report import write_report
 from mincam_render.studies.design_protocol.study import (
     DesignProtocolResult,
@@ -16,13 +15,11 @@ from mincam_render.studies.design_protocol.study import (
 )
 
 __all__ = [
-    "DesignFigure",
     "DesignProtocolConfig",
     "DesignProtocolResult",
     "Floor",
     "FloorCheck",
     "FloorVerdict",
-    "Paired",
     "RecipeVariant",
     "default_recipes",
     "run",

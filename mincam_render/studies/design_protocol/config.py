@@ -6,9 +6,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from mincam_render.analysis.comparison_config import ComparisonConfig, Design
 from mincam_render.core.checks import check_int
 from mincam_render.learn.train_config import MaskReference, TrainConfig
+from mincam_render.studies.comparison.config import ComparisonConfig, Design
 
 #: The learning curves' designs: the paper's 2-pixel camera, 8 freeform pixels,
 #: and the box cameras they are measured against.

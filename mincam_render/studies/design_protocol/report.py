@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from mincam_render.studies.design_protocol.figures import DesignFigure
+from mincam_render.studies.comparison.figures import DesignFigure
 from mincam_render.studies.design_protocol.study import DesignProtocolResult, LadderPoint
 
 

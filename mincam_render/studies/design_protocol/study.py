@@ -1,7 +1,7 @@
 """The design protocol: how to train masks that generalise, and what they must beat.
 
 Every section is a set of comparisons
-(:func:`~mincam_render.analysis.comparison.run_comparison`) on one shared set
+(:func:`~mincam_render.studies.comparison.study.run_comparison`) on one shared set
 of episodes: validation and test episodes are the same everywhere, training
 sets are the first ``n`` training episodes, so every figure of a section is
 measured on the same test episodes and pairs with the others.
@@ -41,14 +41,15 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.comparison import Design, run_comparison
-from mincam_render.analysis.comparison_config import ComparisonConfig, Protocol
 from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
+from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
+from mincam_render.studies.comparison.result import ComparisonResult
+from mincam_render.studies.comparison.study import Design, run_comparison
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
 
 #: A comparison run for the study: ``(config, out_dir) -> its result``.
-Compare = Callable[[ComparisonConfig, Path], dict[str, Any]]
+Compare = Callable[[ComparisonConfig, Path], ComparisonResult]
 
 
 @dataclass(frozen=True)
@@ -200,12 +201,6 @@ class DesignProtocolResult:
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
 
 
-def headline(result: Mapping[str, Any], task: str) -> Mapping[str, Any]:
-    """The block of ``task`` in a comparison's result (the joint block if it was joint)."""
-    tasks = result["tasks"]
-    return tasks[task] if task in tasks else next(iter(tasks.values()))
-
-
 def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ProtocolRow]:
     """Each label under per-task cameras and joint cameras (module docstring, section 1).
 
@@ -217,16 +212,16 @@ def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> li
         cfg.comparison(n, _minimalist(cfg.protocol_pixels), protocol=Protocol.PER_TASK),
         out / "protocol" / "per-task",
     )
-    tasks = len(per_task["tasks"])
+    tasks = len(per_task.tasks)
     joint_px = sorted({p for k in cfg.protocol_pixels for p in (k, k * tasks)})
     joint = compare(
         cfg.comparison(n, _minimalist(joint_px), protocol=Protocol.JOINT),
         out / "protocol" / "joint",
     )
     rows = []
-    for label, lab in per_task["labels"].items():
+    for label, lab in per_task.labels.items():
         figures = {f"per-task {d}": _mean_ci(c) for d, c in lab["configs"].items()}
-        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint["labels"][label]["configs"].items()}
+        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint.labels[label]["configs"].items()}
         rows.append(ProtocolRow(label=label, metric=lab["metric"], figures=figures))
     return rows
 
@@ -259,8 +254,8 @@ def recipe_table(
             cfg.comparison(cfg.recipe_episodes, designs, train=variant.apply(base_cfg)),
             out / "recipes" / variant.name,
         )
-        block = headline(result, cfg.task)
-        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        block = result.block(cfg.task)
+        figures = {d.name: block.figure(d.name) for d in designs}
         base = rows[0].designs if rows else figures
         rows.append(
             RecipeRow(
@@ -310,16 +305,14 @@ def learning_curves(
     points = []
     for n in cfg.ladder:
         result = compare(cfg.comparison(n, cfg.ladder_designs), out / "ladder" / f"episodes-{n}")
-        block = headline(result, cfg.task)
+        block = result.block(cfg.task)
         points.append(
             LadderPoint(
                 episodes=n,
                 frames=n * cfg.episodes.train_frames,
                 render_s=render_seconds(n),
-                designs={
-                    d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs
-                },
-                trivial=float(block["trivial"]["error"]["mean"]),
+                designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
+                trivial=block.trivial_error.mean,
             )
         )
     doublings = [
@@ -356,7 +349,7 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
     """The ladder's designs on the most episodes, with the background known exactly (oracle).
 
     Every frame's converged background replaced by one fixed background
-    (:attr:`~mincam_render.analysis.comparison_config.ComparisonConfig.oracle_background`):
+    (:attr:`~mincam_render.studies.comparison.config.ComparisonConfig.oracle_background`):
     what remains of the error is the people's own signal, its render noise and
     the data, not the light changing around them.
     """
@@ -365,13 +358,13 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
         cfg.comparison(n, cfg.ladder_designs, oracle_background=True),
         out / "oracle" / f"episodes-{n}",
     )
-    block = headline(result, cfg.task)
+    block = result.block(cfg.task)
     return LadderPoint(
         episodes=n,
         frames=n * cfg.episodes.train_frames,
         render_s=0.0,
-        designs={d.name: DesignFigure.from_block(block, d.name) for d in cfg.ladder_designs},
-        trivial=float(block["trivial"]["error"]["mean"]),
+        designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
+        trivial=block.trivial_error.mean,
     )
 
 
@@ -391,10 +384,10 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
     result = compare(
         _replace(cfg.comparison(n, designs), seeds=seeds * r), out / "restarts" / f"episodes-{n}"
     )
-    block = headline(result, cfg.task)
+    block = result.block(cfg.task)
     rows = []
     for d in designs:
-        every = DesignFigure.from_block(block, d.name)
+        every = block.figure(d.name)
         test, val = every.errors(), every.val()
         if val is None:
             raise ValueError(f"{d.name}: the runs kept no validation-episode errors")
@@ -444,8 +437,8 @@ def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> l
         result = compare(
             cfg.comparison(cfg.reference_episodes, tuple(designs)), out / "references" / f"{k}px"
         )
-        block = headline(result, cfg.task)
-        figures = {d.name: DesignFigure.from_block(block, d.name) for d in designs}
+        block = result.block(cfg.task)
+        figures = {d.name: block.figure(d.name) for d in designs}
         e2e = figures[designs[0].name]
         rows.append(
             ReferenceRow(
@@ -512,10 +505,10 @@ def run(
 
     error_names: dict[str, str] = {}
 
-    def compare(comparison: ComparisonConfig, where: Path) -> dict[str, Any]:
+    def compare(comparison: ComparisonConfig, where: Path) -> ComparisonResult:
         result = run_comparison(comparison, where, episodes_dir=episodes, masks_dir=None,
                                 train_workers=train_workers, progress=progress)  # fmt: skip
-        error_names.setdefault("task", headline(result, cfg.task)["error_name"])
+        error_names.setdefault("task", result.block(cfg.task).error_name)
         return result
 
     seconds = render_seconds or (lambda n: training_render_seconds(episodes, n))

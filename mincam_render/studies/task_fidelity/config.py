@@ -5,10 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from mincam_render.analysis.comparison_config import ComparisonConfig, Design
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.render.differential import DifferenceSeeds
+from mincam_render.studies.comparison.config import ComparisonConfig, Design
 
 #: The designs render noise is checked with: the paper's 2-pixel camera, 8 freeform
 #: pixels, and box cameras down to single texels (32x32 at 32 texels per side:

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from mincam_render.studies.design_protocol.figures import DesignFigure, Paired
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.task_fidelity.config import SampleLevel, TaskFidelityConfig
 from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figures
 
@@ -154,11 +154,11 @@ def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, Any
     measured) with frames' and backgrounds' samples scaled, the level's depth
     and seeds (per-window seeds leave the request's field open).
     """
-    from mincam_render.analysis.comparison import episode_requests
     from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
     from mincam_render.data.render_job import plan_render
     from mincam_render.render.differential import DifferenceSeeds
     from mincam_render.render.fidelity import Fidelity
+    from mincam_render.studies.comparison.study import episode_requests
 
     requests = episode_requests(cfg.comparison)
     if level.planned:
@@ -220,12 +220,12 @@ def level_figures(
 
     Runs go to ``out/<level>/runs`` (kept: a second call reads them back).
     """
-    from mincam_render.analysis.comparison import comparison_splits, task_comparison
     from mincam_render.analysis.mask_structure import view_and_label_map
-    from mincam_render.analysis.run_dispatch import task_splits, train_runs
     from mincam_render.core.labels import label_tasks
     from mincam_render.data.dataset import open_dataset
     from mincam_render.learn.train import TrainingData
+    from mincam_render.studies.comparison.runs import task_splits, train_runs
+    from mincam_render.studies.comparison.study import comparison_splits, task_comparison
 
     comparison = cfg.comparison
     names = episode_names(cfg)
@@ -248,23 +248,23 @@ def level_figures(
     if cfg.replicate_seeds:
         others = {d: rs[n:] for d, rs in runs[task].items()}
         rep = task_comparison(comparison, others, task_data, view_map)
-        replicate = {d.name: DesignFigure.from_block(rep, d.name) for d in comparison.designs}
+        replicate = {d.name: rep.figure(d.name) for d in comparison.designs}
     figures = LevelFigures(
         level=level.name,
         factor=level.factor,
         difference_seeds=level.difference_seeds.value,
         render_s_per_frame=render_seconds_per_frame([level.episodes / n for n in names]),
-        designs={d.name: DesignFigure.from_block(block, d.name) for d in comparison.designs},
-        trivial=float(block["trivial"]["error"]["mean"]),
+        designs={d.name: block.figure(d.name) for d in comparison.designs},
+        trivial=block.trivial_error.mean,
         noise=None,
         replicate=replicate,
     )
-    return figures, str(block["error_name"])
+    return figures, block.error_name
 
 
 def episode_names(cfg: TaskFidelityConfig) -> list[str]:
     """The episodes of the check (``train-*``, ``val-*``, ``test-*``)."""
-    from mincam_render.analysis.comparison import episode_requests
+    from mincam_render.studies.comparison.study import episode_requests
 
     return list(episode_requests(cfg.comparison))
 

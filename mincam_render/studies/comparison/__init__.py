@@ -1,0 +1,1 @@
+"""The main job: designs compared on independent episodes, with a verdict that holds."""

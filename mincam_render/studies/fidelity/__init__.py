@@ -1,0 +1,1 @@
+"""The fidelity benchmark: error against run time of every rendering knob."""

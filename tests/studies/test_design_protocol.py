@@ -1,0 +1,194 @@
+"""The design-protocol study end to end on tiny patches episodes, and its configuration."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from mincam_render.learn.train_config import TrainConfig
+from mincam_render.studies.comparison.config import ComparisonConfig, Design
+from mincam_render.studies.comparison.figures import DesignFigure
+from mincam_render.studies.design_protocol import (
+    DesignProtocolConfig,
+    Floor,
+    FloorVerdict,
+    RecipeVariant,
+    run,
+    write_report,
+)
+from mincam_render.studies.design_protocol.study import LadderPoint, floor_checks
+
+QUICK = {"spp": 2, "max_depth": 0, "shared_render": False, "differential": False}
+CFG = DesignProtocolConfig(
+    episodes=ComparisonConfig(
+        family="patches",
+        train_frames=40,
+        val_episodes=2,
+        val_frames=30,
+        test_episodes=2,
+        test_frames=30,
+        seeds=2,
+        train=TrainConfig(max_steps=20, eval_every=10, gain_range=(1.0, 1.0)),
+        fidelity=QUICK,
+    ),
+    task="count",
+    ladder=(1, 2),
+    ladder_designs=(Design(pixels=2), Design(grid=(2, 2))),
+    recipes=(
+        RecipeVariant(name="base"),
+        RecipeVariant(name="tv", changes={"mask_tv_weight": 0.1}, minimalist_only=True),
+    ),
+    reference_episodes=1,
+    reference_pixels=(2,),
+    protocol_episodes=1,
+    restarts=2,
+    floors=(Floor(design="mincam-2px", baseline="baseline-2x2", margin=0.05),),
+)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory, variant):
+    out = tmp_path_factory.mktemp("protocol")
+    sections = ("protocol", "recipes", "ladder", "references", "restarts")
+    return out, run(CFG, out, sections=sections)
+
+
+def test_every_section_reports_the_designs_it_ran(study):
+    out, result = study
+    assert result.error_name == "count RMSE"
+    assert [p.episodes for p in result.ladder] == [1, 2]
+    assert [p.frames for p in result.ladder] == [40, 80]
+    assert all(p.render_s > 0 for p in result.ladder)
+    assert [(d.design, d.episodes) for d in result.doublings] == [
+        ("mincam-2px", (1, 2)),
+        ("baseline-2x2", (1, 2)),
+    ]
+    assert [r.variant for r in result.recipes] == ["base", "tv"]
+    assert set(result.recipes[1].designs) == {"mincam-2px"}  # a mask prior: masks only
+    assert result.recipes[0].versus_base["mincam-2px"].mean == 0.0
+    assert set(result.chosen_recipe) == {"mincam-2px", "baseline-2x2"}
+    assert result.chosen_recipe["baseline-2x2"] == "base"
+    (ref,) = result.references
+    assert sorted(ref.designs) == sorted(
+        ["mincam-2px"]
+        + [f"mincam-2px-{r}{t}" for r in ("pca", "pls", "distilled") for t in ("", "-tuned")]
+    )
+    assert "mincam-2px" not in ref.versus_end_to_end
+    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 2)
+    labels = [r.label for r in result.protocol]
+    assert labels == ["count"]
+    (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
+    assert restarts.design == "mincam-2px" and restarts.restarts == 2
+    picks = restarts.chosen["runs"]
+    assert picks[0] in (0, 1) and picks[1] in (2, 3)
+    assert len(restarts.plain.per_seed) == 2 and restarts.train_s_per_camera[1] > 0
+
+
+def test_the_figures_are_the_comparisons_on_disk(study):
+    out, result = study
+    metrics = json.loads((out / "ladder" / "episodes-2" / "metrics.json").read_text())
+    design = metrics["designs"]["mincam-2px"]
+    fig = result.ladder[1].designs["mincam-2px"]
+    assert fig.error == design["error"]["mean"] and list(fig.ci95) == design["error"]["ci95"]
+    val = design["validation"]
+    assert fig.val_error == val["error"]["mean"] and list(fig.val_ci95) == val["error"]["ci95"]
+    assert fig.val().error.shape == (2, 2)  # seeds x validation episodes
+    assert len(fig.val_per_seed) == 2
+    # every section shares the validation and test episodes: the trivial predictor's
+    # test error depends on the training set only through its mean label
+    assert {e for e in metrics["episodes"] if not e.startswith("train")} == {
+        "val-0", "val-1", "test-0", "test-1"
+    }  # fmt: skip
+
+
+def test_floors_are_paired_on_the_largest_training_set(study):
+    _, result = study
+    (check,) = result.floors
+    last = result.ladder[-1]
+    assert check.episodes == 2 and check.floor.margin == 0.05
+    diff = last.designs["mincam-2px"].errors().error - last.designs["baseline-2x2"].errors().error
+    assert check.paired.mean == pytest.approx(diff.mean(), abs=1e-9)  # equal frames per episode
+    low, high = check.paired.ci95
+    expected = (
+        FloorVerdict.MET if high < 0.05 else FloorVerdict.MISSED if low >= 0.05
+        else FloorVerdict.UNDECIDED
+    )  # fmt: skip
+    assert check.verdict is expected
+
+
+def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
+    flat = [e for seed in errors for e in seed]
+    return DesignFigure(
+        design=name, pixels=2, error=sum(flat) / len(flat), ci95=(0.0, 1.0),
+        per_seed=tuple(sum(s) / len(s) for s in errors), state="converged",
+        steps=(1,) * len(errors), train_s_per_run=1.0,
+        episode_errors={"error": errors, "frames": [100.0] * len(errors[0]), "pooling": "mean"},
+    )  # fmt: skip
+
+
+def _point(design: list[list[float]], baseline: list[list[float]]) -> LadderPoint:
+    """A ladder point of mincam-2px and baseline-8x8 with these per-seed, per-episode errors."""
+    figures = {"mincam-2px": _figure("mincam-2px", design),
+               "baseline-8x8": _figure("baseline-8x8", baseline)}  # fmt: skip
+    return LadderPoint(episodes=4, frames=400, render_s=1.0, trivial=2.0, designs=figures)
+
+
+@pytest.mark.parametrize(
+    ("shift", "margin", "verdict"),
+    [
+        (-0.2, 0.0, FloorVerdict.MET),  # lower on every episode
+        (+0.2, 0.0, FloorVerdict.MISSED),  # higher on every episode
+        (+0.2, 0.3, FloorVerdict.MET),  # higher, but within the margin
+        (+0.35, 0.3, FloorVerdict.MISSED),  # beyond the margin on every episode
+    ],
+)
+def test_a_floor_verdict_follows_the_paired_interval(shift, margin, verdict):
+    base = [[1.0, 1.4, 0.8, 1.2, 1.1, 0.9]] * 3
+    design = [[e + shift for e in seed] for seed in base]
+    point = _point(design, base)
+    cfg = DesignProtocolConfig(
+        floors=(Floor(design="mincam-2px", baseline="baseline-8x8", margin=margin),)
+    )
+    (check,) = floor_checks(cfg, point)
+    assert check.paired.mean == pytest.approx(shift)
+    assert check.verdict is verdict
+
+
+def test_an_undecided_floor_holds_the_margin_in_its_interval():
+    base = [[1.0, 1.4, 0.8, 1.2, 1.1, 0.9]] * 3
+    noisy = [[e + d for e, d in zip(seed, (-0.5, 0.5, -0.4, 0.4, -0.3, 0.35), strict=True)]
+             for seed in base]  # fmt: skip
+    point = _point(noisy, base)
+    cfg = DesignProtocolConfig(floors=(Floor(design="mincam-2px", baseline="baseline-8x8"),))
+    (check,) = floor_checks(cfg, point)
+    assert check.paired.ci95[0] < 0.0 < check.paired.ci95[1]
+    assert check.verdict is FloorVerdict.UNDECIDED
+
+
+def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
+    _, result = study
+    paths = write_report(result, tmp_path, stem="protocol")
+    text = paths["md"].read_text()
+    assert "## Learning curves" in text and "## Recipes" in text and "### 2 px" in text
+    assert "## Seed spread" in text
+    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 |" in text
+    assert paths["png"].stat().st_size > 10_000
+    json.dumps(result.as_json(), allow_nan=False)
+
+
+def test_configuration_is_validated():
+    with pytest.raises(ValueError, match="increasing"):
+        DesignProtocolConfig(ladder=(4, 2))
+    with pytest.raises(ValueError, match="first variant is the base"):
+        DesignProtocolConfig(recipes=(RecipeVariant(name="x", changes={"max_steps": 5}),))
+    with pytest.raises(ValueError, match="unknown TrainConfig fields"):
+        RecipeVariant(name="x", changes={"gain": 1})
+    with pytest.raises(ValueError, match="mask_block"):
+        RecipeVariant(name="x", changes={"mask_block": 0})
+    with pytest.raises(ValueError, match="two designs"):
+        Floor(design="mincam-2px", baseline="mincam-2px")
+    with pytest.raises(ValueError, match="margin"):
+        Floor(design="mincam-2px", baseline="baseline-8x8", margin=-0.1)
+    with pytest.raises(ValueError, match="both must be ladder designs"):
+        DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))

@@ -1,0 +1,232 @@
+"""The task-level fidelity check: acceptance, the chosen level, noise against signal."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mincam_render.data import dataset as ds
+from mincam_render.render.differential import DifferenceSeeds
+from mincam_render.studies.comparison.figures import DesignFigure
+from mincam_render.studies.task_fidelity import SampleLevel, TaskFidelityConfig, noise_figures
+from mincam_render.studies.task_fidelity.study import (
+    LevelFigures,
+    acceptance,
+    chosen_level,
+    render_seconds_per_frame,
+    scaled_samples,
+    supported,
+)
+
+
+def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
+    """A design's figure from per-seed, per-episode errors (mean and a made-up interval)."""
+    e = np.asarray(errors)
+    mean = float(e.mean())
+    return DesignFigure(
+        design=name,
+        pixels=2,
+        error=mean,
+        ci95=(mean - 0.1, mean + 0.1),
+        per_seed=tuple(e.mean(axis=1)),
+        state="converged",
+        steps=(100,) * len(e),
+        train_s_per_run=1.0,
+        episode_errors={"error": e.tolist(), "frames": [600] * e.shape[1], "pooling": "rms"},
+    )
+
+
+def _levels(tmp_path: Path) -> tuple[SampleLevel, ...]:
+    return (
+        SampleLevel(name="1x", factor=1, episodes=tmp_path, max_depth=None, planned=True),
+        SampleLevel(name="0.25x", factor=0.25, episodes=tmp_path),
+        SampleLevel(name="0.0625x", factor=0.0625, episodes=tmp_path),
+        SampleLevel(name="0.25x-frame", factor=0.25, episodes=tmp_path, difference_seeds="frame"),
+        SampleLevel(name="4x", factor=4, episodes=tmp_path),
+    )
+
+
+def _level(designs, replicate=None) -> LevelFigures:
+    return LevelFigures(
+        level="1x",
+        factor=1.0,
+        difference_seeds="window",
+        render_s_per_frame=0.1,
+        designs=designs,
+        trivial=2.0,
+        noise=None,
+        replicate=replicate,
+    )
+
+
+def test_a_level_passes_when_every_figure_moves_less_than_a_quarter_of_its_half_width():
+    ref = {"a": _figure("a", [[1.0, 1.2], [1.1, 0.9]]), "b": _figure("b", [[2.0, 2.0]] * 2)}
+    # half-width 0.1: "a" moves by 0.02 (< 0.025), "b" by 0.03 (>= 0.025)
+    level = {
+        "a": _figure("a", [[1.02, 1.22], [1.12, 0.92]]),
+        "b": _figure("b", [[2.03, 2.03]] * 2),
+    }
+    checks = {c.design: c for c in acceptance(_level(level), ref, 0.25)}
+    assert checks["a"].passes and not checks["b"].passes
+    np.testing.assert_allclose(checks["a"].moved, 0.02, atol=1e-12)
+    np.testing.assert_allclose(checks["b"].half_width, 0.1, atol=1e-12)
+    # paired on the same test episodes: every pair moved by +0.03, so its interval excludes 0
+    np.testing.assert_allclose(checks["b"].paired.mean, 0.03, atol=1e-9)
+    assert not checks["b"].within_seed_noise and not supported(tuple(checks.values()))
+
+
+def test_a_move_the_seeds_spread_cannot_resolve_is_supported():
+    # "b" moves by 0.05 (not accepted: half-width 0.1), its paired interval holds
+    # 0 (seeds spread); other training seeds on the same renders move it by 0.08
+    ref = {"b": _figure("b", [[2.0, 2.1], [1.8, 1.9]])}
+    level = {"b": _figure("b", [[2.2, 2.2], [1.75, 1.85]])}
+    replicate = {"b": _figure("b", [[2.1, 2.1], [2.06, 2.06]])}
+    (check,) = acceptance(_level(level, replicate), ref, 0.25)
+    assert not check.passes
+    np.testing.assert_allclose([check.moved, check.replicate_moved], [0.05, 0.08], atol=1e-12)
+    assert check.paired.ci95[0] <= 0 <= check.paired.ci95[1]
+    assert check.within_seed_noise and supported((check,))
+
+
+def test_the_cheapest_accepted_level_with_the_plans_seeds_is_chosen(tmp_path):
+    cfg = TaskFidelityConfig(levels=_levels(tmp_path), reference="4x")
+    accepted = {"1x": True, "0.25x": True, "0.0625x": False, "0.25x-frame": True}
+    assert chosen_level(cfg, accepted) == "0.25x"
+    assert chosen_level(cfg, accepted | {"0.25x": False}) == "1x"
+    assert chosen_level(cfg, dict.fromkeys(accepted, False)) is None
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"reference": "16x"}, "not among the levels"),
+        ({"second_reference": "2x"}, "not among the levels"),
+        ({"acceptance_share": 0.0}, "acceptance_share"),
+    ],
+)
+def test_a_check_that_cannot_be_judged_is_refused(tmp_path, changes, match):
+    with pytest.raises(ValueError, match=match):
+        TaskFidelityConfig(levels=_levels(tmp_path), **({"reference": "4x"} | changes))
+
+
+def test_exactly_one_level_is_the_plan(tmp_path):
+    levels = _levels(tmp_path)[1:]
+    with pytest.raises(ValueError, match="exactly one is the plan"):
+        TaskFidelityConfig(levels=levels, reference="4x")
+    with pytest.raises(ValueError, match="factor 1"):
+        SampleLevel(name="2x", factor=2, episodes=tmp_path, max_depth=None, planned=True)
+
+
+@pytest.mark.parametrize(
+    ("samples", "factor", "expected"), [(24, 4, 96), (195, 0.25, 49), (20, 0.0625, 1)]
+)
+def test_scaled_samples_round_and_stay_positive(samples, factor, expected):
+    assert scaled_samples(samples, factor) == expected
+
+
+def test_render_seconds_leave_planning_out(tmp_path):
+    episode = tmp_path / "test-0"
+    episode.mkdir()
+    ds.write_manifest(
+        episode, {"format": ds.FORMAT_NAME, "format_version": ds.FORMAT_VERSION, "num_frames": 100}
+    )
+    events = [
+        {"event": "planned", "seconds": 30.0},
+        {"event": "backgrounds", "seconds": 5.0},
+        {"event": "end", "rendered": [0, 1], "seconds": 50.0},  # planning, backgrounds, frames
+        {"event": "end", "rendered": [], "seconds": 1.0},  # a resume with nothing to do
+    ]
+    (episode / "render_log.jsonl").write_text("\n".join(json.dumps(e) for e in events))
+    assert render_seconds_per_frame([episode]) == pytest.approx(0.2)
+
+
+def test_noise_figures_against_closed_forms():
+    # a signal a_f * D, the reference exact, the level off by a pattern of
+    # power sigma^2 held for windows of W frames: error RMS sigma * sqrt(share),
+    # lag-1 autocorrelation (W - 1) / W
+    rng = np.random.default_rng(5)
+    frames, window, shape = 1200, 20, (2, 8, 8)
+    mover = rng.uniform(0.0, 1.0, size=shape)
+    amplitude = rng.integers(0, 4, size=frames).astype(np.float64)
+    background = rng.uniform(5.0, 6.0, size=shape)
+    signal = amplitude[:, None, None, None] * mover[None]
+    exact = background[None] + signal
+    pattern = np.repeat(rng.normal(0.0, 0.1, size=(frames // window, *shape)), window, axis=0)
+    episodes = {Path("ref"): (exact, signal), Path("level"): (exact + pattern, signal)}
+    figures = noise_figures(
+        ([Path("level")], 1.0),
+        ([Path("ref")], 1e9, "ref"),
+        [Path("ref")],
+        window_frames=window,
+        load=episodes.__getitem__,
+        transmittance_range=(0.01, 0.67),
+    )
+    box = figures.error_rms_w["box_1"]
+    np.testing.assert_allclose(box, 0.1, rtol=0.05)
+    np.testing.assert_allclose(figures.signal_rms_w["box_1"], np.sqrt(
+        np.mean((signal - signal.mean(0)) ** 2)), rtol=1e-9)  # fmt: skip
+    acf = figures.autocorrelation["box_1"]
+    np.testing.assert_allclose(acf["lag_1_frame"], (window - 1) / window, atol=0.02)
+    np.testing.assert_allclose(acf["lag_1_window"], 0.0, atol=0.05)
+    assert figures.ratio()["box_1"] == pytest.approx(box / figures.signal_rms_w["box_1"])
+
+
+def test_levels_take_the_plans_seeds_unless_told(tmp_path):
+    level = SampleLevel(name="4x", factor=4, episodes=str(tmp_path))
+    assert level.difference_seeds is DifferenceSeeds.WINDOW
+    assert isinstance(level.episodes, Path)
+
+
+def _three_levels(tmp_path: Path, reference: str, second: str | None) -> TaskFidelityConfig:
+    levels = tuple(
+        SampleLevel(name=n, factor=f, episodes=tmp_path / n, max_depth=None if n == "1x" else 16,
+                    planned=n == "1x")
+        for n, f in (("1x", 1.0), ("0.25x", 0.25), ("4x", 4.0))
+    )  # fmt: skip
+    return TaskFidelityConfig(levels=levels, reference=reference, second_reference=second)
+
+
+def _noise_arguments(monkeypatch, cfg: TaskFidelityConfig, level: str) -> dict:
+    from mincam_render.studies.task_fidelity import study
+
+    seen: dict = {}
+    monkeypatch.setattr(
+        study, "noise_figures", lambda lv, ref, sec, **kw: seen.update(lv=lv, ref=ref, sec=sec)
+    )
+    study._noise(cfg, cfg.level(level))
+    return seen
+
+
+@pytest.mark.parametrize(
+    ("reference", "second", "level", "against", "estimate"),
+    [
+        # the most samples judge; the next most give the signal's second estimate
+        ("4x", "1x", "0.25x", "4x", "1x"),
+        ("4x", "1x", "1x", "4x", "1x"),
+        # a reduced check judged by the plan: the plan's noise against the cheaper level
+        ("1x", "0.25x", "1x", "0.25x", "1x"),
+        ("1x", "0.25x", "0.25x", "1x", "0.25x"),
+    ],
+)
+def test_noise_is_taken_against_the_reference_or_the_plans_against_the_second(
+    tmp_path, monkeypatch, reference, second, level, against, estimate
+):
+    cfg = _three_levels(tmp_path, reference, second)
+    seen = _noise_arguments(monkeypatch, cfg, level)
+    names = cfg.noise_episodes
+    assert seen["lv"] == ([tmp_path / level / n for n in names], cfg.level(level).factor)
+    assert seen["ref"] == (
+        [tmp_path / against / n for n in names],
+        cfg.level(against).factor,
+        against,
+    )
+    assert seen["sec"] == [tmp_path / estimate / n for n in names]
+
+
+@pytest.mark.parametrize(("reference", "second"), [("4x", "1x"), ("1x", None)])
+def test_a_reference_has_no_noise_of_its_own_to_measure(tmp_path, monkeypatch, reference, second):
+    cfg = _three_levels(tmp_path, reference, second)
+    assert _noise_arguments(monkeypatch, cfg, reference) == {}
