@@ -358,7 +358,7 @@ def keep_run_masks(
         **figures,
     }
     exported = export_masks(m, camera, out_dir, task=task, provenance=provenance)
-    return {k: [str(p) for p in v] if isinstance(v, list) else str(v) for k, v in exported.items()}
+    return exported.as_json()
 
 
 def _keep_masks(

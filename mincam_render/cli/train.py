@@ -34,6 +34,7 @@ from .options import (
 )
 
 if TYPE_CHECKING:
+    from mincam_render.export.masks import MaskFiles
     from mincam_render.learn.batches import RenderedBatches
     from mincam_render.learn.restore import TrainedRun
     from mincam_render.learn.training_data import TrainingData
@@ -345,7 +346,7 @@ def _export_run_masks(run_dir: Path, export_dir: Path, train: TrainingData) -> N
     write_masks(open_run(run_dir), export_dir, str(train.source.get("family", "")))
 
 
-def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -> dict[str, Any]:
+def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -> MaskFiles:
     """Export ``run``'s masks into ``folder``; an unfinished run's export is marked so.
 
     The sidecar's provenance holds the run, its data and how far its training got
@@ -534,7 +535,7 @@ def export_masks_cmd(
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
     click.echo(
-        f"wrote {len(paths['png'])} masks to {out / task} "
+        f"wrote {len(paths.png)} masks to {out / task} "
         f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
     )
     if not run.finished:
