@@ -21,6 +21,7 @@ from .options import (
 )
 
 if TYPE_CHECKING:
+    from mincam_render.learn.restore import RunRecord
     from mincam_render.learn.training_data import TrainingData
 
 
@@ -273,7 +274,7 @@ def report_robustness_cmd(
     click.echo(f"wrote {paths['html']}, {paths['png'].name}, {paths['json'].name}")
 
 
-def _test_data(run: dict, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData]:
+def _test_data(run: RunRecord, data_dirs: tuple[Path, ...]) -> dict[str, TrainingData]:
     """``{name: TrainingData}``: the test split of each ``--data``, or of the run's dataset."""
     from mincam_render.data.dataset import open_dataset
     from mincam_render.learn.train import TrainingData

@@ -315,11 +315,12 @@ def train_cmd(
             _export_run_masks(out, export_dir, train)
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
-    t = metrics["test"]
+    t = metrics.test
+    assert t is not None  # the command always has a test split
     click.echo(
-        f"{metrics['model']['kind']} {metrics['model']['pixels']} px: test "
-        f"{t['error_name']} = {t['error']:.4f} after {metrics['steps']} steps "
-        f"({metrics['train_wall_time_s']:.1f} s); wrote {out / 'metrics.json'}"
+        f"{metrics.model['kind']} {metrics.model['pixels']} px: test "
+        f"{t.error_name} = {t.error:.4f} after {metrics.steps} steps "
+        f"({metrics.train_wall_time_s:.1f} s); wrote {out / 'metrics.json'}"
     )
 
 
@@ -463,6 +464,7 @@ def prune_cmd(
     """
     from mincam_render.learn.train import (
         ModelKind,
+        SweepPoint,
         greedy_prune,
         open_run,
         plot_sweep,
@@ -480,21 +482,16 @@ def prune_cmd(
         raise user_error(err) from None
     out.mkdir(parents=True, exist_ok=True)
     source = {"run": str(run_dir), "run_training": run.training}
-    (out / "prune.json").write_text(strict_json.dumps([source | r for r in records]))
-    rows = [
-        {
-            "kind": ModelKind.MINCAM.value,
-            "pixels": r["pixels"],
-            "error": r["test"]["error"],
-            "error_name": r["test"]["error_name"],
-        }
-        for r in records
+    (out / "prune.json").write_text(strict_json.dumps([source | r.as_json() for r in records]))
+    tests = [(r, r.test) for r in records if r.test is not None]
+    points = [
+        SweepPoint(kind=ModelKind.MINCAM, pixels=r.pixels, error=t.error, error_name=t.error_name)
+        for r, t in tests
     ]
-    plot_sweep(rows, out / "prune.png", title="greedy pruning")
-    for r in records:
+    plot_sweep(points, out / "prune.png", title="greedy pruning")
+    for r, t in tests:
         click.echo(
-            f"{r['pixels']:3d} px  removed {r['removed']}  "
-            f"test {r['test']['error_name']} = {r['test']['error']:.4f}"
+            f"{r.pixels:3d} px  removed {list(r.removed)}  test {t.error_name} = {t.error:.4f}"
         )
     click.echo(f"wrote {out / 'prune.json'}, prune.png")
 
