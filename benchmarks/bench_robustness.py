@@ -134,7 +134,7 @@ def train_runs(cfg: ComparisonConfig, episodes: dict, runs_dir: Path, seeds: int
                 config=dataclasses.replace(cfg.train, seed=seed, perturbation=pert),
                 episodes=tests,
             )
-            print(f"{kind} seed {i}: {m['steps']} steps, {m['train_wall_time_s']:.0f} s")
+            print(f"{kind} seed {i}: {m.steps} steps, {m.train_wall_time_s:.0f} s")
             runs[kind].append(run_dir)
     return runs
 

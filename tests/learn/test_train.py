@@ -369,7 +369,7 @@ def test_a_run_is_not_resumed_on_other_data(tmp_path):
     with pytest.raises(ValueError, match="trained with another config"):
         tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=replace(cfg, lr=0.01))
     again = tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=cfg)  # same: resumes
-    assert again["steps"] == 20
+    assert again.steps == 20
 
 
 def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):
