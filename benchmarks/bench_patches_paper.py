@@ -87,12 +87,12 @@ def budget_curve(model, train, val, test, config, checkpoints, run_dir):
             {
                 "steps": res.steps,
                 "wall_time_s": res.wall_time_s,
-                "test_rmse": m["error"],
-                "test_rmse_raw": m["labels"]["count"]["rmse_raw"],
+                "test_rmse": m.error,
+                "test_rmse_raw": m.labels["count"].rmse_raw,
             }
         )
         print(
-            f"    {res.steps:5d} steps {res.wall_time_s:7.1f} s  test RMSE {m['error']:.3f}",
+            f"    {res.steps:5d} steps {res.wall_time_s:7.1f} s  test RMSE {m.error:.3f}",
             flush=True,
         )
     return curve
@@ -402,7 +402,7 @@ def main() -> None:
             results["cameras"][name] = {
                 **tr.describe_model(model),
                 "curve": curve,
-                "test_rmse_best_val": final["error"],
+                "test_rmse_best_val": final.error,
                 "wall_time_s": curve[-1]["wall_time_s"],
             }
     scales = [] if a.light_scales.lower() == "none" else a.light_scales.split(",")
@@ -426,14 +426,14 @@ def main() -> None:
                 mt = m.transmittance()
             volts = m.measure(torch.from_numpy(tes.transport[:256]), noise=False).detach()
             gap[label] = {
-                "test_rmse": ev["error"],
+                "test_rmse": ev.error,
                 "wall_time_s": time.perf_counter() - t1,
                 "mean_transmittance": float(mt.mean()),
                 "mean_signal_v": float(volts.mean()),
                 "signal_std_over_frames_v": float(volts.std(dim=0).mean()),
             }
             print(
-                f"    {label}: test RMSE {ev['error']:.3f}; mean M {float(mt.mean()):.3f}; "
+                f"    {label}: test RMSE {ev.error:.3f}; mean M {float(mt.mean()):.3f}; "
                 f"signal {float(volts.mean()):.3g} V",
                 flush=True,
             )

@@ -34,6 +34,7 @@ from .options import (
 )
 
 if TYPE_CHECKING:
+    from mincam_render.export.masks import MaskFiles
     from mincam_render.learn.batches import RenderedBatches
     from mincam_render.learn.restore import TrainedRun
     from mincam_render.learn.training_data import TrainingData
@@ -289,11 +290,12 @@ def train_cmd(
             _export_run_masks(out, export_dir, train)
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
-    t = metrics["test"]
+    t = metrics.test
+    assert t is not None  # the command always has a test split
     click.echo(
-        f"{metrics['model']['kind']} {metrics['model']['pixels']} px: test "
-        f"{t['error_name']} = {t['error']:.4f} after {metrics['steps']} steps "
-        f"({metrics['train_wall_time_s']:.1f} s); wrote {out / 'metrics.json'}"
+        f"{metrics.model['kind']} {metrics.model['pixels']} px: test "
+        f"{t.error_name} = {t.error:.4f} after {metrics.steps} steps "
+        f"({metrics.train_wall_time_s:.1f} s); wrote {out / 'metrics.json'}"
     )
 
 
@@ -320,7 +322,7 @@ def _export_run_masks(run_dir: Path, export_dir: Path, train: TrainingData) -> N
     write_masks(open_run(run_dir), export_dir, str(train.source.get("family", "")))
 
 
-def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -> dict[str, Any]:
+def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -> MaskFiles:
     """Export ``run``'s masks into ``folder``; an unfinished run's export is marked so.
 
     The sidecar's provenance holds the run, its data and how far its training got
@@ -438,6 +440,7 @@ def prune_cmd(
     """
     from mincam_render.learn.train import (
         ModelKind,
+        SweepPoint,
         greedy_prune,
         open_run,
         plot_sweep,
@@ -456,21 +459,16 @@ def prune_cmd(
         raise user_error(err) from None
     out.mkdir(parents=True, exist_ok=True)
     source = {"run": str(run_dir), "run_training": run.training}
-    (out / "prune.json").write_text(strict_json.dumps([source | r for r in records]))
-    rows = [
-        {
-            "kind": ModelKind.MINCAM.value,
-            "pixels": r["pixels"],
-            "error": r["test"]["error"],
-            "error_name": r["test"]["error_name"],
-        }
-        for r in records
+    (out / "prune.json").write_text(strict_json.dumps([source | r.as_json() for r in records]))
+    tests = [(r, r.test) for r in records if r.test is not None]
+    points = [
+        SweepPoint(kind=ModelKind.MINCAM, pixels=r.pixels, error=t.error, error_name=t.error_name)
+        for r, t in tests
     ]
-    plot_sweep(rows, out / "prune.png", title="greedy pruning")
-    for r in records:
+    plot_sweep(points, out / "prune.png", title="greedy pruning")
+    for r, t in tests:
         click.echo(
-            f"{r['pixels']:3d} px  removed {r['removed']}  "
-            f"test {r['test']['error_name']} = {r['test']['error']:.4f}"
+            f"{r.pixels:3d} px  removed {list(r.removed)}  test {t.error_name} = {t.error:.4f}"
         )
     click.echo(f"wrote {out / 'prune.json'}, prune.png")
 
@@ -511,7 +509,7 @@ def export_masks_cmd(
     except _TRAIN_ERRORS as err:
         raise user_error(err) from None
     click.echo(
-        f"wrote {len(paths['png'])} masks to {out / task} "
+        f"wrote {len(paths.png)} masks to {out / task} "
         f"(PNG, EXR, print_sheet.svg{'' if no_pdf else '/.pdf'}, masks.json)"
     )
     if not run.finished:

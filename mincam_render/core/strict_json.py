@@ -25,6 +25,12 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
+#: A JSON object as written to or read from disk (a manifest's record, a frame's
+#: state in shard metadata): string keys, JSON values. For records whose schema
+#: belongs to their writer (a family's frame state) or that are read before they
+#: are validated; a result with a fixed schema is a dataclass instead.
+JsonObject = dict[str, Any]
+
 #: Suffix of the key that says why a value beside it is null.
 NULL_REASON_SUFFIX = "_null_reason"
 

@@ -29,16 +29,19 @@ when a plan of another variant is kept.
 
 from __future__ import annotations
 
+import enum
 import functools
 import hashlib
 import json
 import logging
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TypedDict
 
 from mincam_render.core.package_data import shipped_path
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.precision import ErrorScale
 
@@ -62,6 +65,40 @@ TOTAL_PLANNING = {
 EPISODE_FIELDS = ("family", "seed", "overrides", "shard_frames", "splits")
 
 
+class PlanSource(enum.StrEnum):
+    """Where a kept plan was found."""
+
+    SHIPPED = "shipped"  # with the package (scenes/plans/)
+    CACHE = "cache"  # the user's cache directory
+
+
+class Planning(TypedDict):
+    """What a request leaves to the family or the planner, resolved (:func:`plan_fields`)."""
+
+    error_scale: str
+    target_error: float
+    difference_seeds: str
+
+
+class KeptPlan(TypedDict):
+    """A plan as a plan file keeps it: :meth:`FidelityPlan.settings` and its decisions.
+
+    Both are the JSON records the planner wrote
+    (:class:`~mincam_render.render.fidelity.FidelityPlan` reads them back).
+    """
+
+    settings: JsonObject
+    decisions: JsonObject
+
+
+@dataclass(frozen=True)
+class FoundPlan:
+    """A kept plan (:func:`find_plan`) and where it was found."""
+
+    plan: KeptPlan
+    where: PlanSource
+
+
 def cache_dir() -> Path:
     """The user's plan cache directory (not created here)."""
     if os.environ.get(CACHE_ENV):
@@ -77,9 +114,12 @@ def shipped_dir() -> Path:
 
 
 def plan_fields(
-    identity: dict, family_name: str, renderer: dict[str, str], planning: dict[str, Any]
-) -> dict[str, Any]:
+    identity: JsonObject, family_name: str, renderer: dict[str, str], planning: Planning
+) -> JsonObject:
     """What a plan depends on: the request identity less the episode, the renderer, the targets.
+
+    Returns:
+        The canonical JSON object a plan is kept under (:func:`plan_key`).
 
     Args:
         identity: :meth:`~mincam_render.data.render_job.RenderRequest.identity` (it
@@ -95,24 +135,24 @@ def plan_fields(
     """
     fields = {k: v for k, v in identity.items() if k not in EPISODE_FIELDS}
     fields.update(family_name=family_name, renderer=renderer, planner_version=PLANNER_VERSION)
-    if {k: planning[k] for k in TOTAL_PLANNING} != TOTAL_PLANNING:
+    if {k: v for k, v in planning.items() if k in TOTAL_PLANNING} != TOTAL_PLANNING:
         fields["planning"] = planning
     return json.loads(json.dumps(fields, sort_keys=True))
 
 
-def plan_key(fields: dict[str, Any]) -> str:
+def plan_key(fields: JsonObject) -> str:
     """sha256 (hex) of the canonical JSON of ``fields``."""
     return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()
 
 
-def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
-    """``(plan, "shipped" | "cache")`` of ``fields``, or None when none is kept.
+def find_plan(fields: JsonObject) -> FoundPlan | None:
+    """The plan kept for ``fields`` and where, or None when none is kept.
 
     A missing folder of shipped plans is said once (:func:`shipped_plans_missing`).
     """
     key = plan_key(fields)
     shipped_plans_missing()
-    for where, folder in (("shipped", shipped_dir()), ("cache", cache_dir())):
+    for where, folder in ((PlanSource.SHIPPED, shipped_dir()), (PlanSource.CACHE, cache_dir())):
         path = folder / f"{key}.json"
         if not path.is_file():
             continue
@@ -120,7 +160,7 @@ def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
             plan = json.loads(path.read_text())
             if plan_key(plan["fields"]) != key:
                 raise ValueError("its fields do not hash to its name")
-            return {"settings": plan["settings"], "decisions": plan["decisions"]}, where
+            return FoundPlan({"settings": plan["settings"], "decisions": plan["decisions"]}, where)
         except (OSError, ValueError, KeyError, TypeError) as err:
             log.warning("ignoring the plan %s (%s); planning again", path, err)
     for variant, path in other_variant_plans(fields):
@@ -134,12 +174,12 @@ def find_plan(fields: dict[str, Any]) -> tuple[dict, str] | None:
     return None
 
 
-def plan_variant(fields: dict[str, Any]) -> str:
+def plan_variant(fields: JsonObject) -> str:
     """The Mitsuba variant a plan of ``fields`` is (or would be) measured with."""
     return str(fields["renderer"]["variant"])
 
 
-def other_variant_plans(fields: dict[str, Any]) -> list[tuple[str, Path]]:
+def other_variant_plans(fields: JsonObject) -> list[tuple[str, Path]]:
     """``(variant, path)`` of kept plans of ``fields`` but of another variant (not reused)."""
     from mincam_render.render.backend import VARIANTS
 
@@ -173,13 +213,13 @@ def shipped_plans_missing() -> bool:
 
 
 def store_plan(
-    fields: dict[str, Any], plan: dict, seconds: float, folder: Path | None = None
+    fields: JsonObject, plan: KeptPlan, seconds: float, folder: Path | None = None
 ) -> Path:
     """Write a plan atomically into ``folder`` (default: the user's cache); returns its path.
 
     Args:
         fields: :func:`plan_fields` of the plan.
-        plan: ``{"settings", "decisions"}``, JSON-ready.
+        plan: the settings and decisions, JSON-ready.
         seconds: wall time the planning took (kept for reports).
         folder: where to write; :func:`shipped_dir` to ship it with the package.
     """

@@ -25,6 +25,7 @@ import io
 import os
 import re
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,6 +33,7 @@ import numpy as np
 from PIL import Image
 
 from mincam_render.core import strict_json
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import MM, FreeformCamera
 
 if TYPE_CHECKING:
@@ -223,6 +225,47 @@ def print_sheet_pdf(
     return path
 
 
+@dataclass(frozen=True, kw_only=True)
+class MaskFiles:
+    """The files of one export of masks: names inside its folder, or paths.
+
+    Attributes:
+        png: ``mask_NN.png`` of every mask, in mask order.
+        exr: ``masks.exr``, every mask unclipped.
+        svg: ``print_sheet.svg``.
+        pdf: ``print_sheet.pdf``, or None when not written.
+        json: ``masks.json``, the sidecar.
+    """
+
+    png: tuple[Path, ...]
+    exr: Path
+    svg: Path
+    pdf: Path | None
+    json: Path
+
+    def in_folder(self, folder: Path) -> MaskFiles:
+        """The same files as paths inside ``folder``."""
+        return MaskFiles(
+            png=tuple(folder / p for p in self.png),
+            exr=folder / self.exr,
+            svg=folder / self.svg,
+            pdf=None if self.pdf is None else folder / self.pdf,
+            json=folder / self.json,
+        )
+
+    def as_json(self) -> dict[str, str | list[str]]:
+        """``{"png": [paths], "exr", "svg", "pdf" (if written), "json"}`` as strings."""
+        out: dict[str, str | list[str]] = {
+            "png": [str(p) for p in self.png],
+            "exr": str(self.exr),
+            "svg": str(self.svg),
+        }
+        if self.pdf is not None:
+            out["pdf"] = str(self.pdf)
+        out["json"] = str(self.json)
+        return out
+
+
 def export_masks(
     transmittance: np.ndarray,
     camera: FreeformCamera,
@@ -232,7 +275,7 @@ def export_masks(
     provenance: Mapping[str, Any] | None = None,
     pdf: bool = True,
     sheet_note: str = "",
-) -> dict[str, Any]:
+) -> MaskFiles:
     """Write the printable masks of a camera into ``out_dir``, whole.
 
     The files are written into a fresh folder that then replaces ``out_dir``
@@ -253,7 +296,7 @@ def export_masks(
             (``"UNFINISHED RUN (...)"``); none when empty.
 
     Returns:
-        ``{"png": [paths], "exr", "svg", "pdf" (if written), "json"}`` paths.
+        The paths of the files written (:class:`MaskFiles`).
 
     Raises:
         ValueError: wrong shape or non-finite values; ``out_dir`` holds other files.
@@ -275,8 +318,7 @@ def export_masks(
         pdf=pdf,
     )
     out = Path(out_dir)
-    names = swap_in_folder(out, write, owned=_written_by_an_export)
-    return {k: [out / n for n in v] if isinstance(v, list) else out / v for k, v in names.items()}
+    return swap_in_folder(out, write, owned=_written_by_an_export).in_folder(out)
 
 
 def _write_export(
@@ -285,28 +327,29 @@ def _write_export(
     folder: Path,
     *,
     title: str,
-    sidecar: Callable[..., dict[str, Any]],
+    sidecar: Callable[..., JsonObject],
     pdf: bool,
-) -> dict[str, Any]:
+) -> MaskFiles:
     """Write every file of an export of ``M[pixel, row, col]`` into ``folder``; their names.
 
     ``sidecar(m, clipped, layout_cam, names=...)`` gives ``masks.json``'s content,
     written last.
     """
     clipped = np.clip(m, *layout_cam.transmittance_range)
-    names: dict[str, Any] = {"png": [f"mask_{k:02d}.png" for k in range(m.shape[0])]}
-    for k, name in enumerate(names["png"]):
+    png = tuple(Path(f"mask_{k:02d}.png") for k in range(m.shape[0]))
+    for k, name in enumerate(png):
         _atomic_write(folder / name, _png16(clipped[k]))
-    names["exr"] = _write_exr(m, folder / "masks.exr").name
-    names["svg"] = "print_sheet.svg"
-    _atomic_write(folder / names["svg"], print_sheet_svg(clipped, layout_cam, title=title).encode())
+    exr = Path(_write_exr(m, folder / "masks.exr").name)
+    svg = Path("print_sheet.svg")
+    _atomic_write(folder / svg, print_sheet_svg(clipped, layout_cam, title=title).encode())
+    sheet = None
     if pdf:
-        names["pdf"] = print_sheet_pdf(
-            clipped, layout_cam, folder / "print_sheet.pdf", title=title
-        ).name
+        sheet = Path(
+            print_sheet_pdf(clipped, layout_cam, folder / "print_sheet.pdf", title=title).name
+        )
+    names = MaskFiles(png=png, exr=exr, svg=svg, pdf=sheet, json=Path("masks.json"))
     record = sidecar(m, clipped, layout_cam, names=names)
-    names["json"] = "masks.json"
-    _atomic_write(folder / names["json"], strict_json.dumps(record).encode())
+    _atomic_write(folder / names.json, strict_json.dumps(record).encode())
     return names
 
 
@@ -387,8 +430,8 @@ def _sidecar(
     *,
     task: str,
     provenance: Mapping[str, Any] | None,
-    names: dict[str, Any],
-) -> dict[str, Any]:
+    names: MaskFiles,
+) -> JsonObject:
     """``masks.json``'s content: geometry (SI units, sheet in mm), range, files, provenance."""
     lo, hi = layout_cam.transmittance_range
     w, h, corners = sheet_layout(layout_cam)
@@ -412,9 +455,9 @@ def _sidecar(
         "camera": layout_cam.to_dict(),
         "provenance": dict(provenance or {}),
         "files": {
-            "png": list(names["png"]),
+            "png": [str(p) for p in names.png],
             "exr": "masks.exr",
             "svg": "print_sheet.svg",
-            "pdf": names.get("pdf"),
+            "pdf": None if names.pdf is None else str(names.pdf),
         },
     }

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Required, TypedDict
 
 import numpy as np
 import torch
@@ -180,7 +180,26 @@ def build_baseline(
     )
 
 
-def describe_model(model: Model) -> dict[str, Any]:
+class ModelRecord(TypedDict, total=False):
+    """A model's description as ``run.json`` holds it (:func:`describe_model`).
+
+    Read back from disk by :mod:`~mincam_render.learn.restore`: the keys of the
+    model's kind, the optional ones only when used.
+    """
+
+    kind: Required[str]
+    pixels: Required[int]
+    history: Required[int]
+    detectors: list[int]
+    sensor_model: bool
+    mask_block: int
+    grid: list[int]
+    exposure_w: float
+    count_classes: dict[str, int]
+    head: str
+
+
+def describe_model(model: Model) -> ModelRecord:
     """A JSON-ready description of a model (kind, pixels, options).
 
     ``count_classes`` appears only for classified counts, ``head`` only for a
@@ -188,6 +207,7 @@ def describe_model(model: Model) -> dict[str, Any]:
     descriptions (and the resume check against checkpoints) of the paper's
     models are unchanged.
     """
+    desc: ModelRecord
     if isinstance(model, MincamCamera):
         desc = {
             "kind": ModelKind.MINCAM.value,

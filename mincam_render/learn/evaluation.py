@@ -13,12 +13,13 @@ docstring says torch.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.learn.models import Model, task_loss
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.perturbation import PerturbationDraw
@@ -181,12 +182,12 @@ def pooled_validation(
         pred, lab, loss = predict(model, ep, limit=lim)
         m = metrics(pred, lab, loss, ep)
         losses.append(loss)
-        errors.append(m["error"])
-        weights.append(m["samples"])
+        errors.append(m.error)
+        weights.append(m.samples)
         if draws:
             under.append(mean_loss_under(model, ep, draws, limit=lim))
     w = np.asarray(weights, np.float64) / sum(weights)
-    rms = m["error_name"].endswith("RMSE")
+    rms = m.error_name.endswith("RMSE")
     error = np.sqrt(w @ np.square(errors)) if rms else w @ np.asarray(errors)
     out = {"loss": float(w @ np.asarray(losses)), "error": float(error)}
     if draws:  # the built cameras' mean decides; the design's own loss is kept beside
@@ -201,7 +202,7 @@ def evaluate(
     noise: bool = True,
     seed: int = 1234,
     draw: PerturbationDraw | None = None,
-) -> dict[str, Any]:
+) -> Evaluation:
     """Test metrics after post-processing (every sample of ``data``, in time order).
 
     ``draw``: measure through this built camera (None: as designed).
@@ -231,27 +232,163 @@ def _rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((np.asarray(a, np.float64) - b) ** 2)))
 
 
+@dataclass(frozen=True, kw_only=True)
+class LabelMetrics:
+    """One label's test figures, in the label's unit (:func:`metrics`).
+
+    BINARY labels have ``accuracy`` (mean over elements) and
+    ``accuracy_per_element``; COUNT and REGRESSION labels ``rmse``
+    (post-processed, rules applied), ``rmse_raw`` (neither) and ``mae``, with a
+    zero rule also ``zero_below_true`` and ``rmse_without_zero_rule``. The
+    figures a label's kind has not are None.
+
+    Attributes:
+        unit: the label's unit ("" for BINARY).
+        median_filter_frames: the post-processing window (1 = not filtered).
+    """
+
+    unit: str
+    median_filter_frames: int
+    accuracy: float | None = None
+    accuracy_per_element: tuple[float, ...] | None = None
+    rmse: float | None = None
+    rmse_raw: float | None = None
+    mae: float | None = None
+    zero_below_true: float | None = None
+    rmse_without_zero_rule: float | None = None
+
+    def as_json(self) -> JsonObject:
+        """The label's record in ``metrics.json`` (the figures it has, in their order)."""
+        if self.accuracy is not None:
+            out: JsonObject = {
+                "accuracy": self.accuracy,
+                "accuracy_per_element": list(self.accuracy_per_element or ()),
+                "unit": self.unit,
+            }
+        else:
+            out = {"rmse": self.rmse, "rmse_raw": self.rmse_raw, "mae": self.mae, "unit": self.unit}
+            if self.zero_below_true is not None:
+                out["zero_below_true"] = self.zero_below_true
+                out["rmse_without_zero_rule"] = self.rmse_without_zero_rule
+        out["median_filter_frames"] = self.median_filter_frames
+        return out
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> LabelMetrics:
+        """The figures of :meth:`as_json`'s record."""
+        per_element = record.get("accuracy_per_element")
+        return cls(
+            **{k: v for k, v in record.items() if k != "accuracy_per_element"},
+            accuracy_per_element=None if per_element is None else tuple(per_element),
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Headline:
+    """The task's headline figure (:func:`headline`).
+
+    Attributes:
+        error: an RMSE (label unit) or ``1 - accuracy``.
+        error_name: ``"<name> RMSE"`` or ``"<name> error rate"``.
+        name: the headline's name (the label's when none is named).
+        labels: the labels pooled into it.
+        pooling: how they are pooled, in words.
+    """
+
+    error: float
+    error_name: str
+    name: str
+    labels: tuple[str, ...]
+    pooling: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class Evaluation:
+    """Test metrics of a camera on an episode (:func:`metrics`, :func:`evaluate`).
+
+    Attributes:
+        loss: the task loss.
+        samples: samples evaluated.
+        labels: per label name, its figures.
+        headline: the task's figure; ``error`` and ``error_name`` are its.
+    """
+
+    loss: float
+    samples: int
+    labels: Mapping[str, LabelMetrics]
+    headline: Headline
+
+    @property
+    def error(self) -> float:
+        """The headline error."""
+        return self.headline.error
+
+    @property
+    def error_name(self) -> str:
+        """The headline error's name."""
+        return self.headline.error_name
+
+    def as_json(self) -> JsonObject:
+        """``{"loss", "samples", "labels": {name: {...}}, "error", "error_name", "headline"}``."""
+        h = self.headline
+        return {
+            "loss": self.loss,
+            "samples": self.samples,
+            "labels": {name: m.as_json() for name, m in self.labels.items()},
+            "error": h.error,
+            "error_name": h.error_name,
+            "headline": {"name": h.name, "labels": list(h.labels), "pooling": h.pooling},
+        }
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> Evaluation:
+        """The metrics of :meth:`as_json`'s record (a run's ``metrics.json``)."""
+        h = record["headline"]
+        return cls(
+            loss=record["loss"],
+            samples=record["samples"],
+            labels={k: LabelMetrics.from_json(v) for k, v in record["labels"].items()},
+            headline=Headline(
+                error=record["error"],
+                error_name=record["error_name"],
+                name=h["name"],
+                labels=tuple(h["labels"]),
+                pooling=h["pooling"],
+            ),
+        )
+
+
 def _label_metrics(
-    s: LabelSpec, pred: np.ndarray, filtered: np.ndarray, scored: np.ndarray, y: np.ndarray
-) -> dict[str, Any]:
+    s: LabelSpec,
+    pred: np.ndarray,
+    filtered: np.ndarray,
+    scored: np.ndarray,
+    y: np.ndarray,
+    median_filter_frames: int,
+) -> LabelMetrics:
     """One label's figures: ``pred`` raw, ``filtered`` post-processed, ``scored`` ruled."""
     if s.kind is LabelKind.BINARY:
         acc = (scored == y).mean(axis=0)
-        return {"accuracy": float(acc.mean()), "accuracy_per_element": acc.tolist(), "unit": ""}
-    out: dict[str, Any] = {
-        "rmse": _rmse(scored, y),
-        "rmse_raw": _rmse(pred, y),
-        "mae": float(np.mean(np.abs(scored - y))),
-        "unit": s.unit,
-    }
-    if s.zero_below_true is not None:
-        out["zero_below_true"] = s.zero_below_true
-        out["rmse_without_zero_rule"] = _rmse(filtered, y)
-    return out
+        return LabelMetrics(
+            accuracy=float(acc.mean()),
+            accuracy_per_element=tuple(acc.tolist()),
+            unit="",
+            median_filter_frames=median_filter_frames,
+        )
+    ruled = s.zero_below_true is not None
+    return LabelMetrics(
+        rmse=_rmse(scored, y),
+        rmse_raw=_rmse(pred, y),
+        mae=float(np.mean(np.abs(scored - y))),
+        unit=s.unit,
+        zero_below_true=s.zero_below_true,
+        rmse_without_zero_rule=_rmse(filtered, y) if ruled else None,
+        median_filter_frames=median_filter_frames,
+    )
 
 
-def headline(res: Mapping[str, Any], specs: Sequence[LabelSpec]) -> dict[str, Any]:
-    """The task's headline figure from per-label metrics ``res["labels"]``.
+def headline(labels: Mapping[str, LabelMetrics], specs: Sequence[LabelSpec]) -> Headline:
+    """The task's headline figure from per-label metrics ``labels``.
 
     The labels sharing a ``LabelSpec.headline`` name are pooled over every test
     frame and every element of every such label: an RMSE as the root of the
@@ -262,8 +399,7 @@ def headline(res: Mapping[str, Any], specs: Sequence[LabelSpec]) -> dict[str, An
     label's figure (unchanged behaviour for patches, workspace and lighting).
 
     Returns:
-        ``{"error", "error_name", "headline": {"name", "labels", "pooling"}}``;
-        ``error`` is an RMSE or ``1 - accuracy``.
+        The :class:`Headline`; its ``error`` is an RMSE or ``1 - accuracy``.
 
     Raises:
         ValueError: more than one headline name, or labels of one headline of
@@ -274,24 +410,26 @@ def headline(res: Mapping[str, Any], specs: Sequence[LabelSpec]) -> dict[str, An
     if len(names) > 1:
         raise ValueError(f"labels name several headlines {sorted(names)}: a task has one")
     group = group or [specs[0]]
-    figures = [res["labels"][s.name] for s in group]
-    binary = ["accuracy" in m for m in figures]
+    figures = [labels[s.name] for s in group]
+    binary = [m.accuracy is not None for m in figures]
     if any(binary) and not all(binary):
         raise ValueError(f"headline {group[0].headline!r} mixes RMSE and accuracy labels")
     w = np.array([s.size for s in group], np.float64)
     w /= w.sum()
     name = group[0].headline or group[0].name
     if binary[0]:
-        error = 1.0 - float(np.dot(w, [m["accuracy"] for m in figures]))
+        error = 1.0 - float(np.dot(w, [m.accuracy for m in figures if m.accuracy is not None]))
         pooling, kind = "mean accuracy over frames and label elements", "error rate"
     else:
-        error = float(np.sqrt(np.dot(w, [m["rmse"] ** 2 for m in figures])))
+        error = float(np.sqrt(np.dot(w, [m.rmse**2 for m in figures if m.rmse is not None])))
         pooling, kind = "root mean square over frames and label elements", "RMSE"
-    return {
-        "error": error,
-        "error_name": f"{name} {kind}",
-        "headline": {"name": name, "labels": [s.name for s in group], "pooling": pooling},
-    }
+    return Headline(
+        error=error,
+        error_name=f"{name} {kind}",
+        name=name,
+        labels=tuple(s.name for s in group),
+        pooling=pooling,
+    )
 
 
 def metrics(
@@ -299,25 +437,31 @@ def metrics(
     lab: Mapping[str, np.ndarray],
     loss: float,
     data: TrainingData,
-) -> dict[str, Any]:
+) -> Evaluation:
     """Metrics of :func:`predict`'s output (time-ordered samples of ``data``).
 
     Post-processing (:func:`postprocess`), then the evaluation rules of the
-    labels (:func:`zero_where_true_below`). Returns ``{"loss", "samples",
-    "labels": {name: {...}}, "error", "error_name", "headline"}`` where
-    COUNT/REGRESSION report ``rmse`` (post-processed, rules applied),
-    ``rmse_raw`` (neither) and ``mae`` in the label's unit (with a zero rule
-    also ``zero_below_true`` and ``rmse_without_zero_rule``), BINARY
-    ``accuracy`` (mean over elements) and ``accuracy_per_element``; every label
-    its ``median_filter_frames`` (1 = not filtered at this frame rate).
-    ``error`` and ``error_name`` are the :func:`headline`.
+    labels (:func:`zero_where_true_below`); every label's figures
+    (:class:`LabelMetrics`, with its ``median_filter_frames``: 1 = not filtered
+    at this frame rate) and the :func:`headline`.
     """
     post = postprocess(pred, data.label_specs, data.fps)
     y = {s.name: np.asarray(lab[s.name], np.float64) for s in data.label_specs}
     scored = zero_where_true_below(post, y, data.label_specs)
-    res: dict[str, Any] = {"loss": loss, "samples": len(next(iter(lab.values()))), "labels": {}}
-    for s in data.label_specs:
-        m = _label_metrics(s, pred[s.name], post[s.name], scored[s.name], y[s.name])
-        m["median_filter_frames"] = median_filter_window(s.median_filter_s, data.fps)
-        res["labels"][s.name] = m
-    return res | headline(res, data.label_specs)
+    labels = {
+        s.name: _label_metrics(
+            s,
+            pred[s.name],
+            post[s.name],
+            scored[s.name],
+            y[s.name],
+            median_filter_window(s.median_filter_s, data.fps),
+        )
+        for s in data.label_specs
+    }
+    return Evaluation(
+        loss=loss,
+        samples=len(next(iter(lab.values()))),
+        labels=labels,
+        headline=headline(labels, data.label_specs),
+    )

@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.learn.builders import build_head, head_kind
-from mincam_render.learn.evaluation import evaluate, even_indices, predict
+from mincam_render.learn.evaluation import Evaluation, evaluate, even_indices, predict
 from mincam_render.learn.loop import train_model
 from mincam_render.learn.models import MincamCamera, task_loss
 from mincam_render.learn.train_config import TrainConfig
@@ -36,6 +37,41 @@ def _val_loss_without(model: MincamCamera, data: TrainingData, pixel: int, limit
     return total / max(1, len(idx))
 
 
+@dataclass(frozen=True, kw_only=True)
+class PruneStep:
+    """The camera after one step of greedy pruning (a record of ``prune.json``).
+
+    Attributes:
+        pixels: pixels left.
+        kept: the original indices of the pixels left.
+        removed: the original indices of the pixels removed, in order.
+        score_val_loss_without: the validation loss that chose the last removal
+            (None for the unpruned camera).
+        val_loss: the validation loss after retraining the head.
+        test: test metrics, or None without a test split.
+    """
+
+    pixels: int
+    kept: tuple[int, ...]
+    removed: tuple[int, ...]
+    score_val_loss_without: float | None = None
+    val_loss: float
+    test: Evaluation | None
+
+    def as_json(self) -> JsonObject:
+        """The record in ``prune.json``."""
+        out: JsonObject = {
+            "pixels": self.pixels,
+            "kept": list(self.kept),
+            "removed": list(self.removed),
+        }
+        if self.score_val_loss_without is not None:
+            out["score_val_loss_without"] = self.score_val_loss_without
+        out["val_loss"] = self.val_loss
+        out["test"] = None if self.test is None else self.test.as_json()
+        return out
+
+
 def greedy_prune(
     model: MincamCamera,
     train: TrainingData,
@@ -45,7 +81,7 @@ def greedy_prune(
     *,
     min_pixels: int = 1,
     progress: bool = False,
-) -> list[dict[str, Any]]:
+) -> list[PruneStep]:
     """Supplement C's greedy pruning of a trained minimalist camera.
 
     At each step the pixel whose removal raises the validation loss least is
@@ -54,22 +90,20 @@ def greedy_prune(
     trained on the remaining pixels with ``config``.
 
     Returns:
-        One record per pixel count, from ``K`` down to ``min_pixels``:
-        ``{"pixels", "detectors", "removed", "val_loss", "test"}`` (test metrics
-        when ``test`` is given); ``removed`` lists original pixel indices in order.
+        One :class:`PruneStep` per pixel count, from ``K`` down to ``min_pixels``.
 
     """
     current = model
     keep = list(range(model.num_pixels))  # indices into the original model's pixels
     removed: list[int] = []
     records = [
-        {
-            "pixels": len(keep),
-            "kept": list(keep),
-            "removed": [],
-            "val_loss": predict(current, val, limit=config.max_eval_samples)[2],
-            "test": evaluate(current, test) if test is not None else None,
-        }
+        PruneStep(
+            pixels=len(keep),
+            kept=tuple(keep),
+            removed=(),
+            val_loss=predict(current, val, limit=config.max_eval_samples)[2],
+            test=evaluate(current, test) if test is not None else None,
+        )
     ]
     while len(keep) > min_pixels:
         scores = [
@@ -82,14 +116,14 @@ def greedy_prune(
         res = train_model(nxt, train, val, config, progress=progress, desc=f"prune {len(keep)} px")
         current = nxt
         records.append(
-            {
-                "pixels": len(keep),
-                "kept": list(keep),
-                "removed": list(removed),
-                "score_val_loss_without": float(scores[j]),
-                "val_loss": res.best_val_loss,
-                "test": evaluate(current, test) if test is not None else None,
-            }
+            PruneStep(
+                pixels=len(keep),
+                kept=tuple(keep),
+                removed=tuple(removed),
+                score_val_loss_without=float(scores[j]),
+                val_loss=res.best_val_loss,
+                test=evaluate(current, test) if test is not None else None,
+            )
         )
     return records
 

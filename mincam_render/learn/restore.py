@@ -24,12 +24,13 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, cast
+from typing import NotRequired, TypedDict, cast
 
 import numpy as np
 import torch
 
-from mincam_render.learn.builders import build_head
+from mincam_render.core.strict_json import JsonObject
+from mincam_render.learn.builders import ModelRecord, build_head
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.models import BaselineCamera, MincamCamera, Model
 from mincam_render.learn.train_config import HeadKind, ModelKind
@@ -58,6 +59,25 @@ def run_finished(run_dir: str | os.PathLike) -> bool:
     return (Path(run_dir) / FINISHED_MARK).is_file()
 
 
+class RunRecord(TypedDict):
+    """A run's ``run.json`` (:func:`~mincam_render.learn.runs.describe_run`), read back here.
+
+    ``camera``, ``data``, ``config`` and each of ``label_specs`` are the JSON
+    records of their own writers (the camera, the datasets' provenance, the
+    recipe, the label specifications).
+    """
+
+    model: ModelRecord
+    camera: JsonObject
+    data: JsonObject
+    config: JsonObject
+    fps: float
+    history: int
+    label_specs: list[JsonObject]
+    frozen_masks_from: NotRequired[str]
+    reference: NotRequired[JsonObject]
+
+
 @dataclass(frozen=True)
 class TrainedRun:
     """A run directory as read back: its record, its best state and how far it got.
@@ -71,7 +91,7 @@ class TrainedRun:
     """
 
     path: Path
-    record: dict[str, Any]
+    record: RunRecord
     state: dict[str, torch.Tensor]
     finished: bool
     step: int
@@ -235,7 +255,7 @@ def masks_of(run: TrainedRun) -> tuple[np.ndarray, FreeformCamera]:
     return m, camera
 
 
-def run_masks(run_dir: str | os.PathLike) -> tuple[np.ndarray, FreeformCamera, dict[str, Any]]:
+def run_masks(run_dir: str | os.PathLike) -> tuple[np.ndarray, FreeformCamera, RunRecord]:
     """``(M[pixel, row, col], camera, run.json)`` of a finished minimalist run (:func:`masks_of`).
 
     Raises:

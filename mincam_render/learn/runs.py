@@ -12,24 +12,76 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
 import torch
 
 from mincam_render.core import strict_json
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
-from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
-from mincam_render.learn.evaluation import evaluate
+from mincam_render.learn.builders import ModelRecord, build_baseline, build_mincam, describe_model
+from mincam_render.learn.evaluation import Evaluation, evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.reference_masks import set_reference_masks
-from mincam_render.learn.restore import FINISHED_MARK, ModelKind, open_run
+from mincam_render.learn.restore import FINISHED_MARK, ModelKind, RunRecord, open_run
 from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunMetrics:
+    """A finished run's outcome, as its ``metrics.json`` holds it (:func:`train_run`).
+
+    Attributes:
+        model: the model's description (``run.json``'s).
+        steps: training steps taken.
+        best_step: the step of the best validation loss (the state kept).
+        best_val_loss: that loss.
+        stopped_early: whether early stopping ended the run.
+        train_wall_time_s: training's wall time across resumes (s).
+        train_samples: samples of the training split.
+        test: metrics on the test split, or None without one.
+        episodes: metrics on each named test episode.
+        history: the validation history (one record per evaluation).
+        validation_episodes: metrics on each named validation episode, or None.
+    """
+
+    model: ModelRecord
+    steps: int
+    best_step: int
+    best_val_loss: float
+    stopped_early: bool
+    train_wall_time_s: float
+    train_samples: int
+    test: Evaluation | None
+    episodes: Mapping[str, Evaluation]
+    history: Sequence[Mapping[str, float]]
+    validation_episodes: Mapping[str, Evaluation] | None = None
+
+    def as_json(self) -> JsonObject:
+        """``metrics.json``'s content."""
+        out: JsonObject = {
+            "model": self.model,
+            "steps": self.steps,
+            "best_step": self.best_step,
+            "best_val_loss": self.best_val_loss,
+            "stopped_early": self.stopped_early,
+            "train_wall_time_s": self.train_wall_time_s,
+            "train_samples": self.train_samples,
+            "test": None if self.test is None else self.test.as_json(),
+            "episodes": {k: e.as_json() for k, e in self.episodes.items()},
+            "history": list(self.history),
+        }
+        if self.validation_episodes is not None:
+            out["validation_episodes"] = {
+                k: e.as_json() for k, e in self.validation_episodes.items()
+            }
+        return out
 
 
 def train_run(
@@ -50,7 +102,7 @@ def train_run(
     resume: bool = True,
     progress: bool = False,
     on_progress: Callable[[int], None] | None = None,
-) -> dict[str, Any]:
+) -> RunMetrics:
     """Train one camera into ``out_dir`` (resumable) and write ``run.json`` + ``metrics.json``.
 
     A minimalist camera of ``pixels`` pixels unless ``baseline_grid`` is given.
@@ -106,8 +158,9 @@ def train_run(
         )
         metrics = _run_metrics(run, res, model, len(train), test, episodes)
         if named:
-            metrics["validation_episodes"] = {k: evaluate(model, d) for k, d in named.items()}
-        _write_json_atomic(out / FINISHED_MARK, metrics)  # last: the run is finished
+            validation = {k: evaluate(model, d) for k, d in named.items()}
+            metrics = replace(metrics, validation_episodes=validation)
+        _write_json_atomic(out / FINISHED_MARK, metrics.as_json())  # last: the run is finished
         return metrics
 
 
@@ -189,7 +242,7 @@ def describe_run(
     test: TrainingData | None,
     config: TrainConfig,
     on_the_fly: bool,
-) -> dict[str, Any]:
+) -> RunRecord:
     """``run.json``: the model, camera, data provenance, recipe and labels of a run.
 
     ``data.val`` is the validation episode's provenance, or a list of them.
@@ -213,29 +266,29 @@ def describe_run(
 
 
 def _run_metrics(
-    run: Mapping[str, Any],
+    run: RunRecord,
     res: TrainResult,
     model: Model,
     train_samples: int,
     test: TrainingData | None,
     episodes: Mapping[str, TrainingData] | None,
-) -> dict[str, Any]:
+) -> RunMetrics:
     """``metrics.json``: the training's outcome, test metrics, per-episode metrics, history."""
-    return {
-        "model": run["model"],
-        "steps": res.steps,
-        "best_step": res.best_step,
-        "best_val_loss": res.best_val_loss,
-        "stopped_early": res.stopped_early,
-        "train_wall_time_s": res.wall_time_s,
-        "train_samples": train_samples,
-        "test": evaluate(model, test) if test is not None else None,
-        "episodes": {k: evaluate(model, d) for k, d in (episodes or {}).items()},
-        "history": res.history,
-    }
+    return RunMetrics(
+        model=run["model"],
+        steps=res.steps,
+        best_step=res.best_step,
+        best_val_loss=res.best_val_loss,
+        stopped_early=res.stopped_early,
+        train_wall_time_s=res.wall_time_s,
+        train_samples=train_samples,
+        test=evaluate(model, test) if test is not None else None,
+        episodes={k: evaluate(model, d) for k, d in (episodes or {}).items()},
+        history=res.history,
+    )
 
 
-def config_record(config: TrainConfig) -> dict[str, Any]:
+def config_record(config: TrainConfig) -> JsonObject:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
     ``head`` appears only when not the paper's MLP, ``perturbation`` (in its
@@ -310,7 +363,7 @@ def _has_content(data: Any) -> bool:
     )
 
 
-def _refuse_other_data(out: Path, run: Mapping[str, Any], resume: bool) -> None:
+def _refuse_other_data(out: Path, run: RunRecord, resume: bool) -> None:
     """A run resumed on other data or another recipe would mix two trainings: refuse it."""
     path, ckpt = out / "run.json", out / "checkpoint.pt"
     if not (resume and path.is_file() and ckpt.is_file()):
@@ -341,5 +394,5 @@ def _write_json_atomic(path: Path, obj: Any) -> None:
     atomic_write_bytes(path, (strict_json.dumps(obj) + "\n").encode())
 
 
-def _camera_dict(camera: FreeformCamera) -> dict[str, Any]:
+def _camera_dict(camera: FreeformCamera) -> JsonObject:
     return json.loads(json.dumps(camera.to_dict(), default=lambda o: getattr(o, "value", str(o))))

@@ -5,13 +5,20 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from mincam_render.core import strict_json
-from mincam_render.learn.builders import build_baseline, build_mincam, describe_model
-from mincam_render.learn.evaluation import evaluate
+from mincam_render.core.strict_json import JsonObject
+from mincam_render.learn.builders import (
+    ModelRecord,
+    build_baseline,
+    build_mincam,
+    describe_model,
+)
+from mincam_render.learn.evaluation import Evaluation, evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import Model
 from mincam_render.learn.train_config import ModelKind, TrainConfig
@@ -35,6 +42,70 @@ def default_pixel_counts(num_detectors: int) -> list[int]:
     return out if out[-1] == num_detectors else [*out, num_detectors]
 
 
+@dataclass(frozen=True, kw_only=True)
+class SweepPoint:
+    """One point of an error-vs-pixel-count plot (:func:`plot_sweep`).
+
+    Attributes:
+        kind: minimalist or baseline camera.
+        pixels: the camera's pixel count.
+        error: its test error (headline).
+        error_name: the error's name.
+    """
+
+    kind: ModelKind
+    pixels: int
+    error: float
+    error_name: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class SweepRow:
+    """One camera of a sweep: its description, test metrics and training (``sweep.json``).
+
+    Attributes:
+        name: ``mincam_<k>px`` or ``baseline_<r>x<c>``.
+        model: the model's description.
+        metrics: its test metrics.
+        steps: training steps taken.
+        best_step: the step of the best validation loss.
+        train_wall_time_s: training's wall time (s).
+        train_samples: samples of the training split.
+    """
+
+    name: str
+    model: ModelRecord
+    metrics: Evaluation
+    steps: int
+    best_step: int
+    train_wall_time_s: float
+    train_samples: int
+
+    @property
+    def point(self) -> SweepPoint:
+        """The row's point of the sweep plot."""
+        return SweepPoint(
+            kind=ModelKind(self.model["kind"]),
+            pixels=self.model["pixels"],
+            error=self.metrics.error,
+            error_name=self.metrics.error_name,
+        )
+
+    def as_json(self) -> JsonObject:
+        """The row in ``sweep.json``: the model's keys inline, then the figures."""
+        return {
+            "name": self.name,
+            **self.model,
+            "error": self.metrics.error,
+            "error_name": self.metrics.error_name,
+            "metrics": self.metrics.as_json(),
+            "steps": self.steps,
+            "best_step": self.best_step,
+            "train_wall_time_s": self.train_wall_time_s,
+            "train_samples": self.train_samples,
+        }
+
+
 def sweep(
     train: TrainingData,
     val: TrainingData,
@@ -45,8 +116,8 @@ def sweep(
     config: TrainConfig = TrainConfig(),
     out_dir: str | os.PathLike | None = None,
     progress: bool = False,
-    on_result: Callable[[dict[str, Any]], None] | None = None,
-) -> list[dict[str, Any]]:
+    on_result: Callable[[SweepRow], None] | None = None,
+) -> list[SweepRow]:
     """Train minimalist cameras and baselines at several pixel counts; error vs pixels.
 
     ``pixel_counts`` None: :func:`default_pixel_counts` of the rendered detectors.
@@ -54,7 +125,7 @@ def sweep(
     ``out_dir``, each run trains in ``out_dir/<name>/`` (resumable) and
     ``sweep.json``, ``sweep.md`` and ``sweep.png`` (log-x axis) are written.
     """
-    rows: list[dict[str, Any]] = []
+    rows: list[SweepRow] = []
     out = Path(out_dir) if out_dir is not None else None
     jobs = _sweep_jobs(train, pixel_counts, baseline_grids, config)
     for name, make in jobs:
@@ -76,8 +147,8 @@ def sweep(
         log.info(
             "%s: %s = %.4g after %d steps (%.1f s)",
             name,
-            metrics["error_name"],
-            metrics["error"],
+            metrics.error_name,
+            metrics.error,
             res.steps,
             res.wall_time_s,
         )
@@ -127,23 +198,21 @@ def _sweep_jobs(
 
 
 def _sweep_row(
-    name: str, model: Model, res: TrainResult, metrics: dict[str, Any], train_samples: int
-) -> dict[str, Any]:
+    name: str, model: Model, res: TrainResult, metrics: Evaluation, train_samples: int
+) -> SweepRow:
     """A sweep row: the camera, its test error and metrics, its training."""
-    return {
-        "name": name,
-        **describe_model(model),
-        "error": metrics["error"],
-        "error_name": metrics["error_name"],
-        "metrics": metrics,
-        "steps": res.steps,
-        "best_step": res.best_step,
-        "train_wall_time_s": res.wall_time_s,
-        "train_samples": train_samples,
-    }
+    return SweepRow(
+        name=name,
+        model=describe_model(model),
+        metrics=metrics,
+        steps=res.steps,
+        best_step=res.best_step,
+        train_wall_time_s=res.wall_time_s,
+        train_samples=train_samples,
+    )
 
 
-def sweep_table(rows: Sequence[Mapping[str, Any]]) -> str:
+def sweep_table(rows: Sequence[SweepRow]) -> str:
     """A Markdown table of sweep rows."""
     lines = [
         "| camera | pixels | test error | steps | train time (s) |",
@@ -151,26 +220,26 @@ def sweep_table(rows: Sequence[Mapping[str, Any]]) -> str:
     ]
     for r in rows:
         lines.append(
-            f"| {r['name']} | {r['pixels']} | {r['error']:.4f} | {r['steps']} | "
-            f"{r['train_wall_time_s']:.1f} |"
+            f"| {r.name} | {r.model['pixels']} | {r.metrics.error:.4f} | {r.steps} | "
+            f"{r.train_wall_time_s:.1f} |"
         )
     return "\n".join(lines)
 
 
 def write_sweep(
-    rows: Sequence[Mapping[str, Any]], out_dir: str | os.PathLike, title: str = ""
+    rows: Sequence[SweepRow], out_dir: str | os.PathLike, title: str = ""
 ) -> dict[str, Path]:
     """Write ``sweep.json``, ``sweep.md`` and ``sweep.png`` (error vs pixel count, log x)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.json").write_text(strict_json.dumps(list(rows)))
+    (out / "sweep.json").write_text(strict_json.dumps([r.as_json() for r in rows]))
     (out / "sweep.md").write_text(sweep_table(rows) + "\n")
-    plot_sweep(rows, out / "sweep.png", title)
+    plot_sweep([r.point for r in rows], out / "sweep.png", title)
     return {"json": out / "sweep.json", "table": out / "sweep.md", "figure": out / "sweep.png"}
 
 
-def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, title: str = "") -> None:
-    """Save test error vs pixel count (log x) of sweep rows ``{"kind", "pixels", "error"}``."""
+def plot_sweep(points: Sequence[SweepPoint], path: str | os.PathLike, title: str = "") -> None:
+    """Save test error vs pixel count (log x) of ``points``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -181,12 +250,12 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike, title
         (ModelKind.MINCAM, "o-", "minimalist camera"),
         (ModelKind.BASELINE, "s--", "baseline camera"),
     ):
-        pts = sorted((r["pixels"], r["error"]) for r in rows if ModelKind(r["kind"]) is kind)
+        pts = sorted((p.pixels, p.error) for p in points if p.kind is kind)
         if pts:
             ax.plot(*zip(*pts, strict=True), style, label=label)
     ax.set_xscale("log", base=2)
     ax.set_xlabel("pixel count")
-    ax.set_ylabel(rows[0]["error_name"] if rows else "test error")
+    ax.set_ylabel(points[0].error_name if points else "test error")
     ax.set_title(f"{title} test error vs pixel count".strip())
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()

@@ -42,6 +42,9 @@ from mincam_render.learn.builders import (
     learning_rate_for,
 )
 from mincam_render.learn.evaluation import (
+    Evaluation,
+    Headline,
+    LabelMetrics,
     evaluate,
     median_filter,
     median_filter_window,
@@ -58,7 +61,7 @@ from mincam_render.learn.models import (
     Model,
     task_loss,
 )
-from mincam_render.learn.prune import greedy_prune
+from mincam_render.learn.prune import PruneStep, greedy_prune
 from mincam_render.learn.restore import (
     ModelKind,
     TrainedRun,
@@ -71,10 +74,12 @@ from mincam_render.learn.restore import (
     run_masks,
 )
 from mincam_render.learn.run_log import LOG_EVERY
-from mincam_render.learn.runs import train_run
+from mincam_render.learn.runs import RunMetrics, train_run
 from mincam_render.learn.snapshots import plot_mask_evolution
 from mincam_render.learn.step import build_optimizer, train_step
 from mincam_render.learn.sweep import (
+    SweepPoint,
+    SweepRow,
     default_pixel_counts,
     plot_sweep,
     sweep,
@@ -86,26 +91,33 @@ from mincam_render.learn.train_config import HeadKind, TrainConfig
 from mincam_render.learn.training_data import WIDEN_MAX_BYTES, Batch, GatherBuffer, TrainingData
 
 __all__ = [
-    "LOG_EVERY",
-    "PAPER_COUNT_LOSS",
-    "WIDEN_MAX_BYTES",
     "BaselineCamera",
     "Batch",
     "CountLoss",
     "DatasetBatches",
+    "Evaluation",
     "GatherBuffer",
     "Head",
     "HeadKind",
+    "Headline",
+    "LOG_EVERY",
+    "LabelMetrics",
     "MincamCamera",
     "Model",
     "ModelKind",
+    "PAPER_COUNT_LOSS",
+    "PruneStep",
     "RenderedBatches",
+    "RunMetrics",
+    "SweepPoint",
+    "SweepRow",
     "TemporalConvHead",
     "TrainConfig",
     "TrainResult",
     "TrainedRun",
     "TrainingData",
     "UnfinishedRunError",
+    "WIDEN_MAX_BYTES",
     "build_baseline",
     "build_head",
     "build_mincam",

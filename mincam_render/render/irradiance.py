@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +19,8 @@ from mincam_render.render.backend import use_variant
 
 if TYPE_CHECKING:
     import mitsuba as mi
+
+    from mincam_render.render.mitsuba_scene import MitsubaDict
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,7 +50,7 @@ def _batch_seed(seed: int, batch: int) -> int:
 
 def measure_irradiance(
     scene: mi.Scene,
-    meter: dict[str, Any],
+    meter: MitsubaDict,
     *,
     spp: int,
     batches: int = 8,

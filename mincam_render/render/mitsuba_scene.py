@@ -22,8 +22,13 @@ if TYPE_CHECKING:
 
     from mincam_render.optics.camera import FreeformCamera
 
+#: A Mitsuba scene dictionary, the form ``mi.load_dict`` takes: ``{"type": plugin,
+#: ...}`` with nested plugin dicts, numbers, strings and Mitsuba objects (transforms,
+#: bitmaps) as values. Mitsuba's format, not ours: typed only as far as Mitsuba types it.
+MitsubaDict = dict[str, Any]
+
 #: What :func:`load_scene` accepts.
-SceneInput = Union[dict, str, os.PathLike, "mi.Scene"]
+SceneInput = Union[MitsubaDict, str, os.PathLike, "mi.Scene"]
 
 
 class SceneError(ValueError):
@@ -89,12 +94,12 @@ def _to_world(
     return t
 
 
-def diffuse(reflectance: float) -> dict[str, Any]:
+def diffuse(reflectance: float) -> MitsubaDict:
     """A Lambertian BSDF of albedo ``reflectance`` (0-1)."""
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": float(reflectance)}}
 
 
-def constant_environment(radiance_w_m2_sr: float) -> dict[str, Any]:
+def constant_environment(radiance_w_m2_sr: float) -> MitsubaDict:
     """A uniform environment emitter of radiance ``radiance_w_m2_sr`` (W m^-2 sr^-1)."""
     return {"type": "constant", "radiance": {"type": "rgb", "value": float(radiance_w_m2_sr)}}
 
@@ -103,16 +108,16 @@ def rectangle(
     center_m: Sequence[float] | np.ndarray,
     facing_m: Sequence[float] | np.ndarray,
     size_m: Sequence[float] | np.ndarray,
-    bsdf: dict[str, Any] | None = None,
+    bsdf: MitsubaDict | None = None,
     radiance_w_m2_sr: float | None = None,
     up: Sequence[float] | np.ndarray = (0.0, 1.0, 0.0),
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """A ``(width, height)`` rectangle centred at ``center_m``, front facing ``facing_m``.
 
     With ``radiance_w_m2_sr`` it is an area emitter (one-sided, W m^-2 sr^-1).
     """
     w, h = size_m
-    shape: dict[str, Any] = {
+    shape: MitsubaDict = {
         "type": "rectangle",
         # Mitsuba's rectangle spans [-1, 1]^2 in z = 0 with normal +z; look_at
         # points +z at the target.
@@ -127,11 +132,11 @@ def rectangle(
 def sphere(
     center_m: Sequence[float] | np.ndarray,
     radius_m: float,
-    bsdf: dict[str, Any] | None = None,
+    bsdf: MitsubaDict | None = None,
     radiance_w_m2_sr: float | None = None,
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """A sphere; an area emitter when ``radiance_w_m2_sr`` is given (W m^-2 sr^-1)."""
-    shape: dict[str, Any] = {
+    shape: MitsubaDict = {
         "type": "sphere",
         "center": list(map(float, center_m)),
         "radius": float(radius_m),
@@ -142,14 +147,14 @@ def sphere(
     return shape
 
 
-def scene_dict(shapes: dict[str, dict], *, max_depth: int = 4) -> dict[str, Any]:
+def scene_dict(shapes: dict[str, MitsubaDict | mi.Mesh], *, max_depth: int = 4) -> MitsubaDict:
     """Wrap named shape/emitter dicts into a scene with a path integrator."""
-    d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth}}
+    d: MitsubaDict = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth}}
     d.update(shapes)
     return d
 
 
-def demo_scene() -> dict[str, Any]:
+def demo_scene() -> MitsubaDict:
     """A small room-like demo scene for the default camera (board at the origin, facing +z).
 
     A grey back wall 2 m away, a floor, a lit bright panel up and right, a
@@ -175,7 +180,7 @@ def demo_scene() -> dict[str, Any]:
     )
 
 
-def _irradiance_sensor() -> dict[str, Any]:
+def _irradiance_sensor() -> MitsubaDict:
     """Mitsuba's irradiance meter on the shape holding it: one luminance value (W/m^2)."""
     return {
         "type": "irradiancemeter",
@@ -190,13 +195,13 @@ def _irradiance_sensor() -> dict[str, Any]:
 
 
 def with_mask_geometry(
-    scene: dict[str, Any],
+    scene: MitsubaDict,
     camera: FreeformCamera,
     detector: int,
     transmittance: ArrayLike,
     *,
     max_depth: int,
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """Copy of ``scene`` with one freeform pixel built as geometry, for validation.
 
     Adds, around detector ``detector`` of ``camera``: the mask as a thin sheet
@@ -273,7 +278,7 @@ def irradiance_meter(
     normal: Sequence[float] | np.ndarray,
     tangent: Sequence[float] | np.ndarray,
     size_m: tuple[float, float],
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """A flat rectangular ``irradiancemeter`` (a panel or a lux meter), not part of any scene.
 
     Rendered with ``mi.render(scene, sensor=loaded.sensor())`` it measures the mean
@@ -378,7 +383,7 @@ def mesh(
 
 def environment_map(
     radiance_w_m2_sr: ArrayLike, to_world: mi.ScalarTransform4f | None = None
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """An environment emitter from a lat-long map ``L[row, col]`` (W m^-2 sr^-1).
 
     Row 0 is the zenith of the map's frame (Mitsuba's +y up by default).
@@ -388,7 +393,7 @@ def environment_map(
 
     use_variant()
     data = np.ascontiguousarray(np.asarray(radiance_w_m2_sr, dtype=np.float32))[..., None]
-    d: dict[str, Any] = {"type": "envmap", "bitmap": mi.Bitmap(data)}
+    d: MitsubaDict = {"type": "envmap", "bitmap": mi.Bitmap(data)}
     if to_world is not None:
         d["to_world"] = to_world
     return d
@@ -399,7 +404,7 @@ def portal_sky(
     corner_m: Sequence[float] | np.ndarray,
     edge_u_m: Sequence[float] | np.ndarray,
     edge_v_m: Sequence[float] | np.ndarray,
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """Sky and ground seen through one window, sampled through it (a light portal).
 
     ``radiance_w_m2_sr`` is a lat-long map ``L[row, col]`` in the layout of
@@ -431,7 +436,7 @@ def sun_patch_integrator(
     edge_v_m: Sequence[float] | np.ndarray,
     *,
     max_depth: int = -1,
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """The :mod:`~mincam_render.render.sun_patch` path tracer as an integrator dict (``mi.render``).
 
     The window is the rectangle ``corner_m + a edge_u_m + b edge_v_m``, ``a, b``
@@ -462,7 +467,7 @@ def portal_sky_data(radiance_w_m2_sr: ArrayLike) -> mi.Float:
 
 def directional_light(
     direction: Sequence[float] | np.ndarray, irradiance_w_m2: float
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """A distant light (e.g. the sun) travelling along ``direction``, irradiance in W/m^2."""
     return {
         "type": "directional",
@@ -477,7 +482,7 @@ def textured_emitter_rectangle(
     size_m: Sequence[float] | np.ndarray,
     radiance_w_m2_sr: ArrayLike,
     up: Sequence[float] | np.ndarray = (0.0, 1.0, 0.0),
-) -> dict[str, Any]:
+) -> MitsubaDict:
     """A rectangle emitting a radiance image ``L[row, col]`` (W m^-2 sr^-1), nearest filtered.
 
     Row 0 of the image is the ``up`` edge and column 0 the left edge as seen by

@@ -19,6 +19,7 @@ import numpy as np
 from mincam_render.core.checks import check_int
 from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render.capabilities import SunlitWindow
@@ -127,7 +128,7 @@ class SceneFamily(abc.ABC):
         """
 
     @abc.abstractmethod
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         """A JSON-ready summary of frame ``index``'s state (for metadata)."""
 
     def render_transport(

@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.render.fidelity.signal import SignalSource
 from mincam_render.render.precision import ErrorScale
 from mincam_render.scenes.base import CameraMount
@@ -199,7 +199,7 @@ class LightingFamily(IndoorFamily):
         """Labels of any state (e.g. one set by hand in a test)."""
         return {"lights": np.array(state.lights_on, dtype=np.float32)}
 
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         st = self.state(index)
         return {
             "time_s": self.time_s(index),

@@ -16,13 +16,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import mitsuba as mi
 import numpy as np
 
 from mincam_render.core.config import Described, check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.photodiode import DiodeResponse
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.render.capabilities import Preview, View
@@ -89,7 +90,7 @@ class PatchesFamily(SceneFamily, Preview):
 
     def __init__(self, config: PatchesConfig, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)
-        self._last_image: tuple[int, tuple[np.ndarray, dict[str, Any]]] | None = None
+        self._last_image: tuple[int, tuple[np.ndarray, JsonObject]] | None = None
 
     @property
     def fps(self) -> float:
@@ -113,7 +114,7 @@ class PatchesFamily(SceneFamily, Preview):
         )
         return centre, up, np.asarray(cam.position), side
 
-    def image(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
+    def image(self, index: int) -> tuple[np.ndarray, JsonObject]:
         """Radiance image ``L[row, col]`` (W m^-2 sr^-1) of frame ``index`` and its parameters.
 
         The last frame's result is kept: a render asks for it twice (set_frame,
@@ -125,7 +126,7 @@ class PatchesFamily(SceneFamily, Preview):
         self._last_image = (index, result)
         return result
 
-    def _draw_image(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
+    def _draw_image(self, index: int) -> tuple[np.ndarray, JsonObject]:
         self.check_index(index)
         c = self.config
         rng = np.random.default_rng([self.seed, index])
@@ -189,7 +190,7 @@ class PatchesFamily(SceneFamily, Preview):
         params.update()
         return {"count": np.array([state["count"]], dtype=np.float32)}
 
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         return self.image(index)[1]
 
     def birdseye_view(self) -> View:

@@ -33,7 +33,6 @@ import logging
 import math
 import re
 from dataclasses import dataclass
-from typing import Any
 
 import mitsuba as mi
 import numpy as np
@@ -42,6 +41,7 @@ from mincam_render.core.config import Described, check_min_max, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.core.photometry import irradiance_to_lux
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.render.capabilities import Preview, TemporalLabels, View
@@ -462,46 +462,57 @@ def traffic_labels(
 
 # ---- vehicle meshes --------------------------------------------------------------
 
+
+@dataclass(frozen=True)
+class _BoxLayout:
+    """A vehicle shape's boxes in units of its (L, W, H): see :data:`_LAYOUTS`."""
+
+    body: tuple[tuple[float, float, float, float, float], ...]
+    glass: tuple[float, float, float, float, float]
+    axles: tuple[float, float]
+    wheel_r: float
+
+
 # Box layouts in units of (L, W, H), vehicle frame: x forward from the centre,
 # y left, z up from the ground. Each: (x0, x1, half-width fraction, z0, z1).
 # Three body boxes (a zero box where a shape needs fewer), a glass band
 # wrapped around one of them, and the wheels: (axle x fractions, radius m).
 _Z = (0.0, 0.0, 0.0, 0.0, 0.0)
-_LAYOUTS: dict[VehicleShape, dict[str, Any]] = {
-    VehicleShape.SEDAN: {
-        "body": ((-0.5, 0.5, 0.5, 0.16, 0.60), (-0.30, 0.18, 0.45, 0.60, 1.0), _Z),
-        "glass": (-0.30, 0.18, 0.45, 0.64, 0.93),
-        "axles": (-0.31, 0.31), "wheel_r": 0.32,
-    },
-    VehicleShape.HATCHBACK: {
-        "body": ((-0.5, 0.5, 0.5, 0.16, 0.58), (-0.48, 0.15, 0.45, 0.58, 1.0), _Z),
-        "glass": (-0.48, 0.15, 0.45, 0.62, 0.93),
-        "axles": (-0.32, 0.32), "wheel_r": 0.31,
-    },
-    VehicleShape.SUV: {
-        "body": ((-0.5, 0.5, 0.5, 0.17, 0.58), (-0.47, 0.20, 0.46, 0.58, 1.0), _Z),
-        "glass": (-0.47, 0.20, 0.46, 0.62, 0.93),
-        "axles": (-0.30, 0.31), "wheel_r": 0.37,
-    },
-    VehicleShape.VAN: {
-        "body": ((-0.5, 0.5, 0.5, 0.13, 0.45), (-0.5, 0.32, 0.48, 0.45, 1.0), _Z),
-        "glass": (0.12, 0.32, 0.48, 0.52, 0.85),
-        "axles": (-0.33, 0.30), "wheel_r": 0.36,
-    },
-    VehicleShape.TRUCK: {
-        "body": (
+_LAYOUTS: dict[VehicleShape, _BoxLayout] = {
+    VehicleShape.SEDAN: _BoxLayout(
+        body=((-0.5, 0.5, 0.5, 0.16, 0.60), (-0.30, 0.18, 0.45, 0.60, 1.0), _Z),
+        glass=(-0.30, 0.18, 0.45, 0.64, 0.93),
+        axles=(-0.31, 0.31), wheel_r=0.32,
+    ),
+    VehicleShape.HATCHBACK: _BoxLayout(
+        body=((-0.5, 0.5, 0.5, 0.16, 0.58), (-0.48, 0.15, 0.45, 0.58, 1.0), _Z),
+        glass=(-0.48, 0.15, 0.45, 0.62, 0.93),
+        axles=(-0.32, 0.32), wheel_r=0.31,
+    ),
+    VehicleShape.SUV: _BoxLayout(
+        body=((-0.5, 0.5, 0.5, 0.17, 0.58), (-0.47, 0.20, 0.46, 0.58, 1.0), _Z),
+        glass=(-0.47, 0.20, 0.46, 0.62, 0.93),
+        axles=(-0.30, 0.31), wheel_r=0.37,
+    ),
+    VehicleShape.VAN: _BoxLayout(
+        body=((-0.5, 0.5, 0.5, 0.13, 0.45), (-0.5, 0.32, 0.48, 0.45, 1.0), _Z),
+        glass=(0.12, 0.32, 0.48, 0.52, 0.85),
+        axles=(-0.33, 0.30), wheel_r=0.36,
+    ),
+    VehicleShape.TRUCK: _BoxLayout(
+        body=(
             (-0.5, 0.5, 0.45, 0.12, 0.26),  # chassis
             (0.30, 0.5, 0.48, 0.14, 0.72),  # cab
             (-0.5, 0.28, 0.5, 0.26, 1.0),  # cargo box
         ),
-        "glass": (0.30, 0.5, 0.48, 0.46, 0.68),
-        "axles": (-0.30, 0.38), "wheel_r": 0.50,
-    },
-    VehicleShape.BUS: {
-        "body": ((-0.5, 0.5, 0.5, 0.10, 0.36), (-0.5, 0.5, 0.5, 0.36, 1.0), _Z),
-        "glass": (-0.48, 0.5, 0.5, 0.42, 0.85),
-        "axles": (-0.28, 0.30), "wheel_r": 0.50,
-    },
+        glass=(0.30, 0.5, 0.48, 0.46, 0.68),
+        axles=(-0.30, 0.38), wheel_r=0.50,
+    ),
+    VehicleShape.BUS: _BoxLayout(
+        body=((-0.5, 0.5, 0.5, 0.10, 0.36), (-0.5, 0.5, 0.5, 0.36, 1.0), _Z),
+        glass=(-0.48, 0.5, 0.5, 0.42, 0.85),
+        axles=(-0.28, 0.30), wheel_r=0.50,
+    ),
 }  # fmt: skip
 #: The glass band stands this far proud of its box (m), so it covers the sides.
 _GLASS_PROUD_M = 0.02
@@ -564,14 +575,14 @@ def vehicle_vertices(
             ext = np.zeros(3)
         return centre + bv * ext
 
-    body = np.concatenate([box(*b) for b in lay["body"]])
-    r = lay["wheel_r"]
+    body = np.concatenate([box(*b) for b in lay.body])
+    r = lay.wheel_r
     wheels = []
-    for ax in lay["axles"]:
+    for ax in lay.axles:
         for side in (-1.0, 1.0):
             c = np.array([ax * L, side * (W / 2 - _WHEEL_WIDTH_M / 2 - 0.01), r])
             wheels.append(c + cv * np.array([r, _WHEEL_WIDTH_M, r]))
-    x0, x1, hw, z0, z1 = lay["glass"]
+    x0, x1, hw, z0, z1 = lay.glass
     trim = np.concatenate([box(x0, x1, hw, z0, z1, proud=_GLASS_PROUD_M), *wheels])
     return body, trim
 
@@ -717,7 +728,7 @@ class TrafficFamily(SceneFamily, TemporalLabels, Preview):
 
     def build_scene(self) -> mi.Scene:
         c = self.config
-        shapes: dict[str, Any] = {}
+        shapes: dict[str, ms.MitsubaDict | mi.Mesh] = {}
         day = self.daylight_at(0)
         shapes[_SUN_KEY] = ms.directional_light(
             -day.sun_direction, max(day.sun_irradiance_w_m2, 0.0)
@@ -801,7 +812,7 @@ class TrafficFamily(SceneFamily, TemporalLabels, Preview):
         params.update()
         return self.labels_for_state(veh["center_m"], veh["yaw_rad"], veh["speed_m_s"])
 
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         veh = self.vehicles(index)
         seen = in_view(self._camera, veh["center_m"])
         labels = self.labels_for_state(veh["center_m"], veh["yaw_rad"], veh["speed_m_s"])
@@ -838,11 +849,11 @@ class TrafficFamily(SceneFamily, TemporalLabels, Preview):
 
     # ---- static scenery ----------------------------------------------------------
 
-    def _static_shapes(self) -> dict[str, Any]:
+    def _static_shapes(self) -> dict[str, ms.MitsubaDict | mi.Mesh]:
         c = self.config
         hx = c.scenery_half_length_m
         hw = c.road_half_width_m
-        out: dict[str, Any] = {
+        out: dict[str, ms.MitsubaDict | mi.Mesh] = {
             "ground": ms.rectangle(
                 (0.0, 0.0, -0.02), (0.0, 0.0, 1.0), (4 * hx, 4 * hx), ms.diffuse(c.ground_albedo)
             ),

@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from mincam_render.core.config import Described, spec
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.scenes.base import CameraMount
 from mincam_render.scenes.indoor import (
     DoorConfig,
@@ -184,7 +184,7 @@ class WorkspaceFamily(IndoorFamily):
             ),
         }
 
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         st = self.state(index)
         day = self.rig.sky(st.daylight_time_s)
         return {

@@ -47,7 +47,7 @@ def test_sheet_size_in_mm(camera):
 
 def test_svg_true_size_and_masks(exported, camera):
     _, paths = exported
-    svg = paths["svg"].read_text()
+    svg = paths.svg.read_text()
     w, h, _ = sheet_layout(camera)
     head = re.search(
         r'<svg [^>]*width="([\d.]+)mm" height="([\d.]+)mm" viewBox="0 0 ([\d.]+) '
@@ -69,8 +69,8 @@ def test_svg_true_size_and_masks(exported, camera):
 def test_png_is_16_bit_within_printable_range(exported, camera):
     m, paths = exported
     lo, hi = camera.transmittance_range
-    assert len(paths["png"]) == 6
-    img = Image.open(paths["png"][2])
+    assert len(paths.png) == 6
+    img = Image.open(paths.png[2])
     assert img.mode.startswith("I;16") and img.size == (12, 8)
     a = np.asarray(img).astype(np.float64) / 65535.0
     assert a.min() >= lo - 1e-5 and a.max() <= hi + 1e-5
@@ -79,13 +79,13 @@ def test_png_is_16_bit_within_printable_range(exported, camera):
 
 def test_exr_holds_exact_values(exported):
     m, paths = exported
-    ch = OpenEXR.File(str(paths["exr"])).channels()
+    ch = OpenEXR.File(str(paths.exr)).channels()
     np.testing.assert_allclose(np.asarray(ch["mask0003"].pixels), m[3].astype(np.float32))
 
 
 def test_sidecar(exported, camera):
     m, paths = exported
-    side = json.loads(paths["json"].read_text())
+    side = json.loads(paths.json.read_text())
     assert side["camera"]["mask_size_m"] == pytest.approx(16 * MM)
     assert side["printable_transmittance_range"] == [0.01, 0.67]
     assert side["texels_clipped_to_printable_range"] == int(
@@ -97,7 +97,7 @@ def test_sidecar(exported, camera):
 
 def test_pdf_page_is_true_size(exported, camera):
     _, paths = exported
-    raw = paths["pdf"].read_bytes()
+    raw = paths.pdf.read_bytes()
     box = re.search(rb"/MediaBox \[\s*([\d.]+) ([\d.]+) ([\d.]+) ([\d.]+)\s*\]", raw)
     w, h, _ = sheet_layout(camera)
     assert float(box.group(3)) == pytest.approx(w / 25.4 * 72, rel=1e-3)
@@ -115,7 +115,7 @@ def test_pdf_texels_are_vector_rectangles_where_the_design_puts_them(exported, c
     rows, cols = camera.mask_resolution
     texel_mm = camera.mask_size_m / MM / cols, camera.mask_size_m / MM / rows
     mm_per_pt = 25.4 / 72
-    with pdfplumber.open(paths["pdf"]) as pdf:
+    with pdfplumber.open(paths.pdf) as pdf:
         page = pdf.pages[0]
         assert page.images == []  # no raster anywhere: nothing a viewer could resample
         found = {
@@ -140,8 +140,8 @@ def test_pdf_texels_are_vector_rectangles_where_the_design_puts_them(exported, c
 
 def test_more_masks_than_board_positions(tmp_path, camera):
     paths = export_masks(np.full((8, 8, 12), 0.3), camera, tmp_path, pdf=False)
-    assert len(paths["png"]) == 8
-    assert len(json.loads(paths["json"].read_text())["mask_corners_on_sheet_mm"]) == 8
+    assert len(paths.png) == 8
+    assert len(json.loads(paths.json.read_text())["mask_corners_on_sheet_mm"]) == 8
 
 
 def test_bad_input(tmp_path, camera):

@@ -54,7 +54,7 @@ def test_v3_dataset_trains(v3_copy, variant):
     train, val = (tr.TrainingData.from_dataset(d, s) for s in ("train", "val"))
     model = tr.build_mincam(train, 2)
     res = tr.train_model(model, train, val, tr.TrainConfig(max_steps=3, batch_size=4, eval_every=1))
-    assert res.steps == 3 and np.isfinite(tr.evaluate(model, val)["error"])
+    assert res.steps == 3 and np.isfinite(tr.evaluate(model, val).error)
 
 
 def test_v3_dataset_is_not_resumed_and_the_message_names_the_fix(v3_copy, variant):

@@ -10,7 +10,7 @@ import pytest
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.data import dataset as ds
 from mincam_render.learn import train as tr
-from mincam_render.learn.evaluation import headline, metrics, zero_where_true_below
+from mincam_render.learn.evaluation import LabelMetrics, headline, metrics, zero_where_true_below
 from mincam_render.optics.camera import FreeformCamera
 
 
@@ -50,14 +50,14 @@ def test_headline_pools_both_directions_as_a_root_mean_square():
     data = _data(lab, specs)
     pred = {"speed_left_mph": np.ones((n, 1)), "speed_right_mph": np.full((n, 1), 13.0)}
     res = metrics(pred, data.labels, 0.0, data)
-    left, right = res["labels"]["speed_left_mph"], res["labels"]["speed_right_mph"]
-    assert left["rmse"] == 0.0  # zeroed: truth < 3 mph everywhere
-    assert left["rmse_without_zero_rule"] == pytest.approx(1.0)
-    assert left["zero_below_true"] == 3.0
-    assert right["rmse"] == pytest.approx(3.0)
-    assert res["error"] == pytest.approx(np.sqrt((0.0**2 + 3.0**2) / 2))
-    assert res["error_name"] == "mean speed RMSE"
-    assert res["headline"]["labels"] == ["speed_left_mph", "speed_right_mph"]
+    left, right = res.labels["speed_left_mph"], res.labels["speed_right_mph"]
+    assert left.rmse == 0.0  # zeroed: truth < 3 mph everywhere
+    assert left.rmse_without_zero_rule == pytest.approx(1.0)
+    assert left.zero_below_true == 3.0
+    assert right.rmse == pytest.approx(3.0)
+    assert res.error == pytest.approx(np.sqrt((0.0**2 + 3.0**2) / 2))
+    assert res.error_name == "mean speed RMSE"
+    assert res.headline.labels == ("speed_left_mph", "speed_right_mph")
 
 
 def test_without_headline_labels_the_first_label_is_the_figure():
@@ -66,9 +66,9 @@ def test_without_headline_labels_the_first_label_is_the_figure():
     data = _data({"speed_left_mph": np.zeros(n), "speed_right_mph": np.zeros(n)}, specs)
     pred = {"speed_left_mph": np.full((n, 1), 2.0), "speed_right_mph": np.full((n, 1), 5.0)}
     res = metrics(pred, data.labels, 0.0, data)
-    assert res["error"] == pytest.approx(2.0)
-    assert res["error_name"] == "speed_left_mph RMSE"
-    assert "rmse_without_zero_rule" not in res["labels"]["speed_left_mph"]
+    assert res.error == pytest.approx(2.0)
+    assert res.error_name == "speed_left_mph RMSE"
+    assert "rmse_without_zero_rule" not in res.labels["speed_left_mph"].as_json()
 
 
 def test_binary_headline_is_one_minus_the_mean_accuracy_over_elements():
@@ -78,9 +78,9 @@ def test_binary_headline_is_one_minus_the_mean_accuracy_over_elements():
     pred[:, 0] = 1.0  # light 0 always wrong, the others right
     data = _data({"lights": lab}, (spec,))
     res = metrics({"lights": pred}, data.labels, 0.0, data)
-    assert res["labels"]["lights"]["accuracy_per_element"] == [0.0, 1.0, 1.0, 1.0, 1.0]
-    assert res["error"] == pytest.approx(0.2)
-    assert res["error_name"] == "lights error rate"
+    assert res.labels["lights"].accuracy_per_element == (0.0, 1.0, 1.0, 1.0, 1.0)
+    assert res.error == pytest.approx(0.2)
+    assert res.error_name == "lights error rate"
 
 
 def test_lighting_median_filter_removes_flips_shorter_than_its_window():
@@ -90,8 +90,8 @@ def test_lighting_median_filter_removes_flips_shorter_than_its_window():
     pred[20:25] = 1.0  # a 5-frame flip; at 30 fps the 0.5 s window is 15 frames
     data = _data({"lights": lab}, (spec,))
     res = metrics({"lights": pred}, data.labels, 0.0, data)
-    assert res["labels"]["lights"]["median_filter_frames"] == 15
-    assert res["labels"]["lights"]["accuracy"] == 1.0
+    assert res.labels["lights"].median_filter_frames == 15
+    assert res.labels["lights"].accuracy == 1.0
 
 
 @pytest.mark.parametrize(
@@ -108,10 +108,11 @@ def test_lighting_median_filter_removes_flips_shorter_than_its_window():
     ],
 )
 def test_headline_refuses_ambiguous_groups(specs, match):
-    res = {"labels": {"speed_left_mph": {"rmse": 1.0}, "speed_right_mph": {"rmse": 1.0},
-                      "lights": {"accuracy": 1.0}}}  # fmt: skip
+    labels = {"speed_left_mph": LabelMetrics(unit="mph", median_filter_frames=1, rmse=1.0),
+              "speed_right_mph": LabelMetrics(unit="mph", median_filter_frames=1, rmse=1.0),
+              "lights": LabelMetrics(unit="", median_filter_frames=1, accuracy=1.0)}  # fmt: skip
     with pytest.raises(ValueError, match=match):
-        headline(res, specs)
+        headline(labels, specs)
 
 
 @pytest.mark.parametrize(

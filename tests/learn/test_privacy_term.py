@@ -77,7 +77,7 @@ def test_a_privacy_run_trains_records_its_weight_and_loads(variant, tmp_path):
     metrics = tr.train_run(train, val, test, tmp_path, pixels=2, config=cfg)
     run = json.loads((tmp_path / "run.json").read_text())
     assert run["config"]["privacy_weight"] == 2.0
-    assert metrics["test"]["error"] < float(test.labels["count"].std()) * 1.5
+    assert metrics.test.error < float(test.labels["count"].std()) * 1.5
     trained = tr.open_run(tmp_path)
     assert any(k.startswith("adversary.") for k in trained.state)
     model = tr.restore_model(trained, test)  # the measured camera has no adversary

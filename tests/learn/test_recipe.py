@@ -121,7 +121,7 @@ def test_pooled_validation_is_the_sample_weighted_pool_of_the_episodes():
     parts = []
     for ep in (a, b):
         pred, lab, loss = predict(model, ep)
-        parts.append((loss, metrics(pred, lab, loss, ep)["error"], len(ep)))
+        parts.append((loss, metrics(pred, lab, loss, ep).error, len(ep)))
     w = np.array([n for *_, n in parts], np.float64) / 300
     np.testing.assert_allclose(pooled["loss"], w @ [p[0] for p in parts], rtol=1e-12)
     rmse = np.sqrt(w @ np.square([p[1] for p in parts]))

@@ -88,4 +88,4 @@ def test_a_reference_camera_keeps_or_tunes_its_masks(tmp_path, tuned):
     lo, hi = camera.transmittance_range
     close = np.abs(masks - expected).max() < 1e-3 * (hi - lo)  # the logits' bound at the limits
     assert close is not tuned
-    assert run["steps"] == 40
+    assert run.steps == 40

@@ -55,7 +55,7 @@ def test_every_kind_of_run_restores_to_the_camera_it_tested(runs_of_each_kind, k
     assert run.finished and run.training == "finished" and run.step == CFG.max_steps
     model = tr.restore_model(run, test)
     assert not model.training and not hasattr(model, "adversary")
-    assert tr.evaluate(model, test)["error"] == pytest.approx(metrics["test"]["error"])
+    assert tr.evaluate(model, test).error == pytest.approx(metrics.test.error)
 
 
 @pytest.mark.parametrize("kind", MINCAM_KINDS)
@@ -67,7 +67,7 @@ def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs_of_eac
     model = tr.restore_mincam(run, test, "prune")
     np.testing.assert_array_equal(tr.run_masks(run_dir)[0], m)
     records = tr.greedy_prune(model, test, test, None, replace(CFG, max_steps=4, eval_every=2))
-    assert [r["pixels"] for r in records] == [2, 1]
+    assert [r.pixels for r in records] == [2, 1]
     cfg = RobustnessConfig(levels=(0.0, 1.0), draws=2)
     curves = robustness_curves(model, {"test": test}, cfg, name=kind)
     assert curves["nominal_error"] > 0 and "mix" in curves["curves"]

@@ -53,7 +53,7 @@ def test_robust_training_differs_from_nominal_and_is_recorded(variant, tmp_path)
     run = tr.open_run(tmp_path / "run")
     assert run.record["config"]["perturbation"]["mask_shift_mm"] == pytest.approx(0.3)
     loaded = tr.restore_model(run, test)
-    assert tr.evaluate(loaded, test)["error"] == pytest.approx(metrics["test"]["error"])
+    assert tr.evaluate(loaded, test).error == pytest.approx(metrics.test.error)
 
 
 def test_train_config_refuses_a_perturbation_of_another_type():

@@ -100,7 +100,7 @@ def test_train_run_records_the_head_and_resumes_runs_written_before_the_choice(t
     cfg = tr.TrainConfig(max_steps=4, eval_every=2, batch_size=8, head="tcn")
     metrics = tr.train_run(train, val, None, tmp_path / "tcn", pixels=1, config=cfg)
     run = json.loads((tmp_path / "tcn" / "run.json").read_text())
-    assert run["config"]["head"] == "tcn" and metrics["model"]["head"] == "tcn"
+    assert run["config"]["head"] == "tcn" and metrics.model["head"] == "tcn"
     # the paper's MLP: run.json's recipe as before the head was a choice
     assert "head" not in config_record(tr.TrainConfig())
     assert "perturbation" not in config_record(tr.TrainConfig())

@@ -26,7 +26,7 @@ def test_training_lowers_the_loss(variant):
     after = tr.predict(model, val)[2]
     assert after < 0.6 * before, (before, after, res.history)
     assert not torch.allclose(model.logits, logits0)  # the masks moved too
-    assert tr.evaluate(model, test)["error"] < float(test.labels["count"].std())
+    assert tr.evaluate(model, test).error < float(test.labels["count"].std())
 
 
 def test_baseline_trains(variant):
@@ -71,9 +71,9 @@ def test_pruning_drops_the_dark_detector_first(variant):
     model = tr.build_mincam(train, 3)
     tr.train_model(model, train, val, replace_cfg(max_steps=80))
     records = tr.greedy_prune(model, train, val, test, replace_cfg(max_steps=20), min_pixels=2)
-    assert [r["pixels"] for r in records] == [3, 2]
-    assert records[1]["removed"] == [1]
-    assert records[1]["kept"] == [0, 2]
+    assert [r.pixels for r in records] == [3, 2]
+    assert records[1].removed == (1,)
+    assert records[1].kept == (0, 2)
 
 
 @pytest.mark.parametrize(
@@ -115,7 +115,7 @@ def test_cross_entropy_count_trains_resumes_and_prunes(variant, tmp_path):
     before = tr.predict(model, val)[2]
     tr.train_model(model, train, val, replace_cfg(seed=10), out_dir=tmp_path)
     after = tr.predict(model, val)[2]
-    err = tr.evaluate(model, test)["error"]
+    err = tr.evaluate(model, test).error
     assert after < before  # cross-entropy over ~15 classes falls slower than MSE
     assert err < 0.7 * float(test.labels["count"].std())  # measured 0.56 x
     with pytest.raises(ValueError, match="written for"):  # an MSE head is another model
@@ -123,7 +123,7 @@ def test_cross_entropy_count_trains_resumes_and_prunes(variant, tmp_path):
             tr.build_mincam(train, 3, count_loss=CountLoss.MSE), train, val, CFG, out_dir=tmp_path
         )
     records = tr.greedy_prune(model, train, val, test, replace_cfg(max_steps=10), min_pixels=2)
-    assert [r["pixels"] for r in records] == [3, 2]
+    assert [r.pixels for r in records] == [3, 2]
 
 
 def replace_cfg(**kw) -> tr.TrainConfig:
@@ -212,7 +212,7 @@ def test_train_run_writes_logs_and_metrics(variant, tmp_path):
     train, val, test = linear_task(120).split((0.7, 0.15, 0.15))
     cfg = tr.TrainConfig(max_steps=10, batch_size=16, eval_every=5)
     metrics = tr.train_run(train, val, test, tmp_path, pixels=2, config=cfg)
-    assert metrics["test"]["labels"]["count"]["rmse"] >= 0
+    assert metrics.test.labels["count"].rmse >= 0
     for name in (
         "run.json",
         "metrics.json",
@@ -369,7 +369,7 @@ def test_a_run_is_not_resumed_on_other_data(tmp_path):
     with pytest.raises(ValueError, match="trained with another config"):
         tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=replace(cfg, lr=0.01))
     again = tr.train_run(train, val, test, tmp_path / "run", pixels=2, config=cfg)  # same: resumes
-    assert again["steps"] == 20
+    assert again.steps == 20
 
 
 def test_resume_cuts_history_back_to_the_checkpoint(tmp_path):

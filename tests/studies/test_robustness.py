@@ -100,7 +100,7 @@ def test_curves_of_a_trained_camera_start_at_zero_and_use_common_draws(variant):
     tr.train_model(model, train, val, tr.TrainConfig(max_steps=60, batch_size=32, eval_every=30))
     rec = robustness_curves(model, {"t": test}, SMALL, name="m")
     again = robustness_curves(model, {"t": test}, SMALL, name="m")
-    assert rec["nominal_error"] == pytest.approx(tr.evaluate(model, test)["error"])
+    assert rec["nominal_error"] == pytest.approx(tr.evaluate(model, test).error)
     for c in CURVES:
         first = rec["curves"][c]["levels"][0]
         assert first["draws"] == 1 and first["mean_increase"] == 0.0  # level 0: the design itself

@@ -258,7 +258,7 @@ def _fidelity_plan(
     renderer = {"variant": info["variant"], **{k: versions[k] for k in ("mitsuba", "drjit")}}
     cls = family_class(family_name)
     scale, target = planning_targets(cls.planning_error_scale, cls.signal_target_error, request)
-    planning = {
+    planning: plan_cache.Planning = {
         "error_scale": scale.value,
         "target_error": target,
         "difference_seeds": DifferenceSeeds(request.difference_seeds or DIFFERENCE_SEEDS).value,
@@ -266,9 +266,8 @@ def _fidelity_plan(
     fields = plan_cache.plan_fields(identity, family_name, renderer, planning)
     found = plan_cache.find_plan(fields) if use_cache else None
     if found is not None:
-        plan, where = found
-        log.info("fidelity plan %s (%s)", plan_cache.plan_key(fields)[:12], where)
-        return FidelityPlan.from_dict(plan["settings"], plan["decisions"])
+        log.info("fidelity plan %s (%s)", plan_cache.plan_key(fields)[:12], found.where.value)
+        return FidelityPlan.from_dict(found.plan["settings"], found.plan["decisions"])
     t0 = time.perf_counter()
     plan_request = dataclasses.replace(request, seed=plan_cache.PLAN_SEED)
     family, _, _ = _describe_family(plan_request)
@@ -279,7 +278,7 @@ def _fidelity_plan(
     # of floating-point sums between two planning runs must not change the bytes
     # of otherwise identical manifests; the JSON round trip makes a fresh plan
     # equal to a kept one
-    plan = json.loads(
+    plan: plan_cache.KeptPlan = json.loads(
         json.dumps({"settings": measured.settings(), "decisions": _rounded(decisions)})
     )
     seconds = time.perf_counter() - t0

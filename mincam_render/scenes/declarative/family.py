@@ -11,13 +11,12 @@ can be removed for the privacy audit; a speed label makes the task temporal.
 
 from __future__ import annotations
 
-from typing import Any
-
 import mitsuba as mi
 import numpy as np
 
 from mincam_render.core.config import ConfigError
 from mincam_render.core.labels import LabelSpec
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.capabilities import (
     DifferentialBackground,
@@ -92,7 +91,7 @@ class MitsubaFamily(SceneFamily, DifferentialBackground, PeopleRemoval, Temporal
         self._apply(scene, index, movers=True, switched=self._switched_on(index), static=True)
         return self._labels(index)
 
-    def frame_state(self, index: int) -> dict[str, Any]:
+    def frame_state(self, index: int) -> JsonObject:
         self.check_index(index)
         return {
             "movers": {

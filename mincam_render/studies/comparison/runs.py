@@ -122,12 +122,12 @@ def train_design_run(
         "on_progress": on_progress,
     }
     run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                    **design.train_kwargs())  # fmt: skip
+                    **design.train_kwargs()).as_json()  # fmt: skip
     if not design.sensor_model:
         masks = {"run_dir": str(run_dir), **{k: run[k] for k in _MASK_RUN_KEYS}}
         run_dir = run_dir / _HEAD_RUN
         run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                        frozen_masks_from=masks["run_dir"])  # fmt: skip
+                        frozen_masks_from=masks["run_dir"]).as_json()  # fmt: skip
         run["mask_run"] = masks
     return dict(run, run_dir=str(run_dir), seed_index=task.seed_index)
 

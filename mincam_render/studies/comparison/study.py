@@ -243,7 +243,7 @@ def trivial_metrics(train: TrainingData, test: TrainingData) -> dict[str, Any]:
         if s.kind is LabelKind.BINARY:
             mean = (mean >= 0.5).astype(np.float32)
         pred[s.name] = np.broadcast_to(mean, (n, s.size)).astype(np.float32)
-    scored = metrics(pred, lab, float("nan"), test)
+    scored = metrics(pred, lab, float("nan"), test).as_json()
     return scored | {"loss": None, "loss_null_reason": "the trivial predictor has no training loss"}
 
 
@@ -366,7 +366,7 @@ def keep_run_masks(
         **figures,
     }
     exported = export_masks(m, camera, out_dir, task=task, provenance=provenance)
-    return {k: [str(p) for p in v] if isinstance(v, list) else str(v) for k, v in exported.items()}
+    return exported.as_json()
 
 
 def _keep_masks(

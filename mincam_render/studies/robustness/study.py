@@ -60,7 +60,7 @@ def pooled_error(model: MincamCamera, tests: Mapping[str, TrainingData], draw: A
     """The task error over every test episode (RMSE pooled over frames, rates averaged)."""
     from mincam_render.learn.evaluation import evaluate
 
-    return pool_episode_metrics([evaluate(model, d, draw=draw) for d in tests.values()])
+    return pool_episode_metrics([evaluate(model, d, draw=draw).as_json() for d in tests.values()])
 
 
 def pool_episode_metrics(res: Sequence[Mapping[str, Any]]) -> float:

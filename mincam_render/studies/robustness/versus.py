@@ -82,7 +82,7 @@ def train_kinds(
                 config=dataclasses.replace(cfg.train, seed=seed, perturbation=pert),
                 episodes=tests,
             )
-            report(f"{kind} seed {i}: {m['steps']} steps, {m['train_wall_time_s']:.0f} s")
+            report(f"{kind} seed {i}: {m.steps} steps, {m.train_wall_time_s:.0f} s")
             runs[kind].append(run_dir)
     return runs
 

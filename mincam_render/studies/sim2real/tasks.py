@@ -96,13 +96,13 @@ def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int
 
     sim_model = _measurement_model(n_in, sim_tr, noise, seed)
     train_model(sim_model, sim_tr, sim_va, cfg)
-    out["sim_on_sim"] = evaluate(sim_model, sim_te, noise=False)
-    out["sim_on_real"] = evaluate(sim_model, real_te, noise=False)
+    out["sim_on_sim"] = evaluate(sim_model, sim_te, noise=False).as_json()
+    out["sim_on_real"] = evaluate(sim_model, real_te, noise=False).as_json()
     retrained = copy.deepcopy(sim_model)
     train_model(retrained, real_tr, real_va, cfg)
-    out["sim_head_retrained_on_real"] = evaluate(retrained, real_te, noise=False)
+    out["sim_head_retrained_on_real"] = evaluate(retrained, real_te, noise=False).as_json()
     real_model = _measurement_model(n_in, real_tr, noise, seed)
     train_model(real_model, real_tr, real_va, cfg)
-    out["real_on_real"] = evaluate(real_model, real_te, noise=False)
+    out["real_on_real"] = evaluate(real_model, real_te, noise=False).as_json()
     out["video_simulation"] = None
     return out
