@@ -9,18 +9,52 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mincam_render.core.labels import LabelKind, LabelSpec
+from mincam_render.data.render_job import RenderRequest
 from mincam_render.learn import train as tr
 from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
+from mincam_render.optics.perturbation import PerturbationModel
 
 REPO = Path(__file__).resolve().parents[1]
 COUNT = LabelSpec(name="count", kind=LabelKind.COUNT, median_filter_s=0.0)
 CHANGE = LabelSpec(name="change", kind=LabelKind.REGRESSION, median_filter_s=0.0)
+#: 2 patches detectors at 8x8 texels (the overrides of the shared tiny datasets).
+TINY_CAMERA = {"camera": {"detectors": 2, "mask_resolution": 8}}
+#: The shared tiny dataset (``conftest.tiny_patches``): 24 patches frames in 3
+#: shards of 8, 2 spp, rendered per detector and stored as float32 (so a frame
+#: equals ``render_transport`` of its seed), splits train 0-17, val 17-20, test 20-24.
+TINY_PATCHES = RenderRequest(
+    family="patches",
+    num_frames=24,
+    seed=1,
+    overrides=TINY_CAMERA,
+    shard_frames=8,
+    spp=2,
+    shared_render=False,
+    dtype="float32",
+)
+#: The shared differential dataset (``conftest.differential_dataset``): 24 s of
+#: the workspace at 1 fps, backgrounds every 10 s, 3 shards of 8.
+TINY_DIFFERENTIAL = RenderRequest(
+    family="workspace",
+    num_frames=24,
+    shard_frames=8,
+    overrides={"fps": 1.0, "camera": {"mask_resolution": 8, "detectors": 2}},
+    spp=2,
+    max_depth=3,
+    shared_render=False,
+    dtype="float32",
+    differential=True,
+    background_interval_s=10.0,
+    background_spp=8,
+    shared_difference=True,
+)
 
 
 def linear_task(
@@ -133,3 +167,26 @@ def chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
         timeout=120,
         check=False,
     )
+
+
+#: The recipe of the shared runs (``conftest.runs_of_each_kind``): 20 steps, no early stop.
+RUN_CONFIG = tr.TrainConfig(max_steps=20, batch_size=16, eval_every=10, patience=100)
+#: kind -> (temporal data?, ``train_run`` keyword arguments) of the shared runs.
+RUN_KINDS = {
+    "mincam": (False, {"pixels": 2}),
+    "baseline": (False, {"baseline_grid": (2, 2)}),
+    "tcn": (False, {"pixels": 2, "config": replace(RUN_CONFIG, head=tr.HeadKind.TCN)}),
+    "temporal": (True, {"pixels": 2}),
+    "temporal-tcn": (True, {"pixels": 2, "config": replace(RUN_CONFIG, head=tr.HeadKind.TCN)}),
+    "robust": (
+        False,
+        {"pixels": 2, "config": replace(RUN_CONFIG, perturbation=PerturbationModel())},
+    ),
+    "privacy": (False, {"pixels": 2, "config": replace(RUN_CONFIG, privacy_weight=1.0)}),
+}
+
+
+def run_splits(temporal: bool) -> tuple[tr.TrainingData, tr.TrainingData, tr.TrainingData]:
+    """Train, validation and test splits (60/20/20 %) of 160 synthetic frames."""
+    data = temporal_task(160) if temporal else linear_task(160)
+    return data.split((0.6, 0.2, 0.2))

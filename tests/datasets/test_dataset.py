@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from support import TINY_CAMERA, TINY_PATCHES
 
 from mincam_render.core.labels import LabelKind, LabelSpec
 from mincam_render.data import dataset as ds
@@ -19,53 +20,33 @@ from mincam_render.optics.camera import (
 )
 from mincam_render.render import precision
 
-TINY = {"camera": {"detectors": 2, "mask_resolution": 8}}
 
-
-@pytest.fixture(scope="module")
-def tiny_dataset(tmp_path_factory, variant):
-    """40 patches frames, 2 detectors, 8x8 masks, 4 spp, float32, per detector, shards of 8."""
-    from mincam_render.data.render_job import RenderRequest, render_dataset
-
-    out = tmp_path_factory.mktemp("tiny") / "ds"
-    request = RenderRequest(
-        family="patches",
-        num_frames=40,
-        seed=3,
-        overrides=TINY,
-        shard_frames=8,
-        spp=4,
-        shared_render=False,
-        dtype="float32",
-    )
-    render_dataset(request, out, workers=0)
-    return out
-
-
-def test_round_trip_matches_direct_render(tiny_dataset):
+def test_round_trip_matches_direct_render(tiny_patches):
     from mincam_render.core.seeds import frame_seed
     from mincam_render.render.transport import render_transport
     from mincam_render.scenes.registry import load_family
 
-    d = ds.open_dataset(tiny_dataset)
-    family = load_family("patches", seed=3, num_frames=40, overrides=TINY)
-    assert d.family == "patches" and d.num_frames == 40 and d.fps == family.fps
+    req = TINY_PATCHES  # rendered per detector, stored as float32: frames equal the renders
+    d = ds.open_dataset(tiny_patches)
+    family = load_family("patches", seed=req.seed, num_frames=24, overrides=TINY_CAMERA)
+    assert d.family == "patches" and d.num_frames == 24 and d.fps == family.fps
     assert d.camera == family.camera()
     assert d.label_specs == family.labels
     scene = family.build_scene()
-    for i in (0, 17, 39):
+    for i in (0, 11, 23):
         labels = family.set_frame(scene, i)
-        t = render_transport(scene, family.camera(), spp=4, seed=frame_seed(3, i))
+        t = render_transport(scene, family.camera(), spp=req.spp, seed=frame_seed(req.seed, i))
         np.testing.assert_array_equal(d.frame(i), t)
         np.testing.assert_array_equal(d.frame_labels(i)["count"], labels["count"])
         meta = d.frame_metadata(i)
-        assert meta["seed"] == frame_seed(3, i) and meta["time_s"] == pytest.approx(i / d.fps)
+        assert meta["seed"] == frame_seed(req.seed, i)
+        assert meta["time_s"] == pytest.approx(i / d.fps)
         assert meta["state"]["count"] == int(labels["count"][0])
 
 
-def test_splits_are_contiguous_and_cover_the_sequence(tiny_dataset):
-    d = ds.open_dataset(tiny_dataset)
-    assert d.splits == {"train": (0, 28), "val": (28, 34), "test": (34, 40)}
+def test_splits_are_contiguous_and_cover_the_sequence(tiny_patches):
+    d = ds.open_dataset(tiny_patches)
+    assert d.splits == {"train": (0, 17), "val": (17, 20), "test": (20, 24)}
     total = 0
     for name, (a, b) in d.splits.items():
         t, lab, times = d.transport(name), d.labels(name), d.times_s(name)
@@ -74,7 +55,7 @@ def test_splits_are_contiguous_and_cover_the_sequence(tiny_dataset):
         np.testing.assert_allclose(times, np.arange(a, b) / d.fps)
         total += b - a
     assert total == d.num_frames
-    np.testing.assert_array_equal(d.transport("val"), d.frames(28, 34))
+    np.testing.assert_array_equal(d.transport("val"), d.frames(17, 20))
 
 
 @pytest.mark.parametrize(
@@ -93,13 +74,13 @@ def test_split_ranges_rejects_bad_fractions():
 
 
 @pytest.mark.parametrize("history", [1, 4])
-def test_torch_dataset_shapes_and_windows(tiny_dataset, history):
+def test_torch_dataset_shapes_and_windows(tiny_patches, history):
     import torch
 
-    d = ds.open_dataset(tiny_dataset)
-    tds = d.torch_dataset("val", history=history)
+    d = ds.open_dataset(tiny_patches)
+    tds = d.torch_dataset("train", history=history)
     assert isinstance(tds, torch.utils.data.Dataset)
-    a, b = d.splits["val"]
+    a, b = d.splits["train"]
     assert len(tds) == (b - a) - history + 1
     t, labels = tds[0]
     newest = a + history - 1
@@ -116,15 +97,15 @@ def test_torch_dataset_shapes_and_windows(tiny_dataset, history):
     assert batch_t.shape[0] == 3 and batch_l["count"].shape == (3, 1)
 
 
-def test_torch_dataset_rejects_too_long_history(tiny_dataset):
+def test_torch_dataset_rejects_too_long_history(tiny_patches):
     with pytest.raises(ValueError, match="history"):
-        ds.open_dataset(tiny_dataset).torch_dataset("val", history=7)
+        ds.open_dataset(tiny_patches).torch_dataset("val", history=4)  # val is 3 frames
 
 
-def test_torch_dataset_pickles(tiny_dataset):
+def test_torch_dataset_pickles(tiny_patches):
     import pickle
 
-    tds = ds.open_dataset(tiny_dataset).torch_dataset("train")
+    tds = ds.open_dataset(tiny_patches).torch_dataset("train")
     tds[0]  # opens memory maps, which must not travel
     again = pickle.loads(pickle.dumps(tds))
     np.testing.assert_array_equal(again[5][0].numpy(), tds[5][0].numpy())
@@ -221,11 +202,11 @@ def test_camera_and_label_specs_round_trip_through_json():
     assert ds.label_spec_from_dict(json.loads(json.dumps(ds.label_spec_to_dict(spec)))) == spec
 
 
-def test_checksum_detects_corruption(tiny_dataset, tmp_path):
+def test_checksum_detects_corruption(tiny_patches, tmp_path):
     import shutil
 
     copy = tmp_path / "copy"
-    shutil.copytree(tiny_dataset, copy)
+    shutil.copytree(tiny_patches, copy)
     d = ds.open_dataset(copy)
     assert d.verify() == []
     npy, _ = ds.shard_paths(copy, 2)
@@ -236,11 +217,11 @@ def test_checksum_detects_corruption(tiny_dataset, tmp_path):
     assert [i for i, _ in bad] == [2] and "sha256" in bad[0][1]
 
 
-def test_incomplete_dataset_is_refused(tiny_dataset, tmp_path):
+def test_incomplete_dataset_is_refused(tiny_patches, tmp_path):
     import shutil
 
     copy = tmp_path / "copy"
-    shutil.copytree(tiny_dataset, copy)
+    shutil.copytree(tiny_patches, copy)
     m = ds.read_manifest(copy)
     m["shards"][1] = None
     m["complete"] = False
@@ -254,10 +235,10 @@ def test_not_a_dataset(tmp_path):
         ds.open_dataset(tmp_path)
 
 
-def test_export_exr_round_trip(tiny_dataset, tmp_path):
+def test_export_exr_round_trip(tiny_patches, tmp_path):
     from mincam_render.data.exr import read_transport_exr
 
-    d = ds.open_dataset(tiny_dataset)
+    d = ds.open_dataset(tiny_patches)
     paths = d.export_exr(ds.parse_frame_list("3,10-11", d.num_frames), tmp_path)
     assert [p.name for p in paths] == ["frame-000003.exr", "frame-000010.exr", "frame-000011.exr"]
     t, meta = read_transport_exr(paths[1])

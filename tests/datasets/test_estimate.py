@@ -7,32 +7,18 @@ from collections import namedtuple
 
 import pytest
 from click.testing import CliRunner
+from support import TINY_PATCHES
 
 from mincam_render.cli.main import main
-from mincam_render.data.render_job import (
-    JobLimits,
-    JobTooLarge,
-    RenderRequest,
-    plan_render,
-    render_dataset,
-)
+from mincam_render.data.render_job import JobLimits, JobTooLarge, plan_render, render_dataset
 from mincam_render.data.render_job import estimate as est
 
-SMALL = RenderRequest(
-    family="patches",
-    num_frames=24,
-    seed=2,
-    shard_frames=8,
-    spp=2,
-    overrides={"camera": {"detectors": 2, "mask_resolution": 8}},
-)
 
-
-def test_the_estimate_matches_what_the_render_writes(tmp_path, variant):
-    estimate = est.estimate_job(plan_render(SMALL), tmp_path / "ds")
+def test_the_estimate_matches_what_the_render_writes(tmp_path, tiny_patches):
+    """The estimate of ``TINY_PATCHES`` against the shards the shared render of it wrote."""
+    estimate = est.estimate_job(plan_render(TINY_PATCHES), tmp_path / "ds")
     assert estimate.frames == 24 and estimate.shards == 3 and 0 < estimate.seconds_per_frame < 10
-    render_dataset(SMALL, tmp_path / "ds", workers=0, limits=JobLimits())
-    shards = sorted((tmp_path / "ds" / "shards").iterdir())
+    shards = sorted((tiny_patches / "shards").iterdir())
     per_shard = sum(p.stat().st_size for p in shards) / 3
     assert estimate.bytes_per_shard == pytest.approx(per_shard, rel=0.25)
 
@@ -40,16 +26,17 @@ def test_the_estimate_matches_what_the_render_writes(tmp_path, variant):
 def test_a_job_above_its_limits_is_refused_before_anything_is_written(
     tmp_path, variant, monkeypatch
 ):
+    # renders its own: a render refused, then confirmed, is what it tests
     out = tmp_path / "ds"
     with pytest.raises(JobTooLarge, match=r"more than 1e-09 h; pass --yes"):
-        render_dataset(SMALL, out, workers=0, limits=JobLimits(max_hours=1e-9))
+        render_dataset(TINY_PATCHES, out, workers=0, limits=JobLimits(max_hours=1e-9))
     assert not out.exists()
     disk = namedtuple("usage", "total used free")
     monkeypatch.setattr(est.shutil, "disk_usage", lambda path: disk(10**6, 10**6 - 100, 100))
     with pytest.raises(JobTooLarge, match=r"\(100 B free\): more than the free disk"):
-        render_dataset(SMALL, out, workers=0, limits=JobLimits())
+        render_dataset(TINY_PATCHES, out, workers=0, limits=JobLimits())
     assert not out.exists()
-    render_dataset(SMALL, out, workers=0, limits=JobLimits(confirmed=True))  # --yes
+    render_dataset(TINY_PATCHES, out, workers=0, limits=JobLimits(confirmed=True))  # --yes
     assert (out / "manifest.json").is_file()
 
 

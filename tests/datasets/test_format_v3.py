@@ -19,7 +19,8 @@ from mincam_render.data.render_job import RenderRequest, render_dataset
 from mincam_render.learn import train as tr
 
 FIXTURE = Path(__file__).parent.parent / "data" / "dataset_v3"
-#: The request the fixture was rendered from.
+#: The request the fixture was rendered from (the kept format 3 dataset in tests/data,
+#: so not conftest's ``tiny_patches``: it is tiny_patches' request stored as float16).
 V3_REQUEST = RenderRequest(
     family="patches",
     num_frames=24,

@@ -20,6 +20,8 @@ from mincam_render.data.render_job import (
 from mincam_render.render.backend import VARIANTS, Backend
 from mincam_render.scenes.registry import load_family
 
+#: Planned automatically (no spp, depth or dtype given): the plans are what is cached,
+#: so these tests render their own datasets, not conftest's ``tiny_patches``.
 AUTO = RenderRequest(
     family="patches",
     num_frames=16,

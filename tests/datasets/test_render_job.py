@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import json
 import logging
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support import cli_process
+from support import TINY_PATCHES, cli_process
 
 from mincam_render.core.seeds import frame_seed
 from mincam_render.data import dataset as ds
@@ -124,16 +125,8 @@ def test_resume_after_sigkill_is_byte_identical(tmp_path, variant):
     assert ds.open_dataset(killed).verify() == []
 
 
-@pytest.fixture
-def tiny_request():
-    return RenderRequest(
-        family="patches", num_frames=24, seed=1, overrides=TINY, shard_frames=8, spp=4
-    )
-
-
-def test_corrupted_and_truncated_shards_are_re_rendered(tmp_path, tiny_request, variant):
-    out = tmp_path / "ds"
-    render_dataset(tiny_request, out, workers=0)
+def test_corrupted_and_truncated_shards_are_re_rendered(tiny_patches_copy, variant):
+    out = tiny_patches_copy
     good = _files(out)
     npy1, _ = ds.shard_paths(out, 1)
     data = bytearray(npy1.read_bytes())
@@ -141,33 +134,31 @@ def test_corrupted_and_truncated_shards_are_re_rendered(tmp_path, tiny_request, 
     npy1.write_bytes(bytes(data))
     npy2, json2 = ds.shard_paths(out, 2)
     json2.write_bytes(json2.read_bytes()[:50])  # truncated metadata
-    summary = render_dataset(tiny_request, out, workers=0)
+    summary = render_dataset(TINY_PATCHES, out, workers=0)
     assert summary.shards_repaired == [1, 2] and summary.shards_rendered == [1, 2]
     assert summary.shards_kept == [0]
     assert _files(out) == good
 
 
-def test_shard_finished_but_not_in_manifest_is_kept(tmp_path, tiny_request, variant):
-    out = tmp_path / "ds"
-    render_dataset(tiny_request, out, workers=0)
+def test_shard_finished_but_not_in_manifest_is_kept(tiny_patches_copy, variant):
+    out = tiny_patches_copy
     good = _files(out)
     m = ds.read_manifest(out)  # as if killed between writing shard 2 and the manifest
     m["shards"][2] = None
     m["complete"] = False
     ds.write_manifest(out, m)
-    summary = render_dataset(tiny_request, out, workers=0)
+    summary = render_dataset(TINY_PATCHES, out, workers=0)
     assert summary.shards_rendered == [] and summary.shards_kept == [0, 1, 2]
     assert _files(out) == good
 
 
-def test_mismatched_configuration_is_refused(tmp_path, tiny_request, variant):
+def test_mismatched_configuration_is_refused(tiny_patches_copy, variant):
     from click.testing import CliRunner
 
     from mincam_render.cli.main import main
 
-    out = tmp_path / "ds"
-    render_dataset(tiny_request, out, workers=0)
-    other = RenderRequest(**{**tiny_request.__dict__, "seed": 2})
+    out = tiny_patches_copy
+    other = dataclasses.replace(TINY_PATCHES, seed=2)
     with pytest.raises(ds.DatasetError, match=r"different configuration.*seed: 1 .* != 2"):
         render_dataset(other, out, workers=0)
     res = CliRunner().invoke(
@@ -177,23 +168,21 @@ def test_mismatched_configuration_is_refused(tmp_path, tiny_request, variant):
     assert "different configuration" in res.output and "Traceback" not in res.output
 
 
-def test_dataset_of_an_older_format_is_read_but_not_resumed(tmp_path, tiny_request, variant):
-    out = tmp_path / "ds"
-    render_dataset(tiny_request, out, workers=0)
+def test_dataset_of_an_older_format_is_read_but_not_resumed(tiny_patches_copy, variant):
+    out = tiny_patches_copy
     m = ds.read_manifest(out)
     m["format_version"] = ds.FORMAT_VERSION - 1
     m["shards"][2], m["complete"] = None, False
     ds.write_manifest(out, m)
     assert ds.read_manifest(out)["format_version"] == ds.FORMAT_VERSION - 1
     with pytest.raises(ds.DatasetError, match="can be read but not resumed"):
-        render_dataset(tiny_request, out, workers=0)
+        render_dataset(TINY_PATCHES, out, workers=0)
 
 
-def test_a_dataset_of_another_variant_is_not_resumed(tmp_path, tiny_request, variant):
+def test_a_dataset_of_another_variant_is_not_resumed(tiny_patches_copy, variant):
     from mincam_render.render.backend import VARIANTS
 
-    out = tmp_path / "ds"
-    render_dataset(tiny_request, out, workers=0)
+    out = tiny_patches_copy
     other = next(v for v in VARIANTS.values() if v != variant)
     m = ds.read_manifest(out)  # as if started on a host with the other backend
     m["variant"] = other
@@ -201,22 +190,22 @@ def test_a_dataset_of_another_variant_is_not_resumed(tmp_path, tiny_request, var
     ds.write_manifest(out, m)
     shards = _files(out)
     with pytest.raises(ds.DatasetError) as err:
-        render_dataset(tiny_request, out, workers=0)
+        render_dataset(TINY_PATCHES, out, workers=0)
     message = str(err.value)
     assert f"rendered with Mitsuba variant {other!r}" in message
     assert f"renders with {variant!r}" in message and "\n" not in message
     assert _files(out) == shards  # nothing was rendered into it
 
 
-def test_non_empty_directory_without_manifest_is_refused(tmp_path, tiny_request):
+def test_non_empty_directory_without_manifest_is_refused(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     with pytest.raises(ds.DatasetError, match="not empty"):
-        render_dataset(tiny_request, tmp_path, workers=0)
+        render_dataset(TINY_PATCHES, tmp_path, workers=0)
 
 
 @pytest.mark.parametrize(("bound", "expected"), [(1e-9, "float32"), (1e-2, "float16")])
-def test_dtype_chosen_by_error_bound(tiny_request, bound, expected, variant):
-    req = RenderRequest(**{**tiny_request.__dict__, "dtype_error_bound": bound})
+def test_dtype_chosen_by_error_bound(bound, expected, variant):
+    req = dataclasses.replace(TINY_PATCHES, dtype=None, dtype_error_bound=bound)
     m = plan_render(req)
     decision = m["fidelity"]["dtype"]
     assert decision["value"] == expected == m["job"]["render"]["dtype"]
@@ -252,6 +241,7 @@ def test_auto_fidelity_records_measured_decisions(tmp_path, variant):
 
 
 def test_shared_render_replicates_the_centre_render(tmp_path, variant):
+    # its own render: tiny_patches renders each detector, this is the shared render
     req = RenderRequest(
         family="patches",
         num_frames=8,

@@ -7,33 +7,12 @@ import shutil
 
 import pytest
 from click.testing import CliRunner
+from support import TINY_PATCHES
 
 from mincam_render.cli.main import main
 from mincam_render.data import dataset as ds
-from mincam_render.data.render_job import RenderRequest, render_dataset
+from mincam_render.data.render_job import render_dataset
 from mincam_render.data.repair import repair_dataset
-
-REQUEST = RenderRequest(
-    family="patches",
-    num_frames=24,
-    seed=3,
-    shard_frames=8,
-    spp=2,
-    overrides={"camera": {"detectors": 2, "mask_resolution": 8}},
-)
-
-
-@pytest.fixture(scope="module")
-def original(tmp_path_factory, variant):
-    out = tmp_path_factory.mktemp("repair") / "ds"
-    render_dataset(REQUEST, out, workers=0)
-    return out
-
-
-def _copy(original, tmp_path):
-    root = tmp_path / "copy"
-    shutil.copytree(original, root)
-    return root
 
 
 def _edit(root, change) -> None:
@@ -47,8 +26,8 @@ def _without_versions(manifest: dict) -> dict:
     return {k: v for k, v in manifest.items() if k != "versions"}
 
 
-def test_an_edited_field_is_restored_and_every_shard_kept(original, tmp_path):
-    root = _copy(original, tmp_path)
+def test_an_edited_field_is_restored_and_every_shard_kept(tiny_patches, tiny_patches_copy):
+    original, root = tiny_patches, tiny_patches_copy
     _edit(root, lambda m: m["job"]["render"].__setitem__("spp", 99))
     with pytest.raises(ds.DatasetError, match="mincam-render repair"):
         ds.open_dataset(root)
@@ -60,8 +39,8 @@ def test_an_edited_field_is_restored_and_every_shard_kept(original, tmp_path):
     assert ds.open_dataset(root).verify() == []
 
 
-def test_a_stripped_checksum_with_an_edit_is_refused_then_repaired(original, tmp_path):
-    root = _copy(original, tmp_path)
+def test_a_stripped_checksum_with_an_edit_is_refused_then_repaired(tiny_patches, tiny_patches_copy):
+    original, root = tiny_patches, tiny_patches_copy
 
     def strip_and_edit(m):
         del m[ds.MANIFEST_CHECKSUM_KEY]
@@ -77,8 +56,10 @@ def test_a_stripped_checksum_with_an_edit_is_refused_then_repaired(original, tmp
     )
 
 
-def test_a_damaged_shard_is_dropped_and_the_render_command_restores_it(original, tmp_path):
-    root = _copy(original, tmp_path)
+def test_a_damaged_shard_is_dropped_and_the_render_command_restores_it(
+    tiny_patches, tiny_patches_copy
+):
+    original, root = tiny_patches, tiny_patches_copy
     npy, _ = ds.shard_paths(root, 1)
     data = bytearray(npy.read_bytes())
     data[len(data) // 2] ^= 0x40
@@ -91,23 +72,23 @@ def test_a_damaged_shard_is_dropped_and_the_render_command_restores_it(original,
     summary = repair_dataset(root)
     assert summary.kept == [0, 2] and "sha256" in summary.dropped[1]
     assert not ds.read_manifest(root)["complete"]
-    render_dataset(REQUEST, root, workers=0)
+    render_dataset(TINY_PATCHES, root, workers=0)
     for i in range(3):
         assert (
             ds.shard_paths(root, i)[0].read_bytes() == ds.shard_paths(original, i)[0].read_bytes()
         )
 
 
-def test_shards_of_another_request_are_not_kept(original, tmp_path):
+def test_shards_of_another_request_are_not_kept(tiny_patches_copy):
     """An edited request: the shards were rendered for the original one, so none is kept."""
-    root = _copy(original, tmp_path)
+    root = tiny_patches_copy
     _edit(root, lambda m: m["request"].__setitem__("seed", 4))
     summary = repair_dataset(root)
     assert summary.kept == [] and set(summary.dropped.values()) == {"rendered for another request"}
 
 
-def test_cli_repair_reports_in_lines(original, tmp_path):
-    root = _copy(original, tmp_path)
+def test_cli_repair_reports_in_lines(tiny_patches_copy, tmp_path):
+    root = tiny_patches_copy
     _edit(root, lambda m: m["job"]["render"].__setitem__("spp", 99))
     res = CliRunner().invoke(main, ["repair", str(root)])
     assert res.exit_code == 0, res.output
@@ -116,29 +97,16 @@ def test_cli_repair_reports_in_lines(original, tmp_path):
     assert missing.exit_code == 2 and "cannot repair" in missing.output
 
 
-def test_a_differential_dataset_keeps_its_shards(variant, tmp_path):
+def test_a_differential_dataset_keeps_its_shards(differential_dataset_copy):
     """Differential shards record their request's hash (they recorded a background key,
     so `repair` kept none of them and a killed render re-rendered its unrecorded shards)."""
-    request = RenderRequest(
-        family="workspace",
-        num_frames=8,
-        seed=2,
-        shard_frames=4,
-        differential=True,
-        spp=2,
-        background_spp=16,
-        max_depth=2,
-        shared_render=True,
-        dtype="float32",
-        overrides={"camera": {"detectors": 2, "mask_resolution": 4}},
-    )
-    root = tmp_path / "ds"
-    render_dataset(request, root, workers=0)
+    root = differential_dataset_copy
     manifest = ds.read_manifest(root)
     assert manifest["job"]["render"]["background"] is not None  # differential indeed
-    for i in range(2):
+    shards = list(range(len(manifest["shards"])))
+    for i in shards:
         meta = json.loads(ds.shard_paths(root, i)[1].read_text())
         assert meta["request_sha256"] == manifest["job"]["request_sha256"]
     _edit(root, lambda m: m["job"]["render"].__setitem__("spp", 99))
     summary = repair_dataset(root)
-    assert summary.kept == [0, 1] and summary.dropped == {}
+    assert summary.kept == shards == [0, 1, 2] and summary.dropped == {}

@@ -16,7 +16,11 @@ FRAMES = 6
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory, variant):
-    """6 patches frames, 1 detector, 4x4 masks, rendered in this process."""
+    """6 patches frames, 1 detector, 4x4 masks, rendered in this process.
+
+    Not conftest's ``tiny_patches`` (24 frames): every frame's view is rendered
+    again by each test here, so the episode is kept to 6 frames.
+    """
     from mincam_render.data.render_job import RenderRequest, render_dataset
 
     out = tmp_path_factory.mktemp("views") / "ds"
@@ -92,6 +96,7 @@ OFFICE = {"fps": 1.0, "burn_in_s": 120.0, "camera": {"detectors": 1, "mask_resol
 
 @pytest.fixture(scope="module")
 def office(tmp_path_factory, variant):
+    """Its own dataset: a workspace with people in every frame (what removing them needs)."""
     from mincam_render.data.render_job import RenderRequest, render_dataset
     from mincam_render.render.fidelity.plan import Fidelity
 

@@ -7,45 +7,17 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from support import linear_task, temporal_task
+from support import RUN_CONFIG, RUN_KINDS, linear_task, run_splits
 
 from mincam_render.learn import train as tr
 from mincam_render.learn.runs import data_identity, describe_run
-from mincam_render.optics.perturbation import PerturbationModel
 from mincam_render.studies.robustness.config import RobustnessConfig
 from mincam_render.studies.robustness.study import robustness_curves
 
-CFG = tr.TrainConfig(max_steps=20, batch_size=16, eval_every=10, patience=100)
-
-#: kind -> (temporal data?, train_run keyword arguments)
-KINDS = {
-    "mincam": (False, {"pixels": 2}),
-    "baseline": (False, {"baseline_grid": (2, 2)}),
-    "tcn": (False, {"pixels": 2, "config": replace(CFG, head=tr.HeadKind.TCN)}),
-    "temporal": (True, {"pixels": 2}),
-    "temporal-tcn": (True, {"pixels": 2, "config": replace(CFG, head=tr.HeadKind.TCN)}),
-    "robust": (False, {"pixels": 2, "config": replace(CFG, perturbation=PerturbationModel())}),
-    "privacy": (False, {"pixels": 2, "config": replace(CFG, privacy_weight=1.0)}),
-}
+CFG = RUN_CONFIG
+KINDS = RUN_KINDS
 MINCAM_KINDS = [k for k in KINDS if k != "baseline"]
-
-
-def _splits(temporal: bool):
-    data = temporal_task(160) if temporal else linear_task(160)
-    return data.split((0.6, 0.2, 0.2))
-
-
-@pytest.fixture(scope="module")
-def runs_of_each_kind(tmp_path_factory, variant):
-    """``{kind: (run directory, its metrics, its test split)}``: one finished run of each kind."""
-    root = tmp_path_factory.mktemp("runs")
-    out = {}
-    for kind, (temporal, kwargs) in KINDS.items():
-        train, val, test = _splits(temporal)
-        kwargs = {"config": CFG, **kwargs}
-        metrics = tr.train_run(train, val, test, root / kind, **kwargs)
-        out[kind] = (root / kind, metrics, test)
-    return out
+_splits = run_splits
 
 
 @pytest.mark.parametrize("kind", list(KINDS))

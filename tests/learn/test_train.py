@@ -256,7 +256,11 @@ def test_rendered_patches_and_on_the_fly(variant):
 
 @pytest.fixture(scope="module")
 def float16_dataset(tmp_path_factory, variant):
-    """24 patches frames stored as float16 in shards of 16 (train 0-16 in one shard)."""
+    """24 patches frames stored as float16 in shards of 16 (train 0-16 in one shard).
+
+    Not conftest's ``tiny_patches`` (float32, shards of 8): float16 shards, and a
+    training split inside one shard, are what the tests below read.
+    """
     from mincam_render.data.render_job import RenderRequest, render_dataset
 
     out = tmp_path_factory.mktemp("f16") / "ds"

@@ -6,6 +6,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from support import TINY_DIFFERENTIAL
 
 from mincam_render.data import dataset as ds
 from mincam_render.render import precision
@@ -241,33 +242,10 @@ def test_estimate_is_unbiased_and_less_noisy_than_plain(variant):
     assert err < 3 * sigma
 
 
-@pytest.fixture(scope="module")
-def differential_dataset(tmp_path_factory, variant):
-    from mincam_render.data.render_job import RenderRequest, render_dataset
-
-    out = tmp_path_factory.mktemp("diff") / "ds"
-    request = RenderRequest(
-        family="workspace",
-        num_frames=24,
-        shard_frames=8,
-        overrides={"fps": 1.0, "camera": {"mask_resolution": 8, "detectors": 2}},
-        spp=2,
-        max_depth=3,
-        shared_render=False,
-        dtype="float32",
-        differential=True,
-        background_interval_s=10.0,
-        background_spp=8,
-        shared_difference=True,
-    )
-    render_dataset(request, out, workers=0)
-    return request, out
-
-
 def test_differential_dataset_records_backgrounds(differential_dataset):
     import json
 
-    request, out = differential_dataset
+    request, out = TINY_DIFFERENTIAL, differential_dataset
     manifest = ds.read_manifest(out)
     job = manifest["job"]
     assert job["render"]["background"] == {
@@ -306,14 +284,12 @@ def test_differential_dataset_records_backgrounds(differential_dataset):
     assert manifest["fidelity"]["differential"]["value"] is True
 
 
-def test_corrupt_background_is_rerendered_and_shards_are_identical(differential_dataset, tmp_path):
-    import shutil
-
+def test_corrupt_background_is_rerendered_and_shards_are_identical(
+    differential_dataset, differential_dataset_copy
+):
     from mincam_render.data.render_job import render_dataset
 
-    request, out = differential_dataset
-    copy = tmp_path / "copy"
-    shutil.copytree(out, copy)
+    request, out, copy = TINY_DIFFERENTIAL, differential_dataset, differential_dataset_copy
     manifest = ds.read_manifest(copy)
     bg_file = copy / manifest["background_components"][1]["file"]
     bg_file.write_bytes(bg_file.read_bytes()[:-16])  # truncated
@@ -380,7 +356,7 @@ def test_ray_renders_differential_datasets_byte_identically(differential_dataset
     pytest.importorskip("ray")
     from mincam_render.data.render_job import render_dataset
 
-    request, out = differential_dataset
+    request, out = TINY_DIFFERENTIAL, differential_dataset
     render_dataset(request, tmp_path / "ray", ray_address="local")
     for rec in ds.read_manifest(out)["shards"]:
         for name in ("transport", "metadata"):
@@ -424,7 +400,7 @@ def test_converged_backgrounds_are_the_frames_without_their_movers(
     from mincam_render.data.render_job import render_dataset
     from mincam_render.data.render_job.backgrounds import converged_backgrounds
 
-    request, out = differential_dataset
+    request, out = TINY_DIFFERENTIAL, differential_dataset
     if empty_room:  # nobody comes in: every frame is its background, bit for bit
         request = replace(request, overrides={**request.overrides, **EMPTY_ROOM})
         out = tmp_path / "empty"
@@ -439,15 +415,11 @@ def test_converged_backgrounds_are_the_frames_without_their_movers(
         assert moving is not empty_room
 
 
-def test_converged_backgrounds_need_a_differential_dataset(tmp_path, variant):
-    from mincam_render.data.render_job import RenderRequest, render_dataset
+def test_converged_backgrounds_need_a_differential_dataset(tiny_patches):
     from mincam_render.data.render_job.backgrounds import converged_backgrounds
 
-    request = RenderRequest(family="patches", num_frames=4, spp=1, max_depth=0,
-                            shared_render=False, differential=False)  # fmt: skip
-    render_dataset(request, tmp_path / "ds", workers=0)
     with pytest.raises(ds.DatasetError, match="not rendered differentially"):
-        converged_backgrounds(tmp_path / "ds")
+        converged_backgrounds(tiny_patches)
 
 
 class _SeedEcho:

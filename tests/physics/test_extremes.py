@@ -111,18 +111,29 @@ def test_shot_noise_gradient_finite_at_tiny_photocurrents(current_a):
 # ---- objects touching the camera -------------------------------------------------------
 
 
-@pytest.mark.parametrize("gap_m", [1e-3, 1e-5, 0.0])
-def test_emitting_wall_touching_the_mask_plane_equals_an_open_sky(variant, gap_m):
-    """A wall covering the whole view, `gap_m` in front of the mask plane (0 = on it)."""
+def _wall_transport(gap_m: float) -> tuple[np.ndarray, float]:
+    """T of a wall (3 W m^-2 sr^-1) covering the whole view ``gap_m`` in front of the
+    mask plane, and the power of an open mask under a sky of that radiance (W)."""
     cam = FreeformCamera(layout=ONE, mask_resolution=(16, 16))
     z = cam.mask_distance_m + gap_m
     wall = ms.rectangle((0.0, 0.0, z), (0.0, 0.0, -1.0), (0.5, 0.5), radiance_w_m2_sr=3.0)
     t = render_transport(ms.scene_dict({"wall": wall}, max_depth=1), cam, spp=64)
+    return t, open_mask_power(cam, 3.0)
+
+
+@pytest.mark.parametrize("gap_m", [1e-3, 1e-5])
+def test_emitting_wall_touching_the_mask_plane_equals_an_open_sky(variant, gap_m):
+    """The wall's radiance fills every ray leaving the mask: an open sky's power, 1 %."""
+    t, open_sky_w = _wall_transport(gap_m)
     assert np.all(np.isfinite(t)) and np.all(t >= 0)
-    if gap_m > 0:  # the wall's radiance fills every ray leaving the mask
-        assert float(t.sum(dtype=np.float64)) == pytest.approx(open_mask_power(cam, 3.0), rel=0.01)
-    else:  # rays start on the wall: they leave from its surface, lit or not, never NaN
-        assert float(t.sum(dtype=np.float64)) <= 1.01 * open_mask_power(cam, 3.0)
+    assert float(t.sum(dtype=np.float64)) == pytest.approx(open_sky_w, rel=0.01)
+
+
+def test_emitting_wall_on_the_mask_plane_is_finite_and_no_brighter_than_an_open_sky(variant):
+    """Rays start on the wall: they leave from its surface, lit or not, never NaN."""
+    t, open_sky_w = _wall_transport(0.0)
+    assert np.all(np.isfinite(t)) and np.all(t >= 0)
+    assert float(t.sum(dtype=np.float64)) <= 1.01 * open_sky_w
 
 
 def test_surface_cutting_through_the_mask_plane(variant):
@@ -167,7 +178,12 @@ def test_training_recovers_from_masks_pinned_at_the_limits(variant, logit):
 
 @pytest.mark.parametrize("slope", [1e-6, 1e-3, 1.0])
 def test_training_from_saturated_detectors_is_finite_and_learns(variant, slope):
-    """Transport 1e5x brighter than the full scale: every pixel saturated at the start."""
+    """Transport 1e5x brighter than the full scale: every pixel saturated at the start.
+
+    Learning is measured against the trivial predictor (the training mean; its
+    standardised loss is 0.79 here): measured over data seeds 0-2 at every slope,
+    the trained loss is 0.022-0.034, 3-4 % of the trivial one; the bound allows 20 %.
+    """
     from dataclasses import replace
 
     train, val, _ = linear_task(260, scale=2e-3, background_w=0.0).split((0.7, 0.15, 0.15))
@@ -182,7 +198,10 @@ def test_training_from_saturated_detectors_is_finite_and_learns(variant, slope):
         model, train, val, tr.TrainConfig(max_steps=200, batch_size=32, eval_every=50, patience=100)
     )
     assert _finite_model(model)
-    assert tr.predict(model, val)[2] < start
+    _, lab, trained = tr.predict(model, val)
+    y = train.labels["count"]
+    trivial = float(np.mean(((lab["count"] - y.mean()) / y.std()) ** 2))
+    assert trained < start and trained < 0.2 * trivial, (start, trained, trivial)
 
 
 def test_noise_dominating_signal_trains_finite(variant):

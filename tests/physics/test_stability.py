@@ -54,7 +54,7 @@ def test_geometry_extremes_match_closed_form(variant, geometry):
     assert float(t.sum(dtype=np.float64)) == pytest.approx(open_mask_power(cam, 2.0), rel=0.01)
 
 
-def test_point_detector_limit_converges(variant):
+def test_a_tiny_detector_equals_the_point_detector_limit(variant):
     """T / A_d for a tiny diode equals the point-detector integral of d^2 / r^4 over the mask."""
     cam = FreeformCamera(layout=ONE, detector_size_m=1e-7, mask_resolution=(16, 16))
     t = render_transport(ms.scene_dict({"sky": ms.constant_environment(1.0)}), cam, spp=16, seed=0)

@@ -40,6 +40,7 @@ def test_variant_names_map_to_backends():
 
 @pytest.mark.gpu
 def test_the_cuda_variant_is_recorded_in_a_dataset(tmp_path, cuda_variant):
+    # its own render: the shared tiny_patches is rendered with the default variant
     request = RenderRequest(
         family="patches",
         num_frames=8,

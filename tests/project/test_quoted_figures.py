@@ -8,6 +8,7 @@ the text. Each case is a figure a newcomer reads first.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -65,3 +66,201 @@ def test_the_design_protocols_floors_are_the_jsons(entry):
         name = f"{check['floor']['design']} − {check['floor']['baseline']}"
         row = next((ln for ln in doc.splitlines() if ln.startswith(f"| {name} <")), "")
         assert quoted in row, f"docs/design_protocol.md: {entry}'s floor {name}"
+
+
+# ---- every interval a doc quotes is in the results JSON it names -------------------------------
+
+RESULTS = REPO / "benchmarks" / "results"
+#: ``mean [lo, hi]`` at three decimals (errors, paired differences) ...
+INTERVAL = re.compile(r"([+\-−]?\d+\.\d{3})\s+\[([+\-−]?\d+\.\d{3}),\s+([+\-−]?\d+\.\d{3})\]")
+#: ... and ``x.x % [lo, hi]``, a fraction quoted in per cent (increases, accuracies).
+PERCENT = re.compile(r"([+\-−]?\d+\.\d) %\s+\[([+\-−]?\d+\.\d),\s+([+\-−]?\d+\.\d)\]")
+#: Quoted intervals no kept JSON holds, each with where it comes from instead.
+NOT_KEPT = {
+    "docs/design_protocol.md": dict.fromkeys(
+        ("−0.028 [−0.135, +0.064]", "−0.016 [−0.108, +0.063]"),
+        "paired differences at 32 episodes, not stored: recomputed from the ladder's "
+        "episode errors by test_the_design_protocols_paired_differences_are_its_episode_errors",
+    ),
+    "docs/lighting_and_traffic.md": dict.fromkeys(
+        (
+            "0.105 [0.093, 0.115]",
+            "0.049 [0.037, 0.064]",
+            "0.088 [0.073, 0.099]",
+            "0.029 [0.020, 0.041]",
+            "0.059 [0.040, 0.074]",
+        ),
+        "`pipeline` runs at 367fc4b and 8cfc910 on the robustness episodes; not kept",
+    ),
+    "docs/studies.md": dict.fromkeys(
+        (
+            "1.043 [0.926, 1.196]",
+            "1.013 [0.887, 1.113]",
+            "1.833 [0.953, 2.237]",
+            "+0.030 [-0.167, +0.260]",
+            "-0.790 [-1.141, -0.045]",
+            "0.968 [0.875, 1.070]",
+            "1.112 [0.914, 1.236]",
+            "2.137 [1.187, 2.701]",
+            "-0.144 [-0.322, +0.090]",
+            "-1.169 [-1.694, -0.197]",
+            "0.940 [0.688, 1.243]",
+            "0.986 [0.705, 1.293]",
+            "0.991 [0.545, 1.404]",
+            "-0.046 [-0.125, +0.046]",
+            "-0.050 [-0.152, +0.144]",
+        ),
+        "the main job run from a fresh clone at c8ce75e with root seeds 0, 1, 2; not kept",
+    ),
+}
+#: Docs that must stay covered (a renamed results file would otherwise drop one silently).
+COVERED = {
+    "docs/benchmarks.md", "docs/design_protocol.md", "docs/energy.md", "docs/fidelity.md",
+    "docs/lighting_and_traffic.md", "docs/privacy.md", "docs/robustness.md", "docs/studies.md",
+}  # fmt: skip
+
+
+def _number(text: str) -> float:
+    return float(text.replace("−", "-"))
+
+
+def _results_intervals(node, found: set[tuple[float, float, float]]) -> set:
+    """Every ``(figure, lo, hi)`` of a results JSON, in the shapes the results use.
+
+    ``{"mean" | "error": m, "ci95": [lo, hi]}`` (``Interval.as_dict``, the design
+    ladder), ``{"X" | "X_mean": m, "X_ci95": [lo, hi]}`` (studies, ablation),
+    ``{"mean_X": m, "ci95_X": [lo, hi]}`` (robustness) and ``[m, [lo, hi]]``
+    (the design protocol's figures).
+    """
+    if isinstance(node, dict):
+        for key, value in node.items():
+            pair = isinstance(value, list) and len(value) == 2
+            if pair and all(isinstance(v, int | float) for v in value) and "ci95" in key:
+                name = key.replace("ci95", "").strip("_")
+                names = (name, f"{name}_mean", f"mean_{name}") if name else ("mean", "error")
+                for n in names:
+                    if isinstance(node.get(n), int | float):
+                        found.add((node[n], *value))
+            _results_intervals(value, found)
+    elif isinstance(node, list):
+        if len(node) == 2 and isinstance(node[0], int | float) and isinstance(node[1], list):
+            if len(node[1]) == 2 and all(isinstance(v, int | float) for v in node[1]):
+                found.add((node[0], *node[1]))
+        for value in node:
+            _results_intervals(value, found)
+    return found
+
+
+def _named_results(text: str) -> list[Path]:
+    """The results JSONs a doc names: ``X.json``, ``X.md``, ``X.png``, ``X.{json,...}``.
+
+    Or a study's bare name in backticks (`` `study_workspace_16px` ``); a bare
+    word (`` `render` ``) is a command, not a results file.
+    """
+    stems = set(re.findall(r"(?<![\w-])([a-z0-9_]+)(?:\.json|\.md|\.png|\.\{json)", text))
+    stems |= set(re.findall(r"`([a-z0-9]+_[a-z0-9_]+)`", text))
+    return sorted(p for p in RESULTS.rglob("*.json") if p.stem in stems)
+
+
+def _docs_naming_results() -> list[str]:
+    docs = sorted((REPO / "docs").glob("*.md"))
+    return [str(p.relative_to(REPO)) for p in docs if _named_results(_read(p))]
+
+
+def test_the_docs_that_quote_kept_results_are_all_checked():
+    assert COVERED <= set(_docs_naming_results())
+
+
+@pytest.mark.parametrize("doc", _docs_naming_results())
+def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
+    text = _read(REPO / doc)
+    kept: set = set()
+    for path in _named_results(text):
+        kept |= _results_intervals(json.loads(_read(path)), set())
+    decimals = {tuple(f"{v:.3f}" for v in t) for t in kept}
+    percents = {tuple(f"{100 * v:.1f}" for v in t) for t in kept}
+    wrong = []
+    for pattern, known, fmt in ((INTERVAL, decimals, "{:.3f}"), (PERCENT, percents, "{:.1f}")):
+        for m in pattern.finditer(text):
+            quoted = " ".join(m.group(0).split())
+            figure = tuple(fmt.format(_number(g)) for g in m.groups())
+            if figure not in known and quoted not in NOT_KEPT.get(doc, {}):
+                wrong.append(f"line {text.count(chr(10), 0, m.start()) + 1}: {quoted}")
+    names = [p.name for p in _named_results(text)]
+    assert not wrong, f"{doc} quotes intervals none of {names} holds: {wrong}"
+
+
+def test_the_design_protocols_paired_differences_are_its_episode_errors():
+    from mincam_render.analysis.statistics import EpisodeErrors, paired_difference
+
+    ladder = json.loads(_read(DESIGN_PROTOCOL))["workspace"]["ladder"][-1]
+    doc = " ".join(_read(REPO / "docs" / "design_protocol.md").replace("−", "-").split())
+    for a, b, quoted_a, quoted_b in (
+        ("mincam-2px", "baseline-8x8", "mincam 2 px", "8×8"),
+        ("mincam-8px", "baseline-32x32", "mincam 8 px", "32×32"),
+    ):
+        errors = [EpisodeErrors.from_dict(ladder["designs"][n]["episode_errors"]) for n in (a, b)]
+        diff = paired_difference(*errors)
+        figure = f"{diff.mean:+.3f} [{diff.low:+.3f}, {diff.high:+.3f}]"
+        assert f"{quoted_a} − {quoted_b} {figure}".replace("−", "-") in doc, (a, b, figure)
+
+
+# ---- the self-powered budget: energy.json's headline figures, as docs quote them ---------------
+
+
+def _energy_quotes() -> dict[str, list[str]]:
+    """``{doc: [figure as quoted]}`` of ``benchmarks/results/energy.json``."""
+    energy = json.loads(_read(RESULTS / "energy.json"))
+    t = energy["result"]["threshold"]  # the 24-pixel, 30 fps budget
+    fams = energy["result"]["families"]
+    ws, li = fams["workspace"], fams["lighting"]
+    peak = {k: max(v) for k, v in li["sustainable_fps"].items()}
+    at_30 = max(int(k) for k, v in peak.items() if v >= 30.0)
+    depth = {(r["depth"], r["component"]): r for r in energy["depth_check"]["rows"]}
+    low = sorted(-100 * r["relative_to_deepest"] for (d, _), r in depth.items() if d == 3)
+    at_12 = max(-100 * r["relative_to_deepest"] for (d, _), r in depth.items() if d == 12)
+    depth_figures = [f"reads {low[0]:.0f}–{low[-1]:.0f} % low", f"within {at_12:.2f} %"]
+    mc = [100 * f["render"]["max_relative_error_total"] for f in (ws, li)]
+    cmp = energy["result"]["comparisons"]
+
+    def power(c: dict) -> str:
+        mincam, module = (1e3 * c[k]["power_at_fps_w"] for k in ("mincam", "module"))
+        return f"{mincam:.2f} vs {module:.1f} mW"
+
+    benchmarks = [
+        f"**{1e3 * t['power_at_fps_w']:.2f} mW**",
+        f"{1e6 * t['energy_per_frame_j']:.1f} µJ a frame",
+        f"{1e6 * t['static_w']:.1f} µW static",
+        f"**{t['threshold_lux']:.0f} lx**",
+        f"peaks at {max(ws['lux']):.0f} lx",
+        f"**{ws['hours_at_fps']['24']:.1f} h**",
+        f"(1 px: {ws['hours_at_fps']['1']:.1f} h)",
+        f"{max(li['lux']):.0f} lx, enough for 30 fps up to {at_30}",
+        f"sustain {peak['24']:.1f} fps and run {li['hours_at_fps']['24']:.1f} h",
+        *(power(cmp[f]) for f in ("workspace", "lighting", "patches")),
+        *depth_figures,
+        f"{max(mc):.2f} %",
+    ]
+    energy_md = [
+        *depth_figures,
+        f"it is {mc[0]:.2f} % (workspace) and {mc[1]:.2f} % (lighting)",
+        f"a 24-pixel frame costs {1e6 * t['energy_per_frame_j']:.1f} µJ",
+        f"({1e6 * t['radio_j']:.1f} µJ), {1e6 * t['compute_j']:.1f} µJ the head",
+        f"{1e6 * t['readout_j']:.1f} µJ the",  # readout (the line breaks after "the")
+        f"static draw is {1e6 * t['static_w']:.1f} µW",
+    ]
+    for kind, quoted, fmt in (("light=", "a ceiling bank alone", "{:.4f}"),
+                              ("daylight", "the noon daylight", "{:.3f}")):  # fmt: skip
+        rows = sorted((d, r) for (d, comp), r in depth.items() if comp.startswith(kind))
+        levels = " / ".join(fmt.format(r["irradiance_w_m2"]) for _, r in rows)
+        energy_md.append(f"{quoted} {levels} W/m²")
+    weakest = 100 * max(f["render"]["max_relative_error_component"] for f in (ws, li))
+    energy_md.append(f"(a floor lamp alone, early twilight) reach {weakest:.1f} %")
+    return {"docs/benchmarks.md": benchmarks, "docs/energy.md": energy_md}
+
+
+@pytest.mark.parametrize("doc", ["docs/benchmarks.md", "docs/energy.md"])
+def test_the_self_powered_budgets_figures_are_energy_jsons(doc):
+    text = " ".join(_read(REPO / doc).split())
+    missing = [q for q in _energy_quotes()[doc] if q not in text]
+    assert not missing, f"{doc} does not quote energy.json's {missing}"

@@ -26,64 +26,68 @@ def _family(seed: int = 5, **over) -> LightingFamily:
 
 
 @pytest.fixture(scope="module")
-def family() -> LightingFamily:
+def lighting_family() -> LightingFamily:
     return _family()
 
 
 @pytest.fixture(scope="module")
-def scene(family):
-    return family.build_scene()
+def lighting_scene(lighting_family):
+    return lighting_family.build_scene()
 
 
 @pytest.fixture(scope="module")
-def camera(family):
+def lighting_camera(lighting_family):
     """The default pose with 16 x 16 masks (fast), all 8 detectors."""
-    return replace(family.config.camera, mask_resolution=16).camera()
+    return replace(lighting_family.config.camera, mask_resolution=16).camera()
 
 
 def _only(index: int | None) -> tuple[bool, ...]:
     return tuple(i == index for i in range(len(NAMES)))
 
 
-def test_label_spec(family):
-    (spec,) = family.labels
+def test_label_spec(lighting_family):
+    (spec,) = lighting_family.labels
     assert spec.name == "lights" and spec.kind is LabelKind.BINARY
     assert spec.size == 5 and spec.element_names == NAMES
     assert spec.median_filter_s == 0.5
 
 
-def test_emitters_project_outside_every_mask(family):
-    cam = family.camera()
-    for lamp in family.config.floor_lamps:
+def test_emitters_project_outside_every_mask(lighting_family):
+    cam = lighting_family.camera()
+    for lamp in lighting_family.config.floor_lamps:
         assert not points_in_view(cam, lamp_surface_points(lamp)).any(), lamp.name
-    for bank in family.config.ceiling_lights:
-        assert not points_in_view(cam, panel_points(family.config.room, bank)).any(), bank.name
+    for bank in lighting_family.config.ceiling_lights:
+        assert not points_in_view(cam, panel_points(lighting_family.config.room, bank)).any(), (
+            bank.name
+        )
 
 
-def test_view_check_sees_a_point_in_front(family):
-    cam = family.camera()
+def test_view_check_sees_a_point_in_front(lighting_family):
+    cam = lighting_family.camera()
     assert points_in_view(cam, [np.asarray(cam.look_at)]).all()
 
 
-def test_no_emitter_is_directly_visible(family, scene, camera):
+def test_no_emitter_is_directly_visible(lighting_family, lighting_scene, lighting_camera):
     """Depth 1 renders only emitters seen directly: with every light on it is black."""
     from mincam_render.render.transport import render_transport
 
-    family.apply_state(scene, IndoorState(lights_on=(True,) * 5))
-    t = render_transport(scene, camera, spp=4, seed=0, max_depth=1)
+    lighting_family.apply_state(lighting_scene, IndoorState(lights_on=(True,) * 5))
+    t = render_transport(lighting_scene, lighting_camera, spp=4, seed=0, max_depth=1)
     assert float(np.abs(t).max()) == 0.0
-    assert render_transport(scene, camera, spp=4, seed=0).sum() > 0
+    assert render_transport(lighting_scene, lighting_camera, spp=4, seed=0).sum() > 0
 
 
 @pytest.mark.parametrize("light", range(5), ids=NAMES)
-def test_switching_a_light_on_brightens_its_side(family, scene, camera, light):
+def test_switching_a_light_on_brightens_its_side(
+    lighting_family, lighting_scene, lighting_camera, light
+):
     from mincam_render.render.transport import render_transport
 
-    family.apply_state(scene, IndoorState(lights_on=_only(None)))
-    dark = render_transport(scene, camera, spp=4, seed=0)
-    labels = family.apply_state(scene, IndoorState(lights_on=_only(light)))
+    lighting_family.apply_state(lighting_scene, IndoorState(lights_on=_only(None)))
+    dark = render_transport(lighting_scene, lighting_camera, spp=4, seed=0)
+    labels = lighting_family.apply_state(lighting_scene, IndoorState(lights_on=_only(light)))
     np.testing.assert_array_equal(labels["lights"], np.array(_only(light), dtype=np.float32))
-    lit = render_transport(scene, camera, spp=4, seed=0)
+    lit = render_transport(lighting_scene, lighting_camera, spp=4, seed=0)
     assert dark.sum() == 0.0  # no window by default: all off is black
     assert lit.sum() > 0.0
     # the camera looks north: west lamps light the left half (col 0 = left) more
@@ -95,12 +99,12 @@ def test_switching_a_light_on_brightens_its_side(family, scene, camera, light):
         assert right > 1.2 * left
 
 
-def test_labels_follow_the_switching_process(family, scene):
-    on = family.lights_on
+def test_labels_follow_the_switching_process(lighting_family, lighting_scene):
+    on = lighting_family.lights_on
     assert on.shape == (NUM_FRAMES, 5)
     for i in (0, 37, NUM_FRAMES - 1):
         np.testing.assert_array_equal(
-            family.set_frame(scene, i)["lights"], on[i].astype(np.float32)
+            lighting_family.set_frame(lighting_scene, i)["lights"], on[i].astype(np.float32)
         )
     # mean on/off durations of tens of seconds: at most a few switches in 4 s
     assert np.abs(np.diff(on.astype(int), axis=0)).sum() <= 10
@@ -115,17 +119,19 @@ def test_switching_statistics():
     assert abs(s.mean() - 0.75) < 0.06
 
 
-def test_deterministic_and_continuous(family):
+def test_deterministic_and_continuous(lighting_family):
     other = _family()
-    np.testing.assert_array_equal(family.lights_on, other.lights_on)
-    np.testing.assert_array_equal(family.track.pose, other.track.pose)
-    tr = family.track
+    np.testing.assert_array_equal(lighting_family.lights_on, other.lights_on)
+    np.testing.assert_array_equal(lighting_family.track.pose, other.track.pose)
+    tr = lighting_family.track
     same = tr.active[1:] & tr.active[:-1] & (tr.visit[1:] == tr.visit[:-1])
     step = np.linalg.norm(tr.pose[1:, :, :2] - tr.pose[:-1, :, :2], axis=-1)
-    assert np.all(step[same] <= family.config.people.walk_speed_m_s[1] / family.fps + 1e-9)
-    assert not np.array_equal(family.lights_on, _family(seed=6).lights_on) or not np.array_equal(
-        family.track.pose, _family(seed=6).track.pose
+    assert np.all(
+        step[same] <= lighting_family.config.people.walk_speed_m_s[1] / lighting_family.fps + 1e-9
     )
+    assert not np.array_equal(
+        lighting_family.lights_on, _family(seed=6).lights_on
+    ) or not np.array_equal(lighting_family.track.pose, _family(seed=6).track.pose)
 
 
 def _write(tmp_path, text):

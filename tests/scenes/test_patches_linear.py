@@ -21,7 +21,7 @@ SPP = 1024
 
 
 @pytest.fixture(scope="module")
-def family():
+def patches_family():
     # small masks keep Mitsuba renders and the operator fast (4 detectors, 8x8 texels)
     return load_family(
         "patches", seed=0, num_frames=8, overrides={"camera": {"mask_resolution": 8}}
@@ -29,8 +29,10 @@ def family():
 
 
 @pytest.fixture(scope="module")
-def operator(family):
-    return build_plane_transport(PlaneGeometry.of(family), family.camera(), spp=SPP, seed=1)
+def operator(patches_family):
+    return build_plane_transport(
+        PlaneGeometry.of(patches_family), patches_family.camera(), spp=SPP, seed=1
+    )
 
 
 def _corner_image(n: int) -> np.ndarray:
@@ -40,17 +42,19 @@ def _corner_image(n: int) -> np.ndarray:
     return img
 
 
-def _render(family, scene, images, spp, seed):
+def _render(patches_family, scene, images, spp, seed):
     out = []
     for img in images:
         params = mi.traverse(scene)
         params[PLANE_RADIANCE_PARAM] = ms.emitter_image_data(img)
         params.update()
-        out.append(render_transport(scene, family.camera(), spp=spp, seed=seed))
+        out.append(render_transport(scene, patches_family.camera(), spp=spp, seed=seed))
     return np.stack(out)
 
 
-def test_linear_transport_matches_mitsuba_within_monte_carlo_noise(variant, family, operator):
+def test_linear_transport_matches_mitsuba_within_monte_carlo_noise(
+    variant, patches_family, operator
+):
     """Same estimator, same spp: W L - T_mitsuba is distributed like T_mitsuba - T_mitsuba'.
 
     Both are unbiased estimates at SPP samples per texel, so their distances to a
@@ -59,33 +63,33 @@ def test_linear_transport_matches_mitsuba_within_monte_carlo_noise(variant, fami
     0.95-1.01 in trials); shifting the plane image by half a plane texel
     (0.04 mask texel) raised it to ~2 in a trial, a flipped axis far more.
     """
-    scene = family.build_scene()
-    n = family.config.image_resolution
-    images = np.concatenate([radiance_images(family, [0, 1, 2]), _corner_image(n)[None]])
+    scene = patches_family.build_scene()
+    n = patches_family.config.image_resolution
+    images = np.concatenate([radiance_images(patches_family, [0, 1, 2]), _corner_image(n)[None]])
     lin = operator.apply(images)
-    mit = _render(family, scene, images, SPP, seed=5)
-    ref = _render(family, scene, images, 16 * SPP, seed=7)
+    mit = _render(patches_family, scene, images, SPP, seed=5)
+    ref = _render(patches_family, scene, images, 16 * SPP, seed=7)
     rms_lin = np.sqrt(np.mean((lin - ref) ** 2))
     rms_mit = np.sqrt(np.mean((mit - ref) ** 2))
     assert 0.75 < rms_lin / rms_mit < 1.33, (rms_lin, rms_mit)
     assert abs(lin.sum() / ref.sum() - 1) < 0.02
-    err_lin = measurement_relative_error(lin, ref, family.camera().transmittance_range)
-    err_mit = measurement_relative_error(mit, ref, family.camera().transmittance_range)
+    err_lin = measurement_relative_error(lin, ref, patches_family.camera().transmittance_range)
+    err_mit = measurement_relative_error(mit, ref, patches_family.camera().transmittance_range)
     assert err_lin["rms"] < 1.5 * err_mit["rms"] + 1e-3, (err_lin, err_mit)
 
 
-def test_corner_patch_lands_in_the_matching_mask_corner(operator, family):
+def test_corner_patch_lands_in_the_matching_mask_corner(operator, patches_family):
     """Top-left of the plane (row 0 up, col 0 left as seen from the camera) -> top-left of T."""
-    t = operator.apply(_corner_image(family.config.image_resolution) - np.float32(0.2))
+    t = operator.apply(_corner_image(patches_family.config.image_resolution) - np.float32(0.2))
     for k in range(t.shape[0]):
         rows, cols = t[k].shape
         assert t[k, : rows // 2, : cols // 2].sum() > 0.97 * t[k].sum()
 
 
 @pytest.mark.parametrize("block", [(28, 36), (56, 56), (84, 20), (20, 96)])
-def test_footprint_centroid_is_the_projection_of_the_plane_block(operator, family, block):
+def test_footprint_centroid_is_the_projection_of_the_plane_block(operator, patches_family, block):
     """Independent path: a 16x16-texel spot of the plane lands where the camera projects it."""
-    cam = family.camera()
+    cam = patches_family.camera()
     plane = operator.plane
     n = plane.resolution
     row, col = block
@@ -105,9 +109,12 @@ def test_footprint_centroid_is_the_projection_of_the_plane_block(operator, famil
         np.testing.assert_allclose(centroid, expected, atol=0.2)
 
 
-def test_operator_geometry_matches_the_scene_and_totals_are_positive(operator, family):
-    cam = family.camera()
-    assert operator.matrix.shape == (cam.num_detectors * 64, family.config.image_resolution**2)
+def test_operator_geometry_matches_the_scene_and_totals_are_positive(operator, patches_family):
+    cam = patches_family.camera()
+    assert operator.matrix.shape == (
+        cam.num_detectors * 64,
+        patches_family.config.image_resolution**2,
+    )
     assert operator.transport_shape == (cam.num_detectors, 8, 8)
     # a uniform plane of 1 W m^-2 sr^-1 filling the view: every texel receives light
     t = operator.apply(np.ones((128, 128), np.float32))
@@ -119,14 +126,14 @@ def test_operator_geometry_matches_the_scene_and_totals_are_positive(operator, f
     np.testing.assert_allclose(az, -fwd, atol=1e-12)
 
 
-def test_radiance_images_equal_the_painting_described_by_the_frame_state(family):
+def test_radiance_images_equal_the_painting_described_by_the_frame_state(patches_family):
     """The fast 1-D painting of PatchesFamily.image equals the 2-D definition."""
-    n = family.config.image_resolution
+    n = patches_family.config.image_resolution
     ys, xs = (np.mgrid[0:n, 0:n] + 0.5) / n
-    imgs = radiance_images(family, range(8))
+    imgs = radiance_images(patches_family, range(8))
     for i in range(8):
-        state = family.frame_state(i)
-        img = np.full((n, n), family.config.background_radiance_w_m2_sr)
+        state = patches_family.frame_state(i)
+        img = np.full((n, n), patches_family.config.background_radiance_w_m2_sr)
         for p in state["patches"]:
             (cx, cy), (w, h) = p["center"], p["size"]
             img[(np.abs(xs - cx) <= w / 2) & (np.abs(ys - cy) <= h / 2)] = p["radiance"]
@@ -138,22 +145,22 @@ def test_radiance_images_equal_the_painting_described_by_the_frame_state(family)
         np.testing.assert_array_equal(imgs[i], (img * illum).astype(np.float32))
 
 
-def test_batches_give_labels_and_transport_of_each_frame(operator, family):
-    got = list(linear_transport_batches(family, operator, range(5), batch=2))
+def test_batches_give_labels_and_transport_of_each_frame(operator, patches_family):
+    got = list(linear_transport_batches(patches_family, operator, range(5), batch=2))
     assert [len(t) for t, _ in got] == [2, 2, 1]
     t = np.concatenate([t for t, _ in got])
     counts = np.concatenate([c for _, c in got])
-    np.testing.assert_array_equal(t, operator.apply(radiance_images(family, range(5))))
-    assert counts.tolist() == [[family.frame_state(i)["count"]] for i in range(5)]
+    np.testing.assert_array_equal(t, operator.apply(radiance_images(patches_family, range(5))))
+    assert counts.tolist() == [[patches_family.frame_state(i)["count"]] for i in range(5)]
 
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [({"spp": 0}, r"spp = 0"), ({"seed": -1}, r"seed = -1"), ({"spp": 2.0}, r"spp = 2.0")],
 )
-def test_build_rejects_bad_arguments(family, kwargs, match):
+def test_build_rejects_bad_arguments(patches_family, kwargs, match):
     with pytest.raises(ValueError, match=match):
-        build_plane_transport(PlaneGeometry.of(family), family.camera(), **kwargs)
+        build_plane_transport(PlaneGeometry.of(patches_family), patches_family.camera(), **kwargs)
 
 
 def test_operator_validates_shape_and_image(operator):

@@ -179,24 +179,24 @@ SMALL = {
 
 
 @pytest.fixture(scope="module")
-def family():
+def traffic_family():
     pytest.importorskip(
         "libsumo", reason="needs Eclipse SUMO: pip install 'mincam_render[traffic]'"
     )
     return load_family("traffic", seed=3, num_frames=150, overrides=SMALL)
 
 
-def test_same_seed_same_sequence(family):
+def test_same_seed_same_sequence(traffic_family):
     again = load_family("traffic", seed=3, num_frames=150, overrides=SMALL)
     for name in ("step_offsets", "vehicle", "center_m", "yaw_rad", "speed_m_s", "vehicle_type"):
         np.testing.assert_array_equal(
-            getattr(family.trajectories, name), getattr(again.trajectories, name)
+            getattr(traffic_family.trajectories, name), getattr(again.trajectories, name)
         )
-    assert family.frame_state(77) == again.frame_state(77)
+    assert traffic_family.frame_state(77) == again.frame_state(77)
     other = load_family("traffic", seed=4, num_frames=150, overrides=SMALL)
     assert len(other.trajectories.center_m) != len(
-        family.trajectories.center_m
-    ) or not np.array_equal(other.trajectories.center_m, family.trajectories.center_m)
+        traffic_family.trajectories.center_m
+    ) or not np.array_equal(other.trajectories.center_m, traffic_family.trajectories.center_m)
 
 
 def test_a_study_episode_seed_beyond_sumos_int_runs_and_differs_from_others():
@@ -211,22 +211,22 @@ def test_a_study_episode_seed_beyond_sumos_int_runs_and_differs_from_others():
     assert len(fam.trajectories.center_m) > 0
 
 
-def test_sequence_has_traffic_both_ways(family):
-    labs = [family.frame_labels(i) for i in range(0, 150, 10)]
+def test_sequence_has_traffic_both_ways(traffic_family):
+    labs = [traffic_family.frame_labels(i) for i in range(0, 150, 10)]
     assert sum(lab["count_left"][0] for lab in labs) > 0
     assert sum(lab["count_right"][0] for lab in labs) > 0
 
 
-def test_consecutive_frames_move_by_speed_over_fps(family):
+def test_consecutive_frames_move_by_speed_over_fps(traffic_family):
     moved = 0
     for i in range(0, 149, 7):
-        a, b = family.vehicles(i), family.vehicles(i + 1)
+        a, b = traffic_family.vehicles(i), traffic_family.vehicles(i + 1)
         common, ia, ib = np.intersect1d(a["vehicle"], b["vehicle"], return_indices=True)
         dx = np.abs(b["center_m"][ib, 0] - a["center_m"][ia, 0])
         dy = np.abs(b["center_m"][ib, 1] - a["center_m"][ia, 1])
         mean_speed = 0.5 * (a["speed_m_s"][ia] + b["speed_m_s"][ib])
         # longitudinal step = speed / fps, up to acceleration within the frame
-        np.testing.assert_allclose(dx, mean_speed / family.fps, atol=0.03)
+        np.testing.assert_allclose(dx, mean_speed / traffic_family.fps, atol=0.03)
         assert np.all(dy < 0.1)  # lane changes are gradual (2 s)
         moved += int((dx > 0.1).sum())
     assert moved > 0
@@ -243,8 +243,8 @@ def test_signals_queue_traffic_at_high_demand():
     assert speeds.max() > 10.0
 
 
-def test_labels_follow_the_state(family):
-    st = family.frame_state(40)
+def test_labels_follow_the_state(traffic_family):
+    st = traffic_family.frame_state(40)
     seen = [v for v in st["vehicles"] if v["in_view"]]
     assert st["labels"]["count_left"] + st["labels"]["count_right"] == len(seen)
     for side, sgn in (("left", -1.0), ("right", 1.0)):
@@ -254,38 +254,40 @@ def test_labels_follow_the_state(family):
 
 
 @pytest.fixture(scope="module")
-def scene(family):
-    return family.build_scene()
+def traffic_scene(traffic_family):
+    return traffic_family.build_scene()
 
 
-def _frame_with_vehicle(family) -> int:
+def _frame_with_vehicle(traffic_family) -> int:
     return next(
         i
         for i in range(150)
-        if family.frame_labels(i)["count_left"][0] + family.frame_labels(i)["count_right"][0] > 0
+        if traffic_family.frame_labels(i)["count_left"][0]
+        + traffic_family.frame_labels(i)["count_right"][0]
+        > 0
     )
 
 
-def test_transport_changes_when_a_vehicle_passes(family, scene, tmp_path):
+def test_transport_changes_when_a_vehicle_passes(traffic_family, traffic_scene, tmp_path):
     cam = FreeformCamera(
         layout=DetectorLayout(positions_m=((0.0, 0.0),)),
         mask_resolution=(8, 8),
-        position=family.camera().position,
-        look_at=family.camera().look_at,
-        up=family.camera().up,
+        position=traffic_family.camera().position,
+        look_at=traffic_family.camera().look_at,
+        up=traffic_family.camera().up,
     )
-    f = _frame_with_vehicle(family)
-    family.set_frame(scene, f)
-    with_cars = render_transport(scene, cam, spp=32, seed=1)
-    params = mi.traverse(scene)
-    for slot in range(family.config.max_vehicles):
+    f = _frame_with_vehicle(traffic_family)
+    traffic_family.set_frame(traffic_scene, f)
+    with_cars = render_transport(traffic_scene, cam, spp=32, seed=1)
+    params = mi.traverse(traffic_scene)
+    for slot in range(traffic_family.config.max_vehicles):
         for key in (vehicle_body_key(slot), vehicle_trim_key(slot)):
             n = len(params[vertex_param(key)]) // 3
             params[vertex_param(key)] = mi.Float(np.tile(np.float32(PARKED_POINT_M), n))
     params.update()
-    empty = render_transport(scene, cam, spp=32, seed=1)
-    family.set_frame(scene, f)  # in place again: the same image
-    again = render_transport(scene, cam, spp=32, seed=1)
+    empty = render_transport(traffic_scene, cam, spp=32, seed=1)
+    traffic_family.set_frame(traffic_scene, f)  # in place again: the same image
+    again = render_transport(traffic_scene, cam, spp=32, seed=1)
     diff = np.abs(with_cars - empty)
     if diff.max() <= 0.2 * empty.max():
         np.save(tmp_path / "with_cars.npy", with_cars)
@@ -294,15 +296,15 @@ def test_transport_changes_when_a_vehicle_passes(family, scene, tmp_path):
     np.testing.assert_allclose(again, with_cars, rtol=1e-4, atol=1e-4 * with_cars.max())
 
 
-def test_sun_moves_in_time_lapse(family, scene):
+def test_sun_moves_in_time_lapse(traffic_family, traffic_scene):
     fam = load_family(
         "traffic",
         seed=3,
         num_frames=2,
         overrides={**SMALL, "daylight": {"hours_per_second": 1.0}, "daylight_update_s": 0.0},
     )
-    fam.set_frame(scene, 0)
-    m0 = np.array(mi.traverse(scene)[SUN_DIRECTION_PARAM].matrix)
-    fam.set_frame(scene, 1)  # 1/30 s = 2 solar minutes later
-    m1 = np.array(mi.traverse(scene)[SUN_DIRECTION_PARAM].matrix)
+    fam.set_frame(traffic_scene, 0)
+    m0 = np.array(mi.traverse(traffic_scene)[SUN_DIRECTION_PARAM].matrix)
+    fam.set_frame(traffic_scene, 1)  # 1/30 s = 2 solar minutes later
+    m1 = np.array(mi.traverse(traffic_scene)[SUN_DIRECTION_PARAM].matrix)
     assert not np.allclose(m0, m1)

@@ -37,23 +37,25 @@ def _family(seed: int = 3, num_frames: int = NUM_FRAMES, **over) -> WorkspaceFam
 
 
 @pytest.fixture(scope="module")
-def family() -> WorkspaceFamily:
+def workspace_family() -> WorkspaceFamily:
     return _family()
 
 
 @pytest.fixture(scope="module")
-def scene(family):
-    return family.build_scene()
+def workspace_scene(workspace_family):
+    return workspace_family.build_scene()
 
 
-def _small_camera(family, detectors=2, res=8):
+def _small_camera(workspace_family, detectors=2, res=8):
     from dataclasses import replace
 
-    return replace(family.config.camera, detectors=detectors, mask_resolution=res).camera()
+    return replace(
+        workspace_family.config.camera, detectors=detectors, mask_resolution=res
+    ).camera()
 
 
-def test_label_specs(family):
-    specs = {s.name: s for s in family.labels}
+def test_label_specs(workspace_family):
+    specs = {s.name: s for s in workspace_family.labels}
     assert specs["people_count"].kind is LabelKind.COUNT
     assert specs["people_count"].median_filter_s == 2.0
     assert specs["zones"].kind is LabelKind.BINARY
@@ -63,130 +65,135 @@ def test_label_specs(family):
 
 
 @pytest.mark.parametrize("zone_index", range(4))
-def test_person_in_zone_sets_that_zone_only(family, zone_index):
-    zone = family.config.zones[zone_index]
+def test_person_in_zone_sets_that_zone_only(workspace_family, zone_index):
+    zone = workspace_family.config.zones[zone_index]
     x0, y0, x1, y1 = zone.rect_m
     state = IndoorState(
         people=((PERSON, Pose(0.5 * (x0 + x1), 0.5 * (y0 + y1))),), lights_on=(True, True)
     )
-    labels = family.labels_for(state)
+    labels = workspace_family.labels_for(state)
     expected = np.zeros(4, dtype=np.float32)
     expected[zone_index] = 1.0
     np.testing.assert_array_equal(labels["zones"], expected)
     assert labels["people_count"][0] == 1.0
 
 
-def test_footprint_overlap_at_zone_edge(family):
-    zone = family.config.zones[1]  # desks_south, x from 1.0
+def test_footprint_overlap_at_zone_edge(workspace_family):
+    zone = workspace_family.config.zones[1]  # desks_south, x from 1.0
     r = PERSON.radius_m
     y = 0.5 * (zone.rect_m[1] + zone.rect_m[3])
     assert zone_overlaps(zone, zone.rect_m[0] - 0.9 * r, y, r)
     assert not zone_overlaps(zone, zone.rect_m[0] - 1.1 * r, y, r)
 
 
-def test_person_in_corridor_is_not_counted(family):
-    corridor, doorway, _ = family.rig.door.waypoints()
+def test_person_in_corridor_is_not_counted(workspace_family):
+    corridor, doorway, _ = workspace_family.rig.door.waypoints()
     state = IndoorState(people=((PERSON, Pose(*corridor)),), lights_on=(True, True))
-    labels = family.labels_for(state)
+    labels = workspace_family.labels_for(state)
     assert labels["people_count"][0] == 0.0
     assert labels["zones"].sum() == 0.0
 
 
 @pytest.mark.parametrize(("angle_deg", "is_open"), [(0.0, 0), (5.0, 0), (15.0, 1), (90.0, 1)])
-def test_door_label_from_angle(family, angle_deg, is_open):
+def test_door_label_from_angle(workspace_family, angle_deg, is_open):
     state = IndoorState(door_angle_rad=math.radians(angle_deg), lights_on=(True, True))
-    assert family.labels_for(state)["door_open"][0] == is_open
+    assert workspace_family.labels_for(state)["door_open"][0] == is_open
 
 
-def test_door_geometry_swings_into_room(family):
-    door = family.rig.door
+def test_door_geometry_swings_into_room(workspace_family):
+    door = workspace_family.rig.door
     closed = door.vertices(0.0)
     opened = door.vertices(math.radians(90.0))
-    d = family.config.room.size_m[1]  # the default door is in the north wall (y = D)
+    d = workspace_family.config.room.size_m[1]  # the default door is in the north wall (y = D)
     assert np.all(np.abs(closed[:, 1] - d) <= door.THICKNESS_M + 1e-6)
     assert opened[:, 1].min() < d - 0.8  # the leaf now sticks ~0.9 m into the room
     hinge_x = door.hinge[0]
     assert np.all(np.abs(opened[:, 0] - hinge_x) <= door.THICKNESS_M + 1e-6)
 
 
-def test_people_count_equals_people_inside(family):
+def test_people_count_equals_people_inside(workspace_family):
     for index in range(0, NUM_FRAMES, 10):
-        state = family.state(index)
-        inside = sum(inside_room(family.config.room, p.x, p.y) for _, p in state.people)
-        assert family.labels_for(state)["people_count"][0] == inside
-    counts = [family.labels_for(family.state(i))["people_count"][0] for i in range(NUM_FRAMES)]
-    assert 0 <= min(counts) and max(counts) <= family.config.max_people
+        state = workspace_family.state(index)
+        inside = sum(inside_room(workspace_family.config.room, p.x, p.y) for _, p in state.people)
+        assert workspace_family.labels_for(state)["people_count"][0] == inside
+    counts = [
+        workspace_family.labels_for(workspace_family.state(i))["people_count"][0]
+        for i in range(NUM_FRAMES)
+    ]
+    assert 0 <= min(counts) and max(counts) <= workspace_family.config.max_people
 
 
-def test_set_frame_updates_geometry_and_returns_labels(family, scene):
+def test_set_frame_updates_geometry_and_returns_labels(workspace_family, workspace_scene):
     import mitsuba as mi
 
-    labels = family.set_frame(scene, 7)
-    expected = family.labels_for(family.state(7))
+    labels = workspace_family.set_frame(workspace_scene, 7)
+    expected = workspace_family.labels_for(workspace_family.state(7))
     for k, v in expected.items():
         np.testing.assert_array_equal(labels[k], v)
         assert labels[k].dtype == np.float32
-    params = mi.traverse(scene)
+    params = mi.traverse(workspace_scene)
     v = np.asarray(params["door.vertex_positions"]).reshape(-1, 3)
     np.testing.assert_allclose(
-        v, family.rig.door.vertices(family.state(7).door_angle_rad), atol=1e-5
+        v, workspace_family.rig.door.vertices(workspace_family.state(7).door_angle_rad), atol=1e-5
     )
 
 
-def test_continuity_between_frames(family):
-    tr = family.track
-    vmax = family.config.people.walk_speed_m_s[1]
+def test_continuity_between_frames(workspace_family):
+    tr = workspace_family.track
+    vmax = workspace_family.config.people.walk_speed_m_s[1]
     same = tr.active[1:] & tr.active[:-1] & (tr.visit[1:] == tr.visit[:-1])
     step = np.linalg.norm(tr.pose[1:, :, :2] - tr.pose[:-1, :, :2], axis=-1)
     assert same.any()
-    assert np.all(step[same] <= vmax / family.fps + 1e-9)
-    dmax = math.radians(family.config.door.speed_deg_s) / family.fps
+    assert np.all(step[same] <= vmax / workspace_family.fps + 1e-9)
+    dmax = math.radians(workspace_family.config.door.speed_deg_s) / workspace_family.fps
     assert np.all(np.abs(np.diff(tr.door_angle_rad)) <= dmax + 1e-9)
 
 
-def test_deterministic_for_a_seed(family, scene):
+def test_deterministic_for_a_seed(workspace_family, workspace_scene):
     from mincam_render.render.transport import render_transport
 
     other = _family()
-    np.testing.assert_array_equal(family.track.pose, other.track.pose)
-    np.testing.assert_array_equal(family.lights_on, other.lights_on)
-    cam = _small_camera(family)
+    np.testing.assert_array_equal(workspace_family.track.pose, other.track.pose)
+    np.testing.assert_array_equal(workspace_family.lights_on, other.lights_on)
+    cam = _small_camera(workspace_family)
     # visiting frames out of order gives the same frame
-    family.set_frame(scene, 40)
-    a = render_transport(scene, cam, spp=4, seed=1)
-    family.set_frame(scene, 90)
-    family.set_frame(scene, 40)
-    b = render_transport(scene, cam, spp=4, seed=1)
+    workspace_family.set_frame(workspace_scene, 40)
+    a = render_transport(workspace_scene, cam, spp=4, seed=1)
+    workspace_family.set_frame(workspace_scene, 90)
+    workspace_family.set_frame(workspace_scene, 40)
+    b = render_transport(workspace_scene, cam, spp=4, seed=1)
     np.testing.assert_array_equal(a, b)
     assert a.sum() > 0
     different = _family(seed=4)
-    assert not np.array_equal(family.track.pose, different.track.pose)
+    assert not np.array_equal(workspace_family.track.pose, different.track.pose)
 
 
-def test_ceiling_light_brightens_transport(family, scene):
+def test_ceiling_light_brightens_transport(workspace_family, workspace_scene):
     from mincam_render.render.transport import render_transport
 
-    cam = _small_camera(family)
+    cam = _small_camera(workspace_family)
     dark = IndoorState(lights_on=(False, False), daylight_time_s=MIDNIGHT_S)
     lit = IndoorState(lights_on=(True, False), daylight_time_s=MIDNIGHT_S)
-    family.apply_state(scene, dark)
-    t_dark = render_transport(scene, cam, spp=4, seed=0)
-    family.apply_state(scene, lit)
-    t_lit = render_transport(scene, cam, spp=4, seed=0)
+    workspace_family.apply_state(workspace_scene, dark)
+    t_dark = render_transport(workspace_scene, cam, spp=4, seed=0)
+    workspace_family.apply_state(workspace_scene, lit)
+    t_lit = render_transport(workspace_scene, cam, spp=4, seed=0)
     assert t_lit.sum() > 10 * max(t_dark.sum(), 1e-15)
 
 
-def test_desk_illuminance_is_indoor_level(family, scene):
+def test_desk_illuminance_is_indoor_level(workspace_family, workspace_scene):
     """Both banks on at night: a desk top gets 300-600 lux (office lighting)."""
     import mitsuba as mi
 
     from mincam_render.core.photometry import irradiance_to_lux
     from mincam_render.render import mitsuba_scene as ms
 
-    family.apply_state(scene, IndoorState(lights_on=(True, True), daylight_time_s=MIDNIGHT_S))
+    workspace_family.apply_state(
+        workspace_scene, IndoorState(lights_on=(True, True), daylight_time_s=MIDNIGHT_S)
+    )
     # a 10 cm lux meter lying on the desk top, facing up
     meter = mi.load_dict(ms.irradiance_meter((1.9, 1.7, 0.76), (0, 0, 1), (1, 0, 0), (0.1, 0.1)))
-    e = float(np.asarray(mi.render(scene, sensor=meter.sensor(), spp=1024)).ravel()[0])
+    e = float(np.asarray(mi.render(workspace_scene, sensor=meter.sensor(), spp=1024)).ravel()[0])
     assert 300.0 < irradiance_to_lux(e) < 600.0
 
 
@@ -216,23 +223,23 @@ def test_bad_descriptions_are_rejected(tmp_path, text, field):
     assert field in str(err.value)
 
 
-def test_applying_only_what_changed_renders_as_a_fresh_scene(family):
+def test_applying_only_what_changed_renders_as_a_fresh_scene(workspace_family):
     """A scene taken through other frames (lights, door, people, daylight skipped when
     unchanged) renders bit for bit like a fresh scene set to the last frame."""
     import dataclasses
 
     from mincam_render.render.transport import render_transport
 
-    cam = dataclasses.replace(family.camera(), mask_resolution=(4, 4))
-    busy = [i for i in range(NUM_FRAMES) if len(family.state(i).people) >= 2]
+    cam = dataclasses.replace(workspace_family.camera(), mask_resolution=(4, 4))
+    busy = [i for i in range(NUM_FRAMES) if len(workspace_family.state(i).people) >= 2]
     last = busy[-1]
-    walked = family.build_scene()
+    walked = workspace_family.build_scene()
     for i in (busy[0], 0, busy[len(busy) // 2], last, last):
-        family.set_frame(walked, i)
-    family.set_frame_in_window(walked, last, 60.0)  # other daylight, then back
-    family.set_frame(walked, last)
-    fresh = family.build_scene()
-    family.set_frame(fresh, last)
+        workspace_family.set_frame(walked, i)
+    workspace_family.set_frame_in_window(walked, last, 60.0)  # other daylight, then back
+    workspace_family.set_frame(walked, last)
+    fresh = workspace_family.build_scene()
+    workspace_family.set_frame(fresh, last)
     a = render_transport(walked, cam, spp=4, seed=2, max_depth=3)
     b = render_transport(fresh, cam, spp=4, seed=2, max_depth=3)
     np.testing.assert_array_equal(a, b)
@@ -271,16 +278,18 @@ def test_a_frame_without_its_people_keeps_the_door_and_changes_only_what_they_to
     np.testing.assert_array_equal(again, view)
 
 
-def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
+def test_people_mesh_carries_each_persons_albedo_per_vertex(workspace_family):
     import mitsuba as mi
 
     from mincam_render.scenes.indoor import PEOPLE_ALBEDO_PARAM, PEOPLE_VERTICES_PARAM
 
-    scene = family.build_scene()
-    state = IndoorState(people=((PERSON, Pose(2.0, 2.0)),), lights_on=family.state(0).lights_on)
-    family.apply_state(scene, state)
+    scene = workspace_family.build_scene()
+    state = IndoorState(
+        people=((PERSON, Pose(2.0, 2.0)),), lights_on=workspace_family.state(0).lights_on
+    )
+    workspace_family.apply_state(scene, state)
     params = mi.traverse(scene)
-    layout = family.rig.people
+    layout = workspace_family.rig.people
     albedo = np.asarray(params[PEOPLE_ALBEDO_PARAM])
     vertices = np.asarray(params[PEOPLE_VERTICES_PARAM]).reshape(-1, 3)
     upper, lower, skin = layout.part_sizes
@@ -294,7 +303,7 @@ def test_people_mesh_carries_each_persons_albedo_per_vertex(family):
 
 @pytest.mark.parametrize(("target_z_m", "where"), [(1.0, "corridor"), (2.2, "wall"), (2.3, "wall")])
 def test_open_doorway_shows_the_corridor_and_the_wall_above_it_faces_the_room(
-    family, target_z_m, where
+    workspace_family, target_z_m, where
 ):
     """The corridor is open on the room's side: no face in the doorway, none on the wall.
 
@@ -304,12 +313,12 @@ def test_open_doorway_shows_the_corridor_and_the_wall_above_it_faces_the_room(
     """
     import mitsuba as mi
 
-    rig = family.rig
+    rig = workspace_family.rig
     scene = rig.build_scene()
     off = (False,) * len(rig.lights)
     rig.apply(scene, IndoorState(door_angle_rad=math.radians(90.0), lights_on=off, daylight=False))
     door = rig.door
-    d_room = family.config.room.size_m[1]
+    d_room = workspace_family.config.room.size_m[1]
     # from the middle of the room toward the doorway's centre line, below and
     # above the door's top (2.05 m) but under the corridor's ceiling (2.35 m)
     target = np.array([door.center[0], d_room, target_z_m])
