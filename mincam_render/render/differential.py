@@ -57,8 +57,8 @@ from __future__ import annotations
 
 import enum
 import hashlib
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, cast
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
 
@@ -126,6 +126,9 @@ class BackgroundSettings:
             for all detectors (``B`` stays per detector).
         difference_seeds: which frames share the seed of ``X - C``
             (:class:`DifferenceSeeds`).
+        seeds_recorded: False for a record written before ``difference_seeds``
+            existed (plans shipped then): :meth:`as_json` leaves it out again,
+            so a record is written back as it was read.
     """
 
     interval_s: float
@@ -133,6 +136,7 @@ class BackgroundSettings:
     max_depth: int | None
     shared_difference: bool = False
     difference_seeds: DifferenceSeeds = DifferenceSeeds.WINDOW
+    seeds_recorded: bool = field(default=True, compare=False, repr=False)
 
     @classmethod
     def from_dict(cls, d: dict) -> BackgroundSettings:
@@ -146,7 +150,20 @@ class BackgroundSettings:
             max_depth=int(d["max_depth"]) or None,
             shared_difference=bool(d.get("shared_difference", False)),
             difference_seeds=DifferenceSeeds(d.get("difference_seeds", "window")),
+            seeds_recorded="difference_seeds" in d,
         )
+
+    def as_json(self) -> dict[str, Any]:
+        """The record :meth:`from_dict` reads (``max_depth`` 0: the scene's integrator)."""
+        record: dict[str, Any] = {
+            "interval_s": self.interval_s,
+            "spp": self.spp,
+            "max_depth": self.max_depth or 0,
+            "shared_difference": self.shared_difference,
+        }
+        if self.seeds_recorded:
+            record["difference_seeds"] = self.difference_seeds.value
+        return record
 
     def __post_init__(self) -> None:
         if not self.interval_s > 0:

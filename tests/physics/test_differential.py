@@ -370,7 +370,7 @@ def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
     target, biases = 0.01, {"depth": 0.004, "interp": 0.003}
     diff, bg = (0.0075, 4.0, None), (0.0975, 0.15, None)
     b = split_noise_budget(target, biases, diff, bg)
-    x, y = b["difference_noise"], b["background_noise"]
+    x, y = b.difference_noise, b.background_noise
     assert x**2 + y**2 + 0.004**2 + 0.003**2 == pytest.approx(target**2)
 
     def cost(x):  # spp needed for noise x (continuous), times the cost per sample
@@ -379,16 +379,16 @@ def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
 
     grid = np.linspace(0.05, 0.99, 500) * np.sqrt(target**2 - 0.004**2 - 0.003**2)
     assert cost(x) <= cost(grid).min() * (1 + 1e-6)
-    assert not b["biases_exceed_target"]
+    assert not b.biases_exceed_target
     # a flag fixes one noise; the other takes the rest
     fixed = split_noise_budget(target, biases, (0.0075, 4.0, 16), bg)
-    assert fixed["difference_noise"] == pytest.approx(0.0075 * np.sqrt(PILOT_SPP / 16))
-    assert fixed["difference_noise"] ** 2 + fixed["background_noise"] ** 2 == pytest.approx(
+    assert fixed.difference_noise == pytest.approx(0.0075 * np.sqrt(PILOT_SPP / 16))
+    assert fixed.difference_noise**2 + fixed.background_noise**2 == pytest.approx(
         target**2 - 0.004**2 - 0.003**2
     )
     # biases beyond the target are reported, and the noises still get a floor
     over = split_noise_budget(target, {"depth": 0.02}, diff, bg)
-    assert over["biases_exceed_target"] and over["difference_noise"] > 0
+    assert over.biases_exceed_target and over.difference_noise > 0
 
 
 @pytest.mark.parametrize("empty_room", [False, True])

@@ -168,12 +168,12 @@ def _job_section(
             "shared_render": plan.shared_render,
             "mask_resolution": plan.mask_resolution,
             "dtype": plan.dtype,
-            "background": plan.background,
+            "background": plan.settings()["background"],
         },
     }
     if plan.background is not None:
         parts = background_parts(
-            background_family(family), job["num_frames"], plan.background["interval_s"]
+            background_family(family), job["num_frames"], plan.background.interval_s
         )
         job["backgrounds"] = list(parts)
         job["background_parts"] = parts

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 from mincam_render.render.fidelity.constants import PILOT_SPP
+from mincam_render.render.fidelity.records import NoiseBudget
 
 
 def spp_for(error_at_pilot: float, target: float, cap: int, steps_per_octave: int = 1) -> int:
@@ -36,7 +36,7 @@ def split_noise_budget(
     biases: Mapping[str, float],
     difference: tuple[float, float, int | None],
     background: tuple[float, float, int | None],
-) -> dict[str, Any]:
+) -> NoiseBudget:
     """Share the error left by ``biases`` between the noises of ``X - C`` and of ``B``.
 
     Errors add in quadrature: ``target^2 = sum(bias^2) + x^2 + y^2`` with ``x``
@@ -52,8 +52,7 @@ def split_noise_budget(
         background: the same for the background.
 
     Returns:
-        ``{"target", **biases, "difference_noise", "background_noise",
-        "biases_exceed_target"}``: the noise each may have.
+        The noise each of ``difference_noise`` and ``background_noise`` may have.
     """
     fixed2 = sum(b * b for b in biases.values())
     # biases eating the budget leave each noise at least a tenth of the target
@@ -70,9 +69,9 @@ def split_noise_budget(
     total = sum(weights.values()) or 1.0
     for name, w in weights.items():
         shares[name] = math.sqrt(rest2 * w / total)
-    return {
-        "target": target,
-        **biases,
-        **shares,
-        "biases_exceed_target": fixed2 > 0.9 * target * target,
-    }
+    return NoiseBudget(
+        target=target,
+        biases=dict(biases),
+        noises=shares,
+        biases_exceed_target=fixed2 > 0.9 * target * target,
+    )

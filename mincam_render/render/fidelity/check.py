@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -26,6 +26,10 @@ from mincam_render.render.fidelity.constants import (
     REFERENCE_SPP_FACTOR,
 )
 from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.fidelity.records import Achieved, Decision
+
+if TYPE_CHECKING:
+    from mincam_render.render.differential import BackgroundSettings
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +52,7 @@ class Draft:
     max_depth: int = 0
     spp: int = 1
     e_pilot: float | None = None
-    background: dict[str, Any] | None = None
+    background: BackgroundSettings | None = None
 
 
 def render_plan(p: Probes, draft: Draft, seed_offset: int = 2) -> np.ndarray:
@@ -64,13 +68,11 @@ def render_plan(p: Probes, draft: Draft, seed_offset: int = 2) -> np.ndarray:
     return np.stack([_differential_probe(p, draft, draft.background, i) for i in p.indices])
 
 
-def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -> np.ndarray:
+def _differential_probe(
+    p: Probes, draft: Draft, background: BackgroundSettings, index: int
+) -> np.ndarray:
     """``B + X - C`` of probe frame ``index`` (as a dataset would store it)."""
-    from mincam_render.render.differential import (
-        BackgroundSettings,
-        render_background,
-        render_frame,
-    )
+    from mincam_render.render.differential import render_background, render_frame
 
     depth = draft.max_depth or None
     bg = render_background(
@@ -78,7 +80,7 @@ def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -
         p.scene,
         draft.render_cam,
         index,
-        BackgroundSettings.from_dict(background),
+        background,
         dataset_seed=p.request.seed,
         spp=draft.spp,
         max_depth=depth,
@@ -90,17 +92,20 @@ def _differential_probe(p: Probes, draft: Draft, background: dict, index: int) -
 
 
 def check_against_reference(
-    p: Probes, auto: bool, decisions: dict[str, dict], draft: Draft
-) -> np.ndarray:
-    """Render the plan and, when auto, measure it against a reference; the plan's probes.
+    p: Probes, auto: bool, decisions: dict[str, Decision], draft: Draft
+) -> tuple[np.ndarray, Achieved | None]:
+    """Render the plan and, when auto, measure it against a reference.
 
-    Records the check in the spp (plain) or differential decision and adds
-    ``decisions["achieved"]``; a differential plan that misses its target has its
-    spp raised (at most ``MAX_SPP_RAISES`` times), in ``draft`` and the records.
+    Records the check in the spp (plain) or differential decision; a
+    differential plan that misses its target has its spp raised (at most
+    ``MAX_SPP_RAISES`` times), in ``draft`` and the decisions.
+
+    Returns:
+        ``(the plan's probes, the error it achieves)``: None unless auto.
     """
     chosen = render_plan(p, draft)
     if not auto:
-        return chosen
+        return chosen, None
     ref_spp, ref_depth = _reference_settings(p, draft)
     ref = p.render(
         draft.render_cam, spp=ref_spp, seed_offset=3, max_depth=ref_depth, shared=draft.shared
@@ -108,17 +113,23 @@ def check_against_reference(
     error = p.error(chosen, ref)
     # the reference's own Monte Carlo error is part of the figure
     ref_noise = draft.e_pilot * math.sqrt(PILOT_SPP / ref_spp) if draft.e_pilot is not None else 0.0
-    check = {"error_vs_reference": error, "reference_spp": ref_spp}
+    check: dict[str, Any] = {"error_vs_reference": error, "reference_spp": ref_spp}
     if draft.e_pilot is not None:
         check["reference_noise_rms"] = ref_noise
     if draft.background is not None:
         chosen = _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen)
-    (decisions["differential"] if draft.background is not None else decisions["spp"]).update(check)
-    decisions["achieved"] = achieved(check, ref_noise, decisions, p, draft.spp)
-    decisions["achieved"]["per_detector_error_rms"] = _per_detector_error(p, chosen, ref, ref_noise)
-    decisions["achieved"]["against_reference"] = p.figures(chosen, ref)
-    decisions["achieved"]["label_signal_rms"] = p.signal_rms()
-    return chosen
+    checked = "differential" if draft.background is not None else "spp"
+    decisions[checked] = decisions[checked].with_measured(**check)
+    found, advice = achieved(check, ref_noise, decisions, p, draft.spp)
+    return chosen, Achieved(
+        error_rms=found,
+        target_error=p.target_error,
+        error_scale=p.scale.value,
+        advice=advice,
+        per_detector_error_rms=_per_detector_error(p, chosen, ref, ref_noise),
+        against_reference=p.figures(chosen, ref),
+        label_signal_rms=p.signal_rms(),
+    )
 
 
 def _reference_settings(p: Probes, draft: Draft) -> tuple[int, int]:
@@ -133,12 +144,12 @@ def _reference_settings(p: Probes, draft: Draft) -> tuple[int, int]:
         if draft.e_pilot is None
         else spp_for(draft.e_pilot, REFERENCE_NOISE_SHARE * p.target_error, MAX_REFERENCE_SPP)
     )
-    return ref_spp, draft.background["max_depth"]
+    return ref_spp, draft.background.max_depth or 0
 
 
 def _raise_differential_spp(
     p: Probes,
-    decisions: dict[str, Any],
+    decisions: dict[str, Decision],
     draft: Draft,
     ref: np.ndarray,
     ref_noise: float,
@@ -147,7 +158,7 @@ def _raise_differential_spp(
 ) -> np.ndarray:
     """Raise the differential spp the request left to us while the check misses the target."""
     assert draft.background is not None  # called only with differential rendering
-    request, diff, background = p.request, decisions["differential"], draft.background
+    request, background = p.request, draft.background
     raises = []
     own_spp = request.spp is None, request.background_spp is None
     error = check["error_vs_reference"]
@@ -159,20 +170,24 @@ def _raise_differential_spp(
         if own_spp[0]:
             draft.spp = round_up_spp(draft.spp * factor, MAX_AUTO_SPP)
         if own_spp[1]:
-            background["spp"] = round_up_spp(background["spp"] * factor, MAX_BACKGROUND_SPP)
+            bg_spp = round_up_spp(background.spp * factor, MAX_BACKGROUND_SPP)
+            background = draft.background = replace(background, spp=bg_spp)
         raises.append(
-            {"error_found_rms": found, "frame_spp": draft.spp, "background_spp": background["spp"]}
+            {"error_found_rms": found, "frame_spp": draft.spp, "background_spp": background.spp}
         )
         chosen = render_plan(p, draft)
         error = p.error(chosen, ref)
     if raises:
         check["spp_raised"] = raises
         check["error_vs_reference"] = error
-        diff["frame_spp"] = decisions["spp"]["value"] = draft.spp
-        diff["background_spp"] = background["spp"]
-        diff["reason"] += (
-            f"; raised to {draft.spp} spp (backgrounds {background['spp']}) after the check "
-            "against the reference missed the target"
+        decisions["spp"] = replace(decisions["spp"], value=draft.spp)
+        diff = decisions["differential"].with_measured(
+            frame_spp=draft.spp, background_spp=background.spp
+        )
+        decisions["differential"] = replace(
+            diff,
+            reason=f"{diff.reason}; raised to {draft.spp} spp (backgrounds {background.spp}) "
+            "after the check against the reference missed the target",
         )
     return chosen
 
@@ -191,8 +206,8 @@ def _per_detector_error(
 
 
 def achieved(
-    check: dict[str, Any], ref_noise: float, decisions: dict[str, Any], p: Probes, spp: int
-) -> dict[str, Any]:
+    check: dict[str, Any], ref_noise: float, decisions: dict[str, Decision], p: Probes, spp: int
+) -> tuple[float, str | None]:
     """The plan's error against the reference vs the target; a warning naming the knob if missed.
 
     In the planning scale (``p.scale``). The reference's own Monte Carlo error
@@ -200,33 +215,31 @@ def achieved(
     error exceeds the target (else the largest): the measured biases of sharing
     and (in the same scale) path depth, and the Monte Carlo rest with the spp
     that brings it to the target.
+
+    Returns:
+        ``(error, advice)``: the error (reference noise out), and the flags to
+        pass when it misses the target (else None).
     """
     found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
     target, request = p.target_error, p.request
-    record: dict[str, Any] = {
-        "error_rms": found,
-        "target_error": target,
-        "error_scale": p.scale.value,
-        "met": found <= target,
-    }
-    if record["met"]:
-        return record
+    if found <= target:
+        return found, None
     knobs = _knobs_to_turn(found, decisions, target, spp, depth_in_scale=p.scale is p.total_scale)
-    record["advice"] = "pass " + " and ".join(f"{k} (now {v:.3g} rms of it)" for k, v in knobs)
+    advice = "pass " + " and ".join(f"{k} (now {v:.3g} rms of it)" for k, v in knobs)
     if request.spp is not None and any(k.startswith("--spp") for k, _ in knobs):
-        record["advice"] += "; or drop --spp to let auto fidelity choose"
+        advice += "; or drop --spp to let auto fidelity choose"
     log.warning(
         "fidelity: measurements are %.3g rms off the reference, target %g (%s-relative): %s",
         found,
         target,
         p.scale.value,
-        record["advice"],
+        advice,
     )
-    return record
+    return found, advice
 
 
 def _knobs_to_turn(
-    found: float, decisions: dict[str, Any], target: float, spp: int, *, depth_in_scale: bool
+    found: float, decisions: dict[str, Decision], target: float, spp: int, *, depth_in_scale: bool
 ) -> list[tuple[str, float]]:
     """``[(flag, its part of the error)]``: those above the target, else the largest.
 
@@ -235,12 +248,13 @@ def _knobs_to_turn(
     """
     shared = decisions["shared_render"]
     parts = {}
-    if shared["value"] and "error_shared_vs_per_detector" in shared:
-        parts["--per-detector"] = shared["error_shared_vs_per_detector"]["rms"]
+    if shared.value and "error_shared_vs_per_detector" in shared.measured:
+        parts["--per-detector"] = shared.measured["error_shared_vs_per_detector"]["rms"]
     depth = decisions["max_depth"]
-    kept = depth.get("change_vs_reference", {}).get(str(depth.get("plain_value", depth["value"])))
+    changes = depth.measured.get("change_vs_reference", {})
+    kept = changes.get(str(depth.measured.get("plain_value", depth.value)))
     if kept is not None and depth_in_scale:
-        parts[f"--max-depth {int(depth['value']) + 1}"] = kept["rms"]
+        parts[f"--max-depth {int(depth.value) + 1}"] = kept["rms"]
     noise = math.sqrt(max(found**2 - sum(b * b for b in parts.values()), 0.0))
     parts[f"--spp {round_up_spp(spp * (noise / target) ** 2, 1 << 24)}"] = noise
     ranked = sorted(parts.items(), key=lambda kv: -kv[1])

@@ -33,6 +33,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.fidelity.records import Decision, Source
 from mincam_render.render.fidelity.signal import difference_pair
 
 if TYPE_CHECKING:
@@ -41,8 +42,8 @@ if TYPE_CHECKING:
 
 def decide_differential(
     p: Probes, auto: bool, render_cam: FreeformCamera, max_depth: int, plain_spp: int
-) -> dict[str, Any]:
-    """The decision record of differential rendering (see the module doc).
+) -> Decision:
+    """The decision of differential rendering (see the module doc).
 
     Raises:
         ValueError: ``--differential`` for a family without a static background.
@@ -57,18 +58,18 @@ def decide_differential(
     components = {c for part in parts.values() for c in part}
     record["backgrounds"] = len(parts)
     record["converged_renders"] = len(components)
-    record["difference_seeds"] = _difference_seeds(p)
+    record["difference_seeds"] = _difference_seeds(p).as_json()
     pilots = _pilots(p, render_cam, max_depth or None, record)
     record.update(_settings_and_cost(p, pilots, len(parts), len(components), plain_spp))
     if p.request.differential:
-        value, source, reason = True, "flag", "set by --differential"
+        value, source, reason = True, Source.FLAG, "set by --differential"
     else:
-        value, source = record["cost_per_frame"] < record["plain_cost_per_frame"], "auto"
+        value, source = record["cost_per_frame"] < record["plain_cost_per_frame"], Source.AUTO
         reason = _reason(record, pilots, plain_spp)
-    return {"value": value, "source": source, "reason": reason, **record}
+    return Decision(value=value, source=source, reason=reason, measured=record)
 
 
-def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str, Any] | None:
+def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> Decision | None:
     """The decision when a flag, full fidelity or the family settles it; else None."""
     family, request = p.family, p.request
     available = isinstance(family, DifferentialBackground)
@@ -79,31 +80,27 @@ def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> dict[str,
                 "is unavailable (drop --differential)"
             )
         if not request.differential:
-            return {
-                "value": False,
-                "source": "flag",
-                "reason": "set by --no-differential",
-                **record,
-            }
+            reason = "set by --no-differential"
+            return Decision(value=False, source=Source.FLAG, reason=reason, measured=record)
     elif not auto:
         reason = "full fidelity renders frames whole"
-        return {"value": False, "source": "full", "reason": reason, **record}
+        return Decision(value=False, source=Source.FULL, reason=reason, measured=record)
     elif not available:
         reason = f"family {family.name!r} has no static background"
-        return {"value": False, "source": "auto", "reason": reason, **record}
+        return Decision(value=False, source=Source.AUTO, reason=reason, measured=record)
     return None
 
 
-def _difference_seeds(p: Probes) -> dict[str, Any]:
+def _difference_seeds(p: Probes) -> Decision:
     """Which frames share the seed of ``X - C``: the request's, else :data:`DIFFERENCE_SEEDS`."""
     if p.request.difference_seeds is not None:
         value = DifferenceSeeds(p.request.difference_seeds)
-        return {"value": value.value, "source": "flag", "reason": "set by --difference-seeds"}
+        return Decision(value=value.value, source=Source.FLAG, reason="set by --difference-seeds")
     reason = (
         "chosen by measurement: the task figures trained and tested on episodes with "
         "per-window and per-frame seeds (benchmarks/results/task_fidelity.json)"
     )
-    return {"value": DIFFERENCE_SEEDS.value, "source": "auto", "reason": reason}
+    return Decision(value=DIFFERENCE_SEEDS.value, source=Source.AUTO, reason=reason)
 
 
 def _difference_pair(
@@ -299,7 +296,7 @@ def _settings_and_cost(
     frame_spp = (
         request.spp
         if request.spp is not None
-        else spp_for(e_diff, budget["difference_noise"], MAX_AUTO_SPP, 4)
+        else spp_for(e_diff, budget.difference_noise, MAX_AUTO_SPP, 4)
     )
     # the background takes what the frame's rounded-up spp left
     budget = split_noise_budget(
@@ -311,7 +308,7 @@ def _settings_and_cost(
     background_spp = (
         request.background_spp
         if request.background_spp is not None
-        else spp_for(e_bg, budget["background_noise"], MAX_BACKGROUND_SPP, 4)
+        else spp_for(e_bg, budget.background_noise, MAX_BACKGROUND_SPP, 4)
     )
     frame_cost = frame_spp * frame_paths
     # every window's own C at the frames' samples (rendered with either seeds)
@@ -327,7 +324,7 @@ def _settings_and_cost(
         "background_pilot_error_rms": e_bg,
         "background_pilot_spp": BACKGROUND_PILOT_SPP,
         "daylight_interpolation": pilots["interpolation"],
-        "error_budget": budget,
+        "error_budget": budget.as_json(),
         "predicted_error_rms": math.hypot(
             e_diff * math.sqrt(PILOT_SPP / frame_spp),
             e_bg * math.sqrt(PILOT_SPP / background_spp),

@@ -1,9 +1,9 @@
 """One decision per render knob, each from a measured error: sharing, path depth, spp, dtype.
 
-Every decision is a JSON-ready record ``{"value", "source", "reason", **measured}``:
-``source`` is ``flag`` (set by the request), ``full`` (full fidelity: no
-shortcut) or ``auto`` (measured on the probe frames), and the measured figures
-are the errors the choice was made from.
+Every decision is a :class:`~.records.Decision` (JSON ``{"value", "source",
+"reason", **measured}``): ``source`` is ``flag`` (set by the request), ``full``
+(full fidelity: no shortcut) or ``auto`` (measured on the probe frames), and the
+measured figures are the errors the choice was made from.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
+from mincam_render.render.fidelity.records import Decision, Source
 from mincam_render.render.precision import (
     ErrorScale,
     StorageDtype,
@@ -35,26 +36,26 @@ if TYPE_CHECKING:
     from mincam_render.optics.camera import FreeformCamera
 
 
-def decide_shared_render(p: Probes, auto: bool) -> dict[str, Any]:
+def decide_shared_render(p: Probes, auto: bool) -> Decision:
     """One render at the board centre for all detectors, or one per detector."""
     request = p.request
     measured = _parallax(p)
     if p.k > 1 and request.shared_render is None and auto:
         measured.update(_sharing_change(p))
     if request.shared_render is not None:
-        value, source = bool(request.shared_render), "flag"
+        value, source = bool(request.shared_render), Source.FLAG
         reason = "set by --shared-render/--per-detector"
     elif not auto:
-        value, source, reason = False, "full", "full fidelity renders every detector"
+        value, source, reason = False, Source.FULL, "full fidelity renders every detector"
     elif p.k == 1:
-        value, source, reason = False, "auto", "one detector: nothing to share"
+        value, source, reason = False, Source.AUTO, "one detector: nothing to share"
     else:
         value, reason = shared_render_choice(
             measured["parallax_texels"], request.parallax_fraction, measured
         )
         z_min, z_max = measured["depth_range_m"]
-        source, reason = "auto", f"{reason} (depths {z_min:.3g}-{z_max:.3g} m)"
-    return {"value": value, "source": source, "reason": reason, **measured}
+        source, reason = Source.AUTO, f"{reason} (depths {z_min:.3g}-{z_max:.3g} m)"
+    return Decision(value=value, source=source, reason=reason, measured=measured)
 
 
 def _parallax(p: Probes) -> dict[str, Any]:
@@ -64,13 +65,13 @@ def _parallax(p: Probes) -> dict[str, Any]:
     baseline = float(np.linalg.norm(np.asarray(camera.layout.positions_m), axis=1).max())
     texel_m = camera.mask_size_m / max(rows, cols)
     depth = p.depth_range_m()
-    z_min, z_max = depth["min"], depth["max"]
+    z_min = depth.min_m
     parallax = (
         0.0 if not math.isfinite(z_min) else baseline * camera.mask_distance_m / z_min / texel_m
     )
     return {
         "parallax_texels": parallax,
-        "depth_range_m": [z_min, z_max],
+        "depth_range_m": depth.as_json(),
         "largest_detector_offset_m": baseline,
         "bound_texels": p.request.parallax_fraction,
     }
@@ -115,9 +116,7 @@ def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tu
     return False, f"{change} >= bound {bound:.3g} (a share of the target error); {geometry}"
 
 
-def decide_max_depth(
-    p: Probes, auto: bool, render_cam: FreeformCamera, shared: bool
-) -> dict[str, Any]:
+def decide_max_depth(p: Probes, auto: bool, render_cam: FreeformCamera, shared: bool) -> Decision:
     """The shallowest path depth whose missing bounces change measurements < the bound.
 
     Relative to the total (``p.total_scale``): the bounces left out are light of
@@ -133,14 +132,16 @@ def decide_max_depth(
     }
     if request.max_depth is not None:
         reason = "set by --max-depth"
-        return {"value": request.max_depth, "source": "flag", "reason": reason, **measured}
+        return Decision(
+            value=request.max_depth, source=Source.FLAG, reason=reason, measured=measured
+        )
     if not auto:
         reason = "full fidelity uses the scene's integrator"
-        return {"value": 0, "source": "full", "reason": reason, **measured}
+        return Decision(value=0, source=Source.FULL, reason=reason, measured=measured)
     if scene_depth is not None and 1 <= scene_depth <= 2:
         reason = f"the scene's integrator is already direct-only (max_depth = {scene_depth})"
         measured["indirect_change"] = {"rms": 0.0, "max": 0.0}
-        return {"value": 0, "source": "auto", "reason": reason, **measured}
+        return Decision(value=0, source=Source.AUTO, reason=reason, measured=measured)
     max_depth, changes = _depth_changes(p, render_cam, shared, scene_depth)
     measured.update(
         {
@@ -157,7 +158,7 @@ def decide_max_depth(
     )
     if scene_depth is not None and scene_depth in changes:
         reason += f", the scene's own depth {scene_depth} by {changes[scene_depth]['rms']:.3g}"
-    return {"value": max_depth, "source": "auto", "reason": reason, **measured}
+    return Decision(value=max_depth, source=Source.AUTO, reason=reason, measured=measured)
 
 
 def _depth_changes(
@@ -187,7 +188,7 @@ def _depth_changes(
 
 def decide_spp(
     p: Probes, auto: bool, render_cam: FreeformCamera, max_depth: int, shared: bool
-) -> tuple[dict[str, Any], float | None]:
+) -> tuple[Decision, float | None]:
     """Samples per texel for the target error (plain estimator); also the pilot error.
 
     Returns:
@@ -205,10 +206,9 @@ def decide_spp(
         e_pilot = p.error(a, b)["rms"] / math.sqrt(2.0)
         measured.update({"pilot_spp": PILOT_SPP, "pilot_error_rms": e_pilot})
     if request.spp is not None:
-        decision = {"value": request.spp, "source": "flag", "reason": "set by --spp"}
+        value, source, reason = request.spp, Source.FLAG, "set by --spp"
     elif e_pilot is None:  # not auto
-        reason = f"full fidelity default {FULL_SPP} spp"
-        decision = {"value": FULL_SPP, "source": "full", "reason": reason}
+        value, source, reason = FULL_SPP, Source.FULL, f"full fidelity default {FULL_SPP} spp"
     else:
         spp = spp_for(e_pilot, target, MAX_AUTO_SPP)
         predicted = measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
@@ -220,11 +220,11 @@ def decide_spp(
         reason = (
             f"Monte Carlo error {e_pilot:.3g} at {PILOT_SPP} spp scales as 1/sqrt(spp); {verdict}"
         )
-        decision = {"value": spp, "source": "auto", "reason": reason}
-    return {**decision, **measured}, e_pilot
+        value, source = spp, Source.AUTO
+    return Decision(value=value, source=source, reason=reason, measured=measured), e_pilot
 
 
-def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
+def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> Decision:
     """float16 storage when the error it adds to ``chosen``'s measurements stays < the bound.
 
     The bound is relative to the total (``p.total_scale``), like float16's own
@@ -240,42 +240,42 @@ def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> dict[str, Any]:
         "bound": request.dtype_error_bound,
     }
     if request.dtype is not None:
-        dtype, source, reason = request.dtype, "flag", "set by --dtype"
+        dtype, source, reason = request.dtype, Source.FLAG, "set by --dtype"
     elif not auto:
-        dtype, source, reason = StorageDtype.FLOAT32, "full", "full fidelity stores float32"
+        dtype, source, reason = StorageDtype.FLOAT32, Source.FULL, "full fidelity stores float32"
     else:
         small = f16_err["max"] < request.dtype_error_bound
         dtype = StorageDtype.FLOAT16 if small else StorageDtype.FLOAT32
-        source = "auto"
+        source = Source.AUTO
         reason = (
             f"float16 changes measurements by at most {f16_err['max']:.3g} "
             f"{'<' if small else '>='} bound {request.dtype_error_bound:g}"
         )
-    return {"value": dtype.value, "source": source, "reason": reason, **measured}
+    return Decision(value=dtype.value, source=source, reason=reason, measured=measured)
 
 
-def recorded_decisions(p: Probes) -> dict[str, dict[str, Any]]:
+def recorded_decisions(p: Probes) -> dict[str, Decision]:
     """Choices with nothing to measure: mask resolution, variant, temporal history."""
     from mincam_render.render import backend
 
     history = history_frames(p.family) > 1
     return {
-        "mask_resolution": {
-            "value": p.camera.mask_resolution[0],
-            "source": "flag" if p.request.mask_res is not None else "camera",
-            "reason": "a coarser transport image is exact for masks of that resolution (block "
+        "mask_resolution": Decision(
+            value=p.camera.mask_resolution[0],
+            source=Source.FLAG if p.request.mask_res is not None else Source.CAMERA,
+            reason="a coarser transport image is exact for masks of that resolution (block "
             "sums), so resolution is a mask design choice, not reduced automatically",
-        },
-        "variant": {
-            "value": backend.describe()["variant"],
-            "source": "auto",
-            "reason": "photodiodes are single-channel: monochrome variant",
-        },
-        "temporal_history": {
-            "value": history,
-            "source": "auto",
-            "reason": "the family's task needs a time history"
+        ),
+        "variant": Decision(
+            value=backend.describe()["variant"],
+            source=Source.AUTO,
+            reason="photodiodes are single-channel: monochrome variant",
+        ),
+        "temporal_history": Decision(
+            value=history,
+            source=Source.AUTO,
+            reason="the family's task needs a time history"
             if history
             else "static task: frames are used without history",
-        },
+        ),
     }

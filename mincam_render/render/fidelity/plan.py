@@ -74,9 +74,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 import logging
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any, Protocol
 
 from mincam_render.core.checks import check_int
+from mincam_render.core.strict_json import JsonObject
+from mincam_render.render.differential import BackgroundSettings
 from mincam_render.render.fidelity.check import Draft, check_against_reference
 from mincam_render.render.fidelity.differential_choice import decide_differential
 from mincam_render.render.fidelity.knobs import (
@@ -87,6 +90,7 @@ from mincam_render.render.fidelity.knobs import (
     recorded_decisions,
 )
 from mincam_render.render.fidelity.probes import Probes, Stages
+from mincam_render.render.fidelity.records import Decision
 from mincam_render.render.precision import StorageDtype, storage_dtype
 
 if TYPE_CHECKING:
@@ -123,12 +127,11 @@ class FidelityPlan:
         mask_resolution: texels per side of the transport images (>= 1).
         dtype: storage type (:class:`~mincam_render.render.precision.StorageDtype`
             or its value, as a plan's JSON holds it).
-        background: differential rendering's background settings
-            (``{"interval_s", "spp", "max_depth", "shared_difference"}``), or None
-            for plain renders.
-        decisions: per knob ``{"value", "source", "reason", **measured}``, plus
-            ``achieved`` (error against the reference) and ``probe_frames``;
-            JSON-ready, written to the manifest as it is.
+        background: differential rendering's background settings, or None for
+            plain renders.
+        decisions: per knob :meth:`~.records.Decision.as_json`, plus ``achieved``
+            (:meth:`~.records.Achieved.as_json`) and ``probe_frames``: the JSON
+            record a plan file keeps, written to the manifest as it is.
 
     Raises:
         ValueError: a setting outside its range, naming it.
@@ -139,8 +142,8 @@ class FidelityPlan:
     shared_render: bool
     mask_resolution: int
     dtype: StorageDtype
-    background: dict[str, Any] | None
-    decisions: dict[str, Any]
+    background: BackgroundSettings | None
+    decisions: JsonObject
 
     def __post_init__(self) -> None:
         for name, low in (("spp", 1), ("max_depth", 0), ("mask_resolution", 1)):
@@ -155,13 +158,18 @@ class FidelityPlan:
             "shared_render": self.shared_render,
             "mask_resolution": self.mask_resolution,
             "dtype": self.dtype.value,
-            "background": self.background,
+            "background": None if self.background is None else self.background.as_json(),
         }
 
     @classmethod
-    def from_dict(cls, settings: dict[str, Any], decisions: dict[str, Any]) -> FidelityPlan:
+    def from_dict(cls, settings: Mapping[str, Any], decisions: JsonObject) -> FidelityPlan:
         """A plan read back from :meth:`settings` and its decisions (a kept plan)."""
-        return cls(**settings, decisions=decisions)
+        background = settings["background"]
+        return cls(
+            **{k: v for k, v in settings.items() if k != "background"},
+            background=None if background is None else BackgroundSettings.from_dict(background),
+            decisions=decisions,
+        )
 
 
 def decide_fidelity(
@@ -201,39 +209,43 @@ def decide_fidelity(
     auto = request.fidelity is Fidelity.AUTO
     p = Probes(family, camera, request)
     stages = Stages(_PLAN_STAGES, enabled=progress)
-    decisions: dict[str, Any] = {}
+    decisions: dict[str, Decision] = {}
     stages.start("parallax: one shared render vs one per detector")
     decisions["shared_render"] = shared = decide_shared_render(p, auto)
-    draft = Draft(shared["value"], camera.rendered_camera(shared["value"]))
+    draft = Draft(bool(shared.value), camera.rendered_camera(bool(shared.value)))
     stages.start("path depth vs a deep reference")
     decisions["max_depth"] = decide_max_depth(p, auto, draft.render_cam, draft.shared)
-    draft.max_depth = decisions["max_depth"]["value"]
+    draft.max_depth = int(decisions["max_depth"].value)
     stages.start("Monte Carlo error at the pilot spp")
     decisions["spp"], draft.e_pilot = decide_spp(
         p, auto, draft.render_cam, draft.max_depth, draft.shared
     )
-    draft.spp = decisions["spp"]["value"]
+    draft.spp = int(decisions["spp"].value)
     stages.start("differential rendering: background and difference")
     decisions["differential"] = decide_differential(
         p, auto, draft.render_cam, draft.max_depth, draft.spp
     )
     _adopt_differential(decisions, draft, request)
     stages.start("the plan against a high-spp reference")
-    chosen = check_against_reference(p, auto, decisions, draft)
+    chosen, achieved = check_against_reference(p, auto, decisions, draft)
     stages.start("float16 storage error")
-    decisions["dtype"] = decide_dtype(p, auto, chosen)
-    decisions.update(recorded_decisions(p))
-    decisions["probe_frames"] = p.indices
+    dtype = decide_dtype(p, auto, chosen)
     stages.close()
-    log.info("fidelity: %s", {k: v["value"] for k, v in decisions.items() if "value" in v})
+    record: JsonObject = {name: d.as_json() for name, d in decisions.items()}
+    if achieved is not None:
+        record["achieved"] = achieved.as_json()
+    record["dtype"] = dtype.as_json()
+    record.update({name: d.as_json() for name, d in recorded_decisions(p).items()})
+    record["probe_frames"] = p.indices
+    log.info("fidelity: %s", {k: v["value"] for k, v in record.items() if "value" in v})
     return FidelityPlan(
         spp=draft.spp,
         max_depth=draft.max_depth,
         shared_render=draft.shared,
         mask_resolution=camera.mask_resolution[0],
-        dtype=decisions["dtype"]["value"],
+        dtype=storage_dtype(str(dtype.value)),
         background=draft.background,
-        decisions=decisions,
+        decisions=record,
     )
 
 
@@ -242,26 +254,28 @@ def decide_fidelity(
 _PLAN_STAGES = 6
 
 
-def _adopt_differential(decisions: dict[str, Any], draft: Draft, request: PlanRequest) -> None:
+def _adopt_differential(decisions: dict[str, Decision], draft: Draft, request: PlanRequest) -> None:
     """With differential rendering, frames take its spp and depth; backgrounds get settings."""
     diff = decisions["differential"]
-    if not diff["value"]:
+    if not diff.value:
         return
-    draft.background = {
-        "interval_s": request.background_interval_s,
-        "spp": diff["background_spp"],
-        "max_depth": draft.max_depth,
-        "shared_difference": diff.get("shared_difference", {}).get("value", False),
-        "difference_seeds": diff["difference_seeds"]["value"],
-    }
+    figures = diff.measured
+    draft.background = BackgroundSettings(
+        interval_s=request.background_interval_s,
+        spp=figures["background_spp"],
+        max_depth=draft.max_depth or None,
+        shared_difference=figures.get("shared_difference", {}).get("value", False),
+        difference_seeds=figures["difference_seeds"]["value"],
+    )
     for name, value, in_background in (
-        ("spp", diff["frame_spp"], diff["background_spp"]),
-        ("max_depth", diff["frame_max_depth"], draft.max_depth),
+        ("spp", figures["frame_spp"], figures["background_spp"]),
+        ("max_depth", figures["frame_max_depth"], draft.max_depth),
     ):
-        decisions[name]["plain_value"] = decisions[name]["value"]
-        decisions[name]["value"] = value
-        decisions[name]["reason"] += (
-            f"; differential rendering renders frames with {name} {value} and backgrounds "
-            f"with {in_background} (see 'differential')"
+        plain = decisions[name]
+        decisions[name] = dataclasses.replace(
+            plain.with_measured(plain_value=plain.value),
+            value=value,
+            reason=f"{plain.reason}; differential rendering renders frames with {name} {value} "
+            f"and backgrounds with {in_background} (see 'differential')",
         )
-    draft.spp, draft.max_depth = diff["frame_spp"], diff["frame_max_depth"]
+    draft.spp, draft.max_depth = figures["frame_spp"], figures["frame_max_depth"]

@@ -17,6 +17,7 @@ from mincam_render.render.fidelity.constants import (
     SIGNAL_FRAMES,
     SIGNAL_SPP,
 )
+from mincam_render.render.fidelity.records import DepthRange
 from mincam_render.render.fidelity.signal import SignalSource, render_label_signal
 from mincam_render.render.precision import (
     ErrorScale,
@@ -296,13 +297,13 @@ class Probes:
             ),
         }
 
-    def depth_range_m(self) -> dict[str, Any]:
+    def depth_range_m(self) -> DepthRange:
         """Nearest and farthest depth (m) seen from the board centre over the probe frames."""
         depths = []
         for i in self.indices:
             self.family.set_frame(self.scene, i)
             depths.append(nearest_depth_m(self.scene, self.camera))
-        return {"min": min(d["min"] for d in depths), "max": max(d["max"] for d in depths)}
+        return DepthRange(min_m=min(d["min"] for d in depths), max_m=max(d["max"] for d in depths))
 
 
 def nearest_depth_m(scene: mi.Scene, camera: FreeformCamera) -> dict[str, float]:
