@@ -112,31 +112,31 @@ def main() -> None:
 
     summary = {
         "headline": headline(result),
-        "threshold_lux_24px_30fps": result["threshold"]["threshold_lux"],
-        "paper_lux": result["threshold"]["paper_lux"],
-        "power_24px_30fps_w": result["threshold"]["power_at_fps_w"],
+        "threshold_lux_24px_30fps": result.threshold.budget.threshold_lux,
+        "paper_lux": result.threshold.paper_lux,
+        "power_24px_30fps_w": result.threshold.budget.power_at_fps_w,
         "families": {
             name: {
-                "peak_lux": max(fam["lux"]),
-                "hours_at_30fps": {k: fam["hours_at_fps"][k] for k in ("1", "8", "16", "24")},
-                "max_relative_error_total": fam["render"]["max_relative_error_total"],
-                "render_seconds": fam["render"]["seconds"],
+                "peak_lux": max(fam.lux),
+                "hours_at_30fps": {str(k): fam.hours_at_fps[k] for k in (1, 8, 16, 24)},
+                "max_relative_error_total": fam.render.max_relative_error_total,
+                "render_seconds": fam.render.seconds,
             }
-            for name, fam in result["families"].items()
+            for name, fam in result.families.items()
         },
         "comparisons": {
             name: {
-                "grid": comp["match"]["grid"],
-                "pixels": comp["mincam"]["pixels"],
-                "source": comp["match"]["source"],
-                "mincam_power_w": comp["mincam"]["power_at_fps_w"],
-                "module_power_w": comp["module"]["power_at_fps_w"],
-                "module_outputs_only_power_w": comp["module_outputs_only"]["power_at_fps_w"],
-                "mincam_lux": comp["mincam"]["threshold_lux"],
-                "module_lux": comp["module"]["threshold_lux"],
-                "module_outputs_only_lux": comp["module_outputs_only"]["threshold_lux"],
+                "grid": list(comp.match.grid),
+                "pixels": comp.mincam.budget.pixels,
+                "source": comp.match.source,
+                "mincam_power_w": comp.mincam.budget.power_at_fps_w,
+                "module_power_w": comp.module.budget.power_at_fps_w,
+                "module_outputs_only_power_w": comp.module_outputs_only.budget.power_at_fps_w,
+                "mincam_lux": comp.mincam.budget.threshold_lux,
+                "module_lux": comp.module.budget.threshold_lux,
+                "module_outputs_only_lux": comp.module_outputs_only.budget.threshold_lux,
             }
-            for name, comp in result["comparisons"].items()
+            for name, comp in result.comparisons.items()
         },
     }
     print(json.dumps(summary, indent=1))
@@ -146,7 +146,7 @@ def main() -> None:
         "seconds": {"depth_check": depth_s, "analysis": seconds},
         "summary": summary,
         "depth_check": depth,
-        "result": result,
+        "result": result.as_json(),
     }
     out.write_text(strict_json.dumps(payload, indent=1) + "\n")
     print(f"wrote {out} and {out.parent / 'energy.png'}")

@@ -102,7 +102,7 @@ def report_sim2real_cmd(
         paths = write_sim2real_report(result, out)
     except (ValueError, ConfigError, Sim2RealError, OSError) as err:
         raise user_error(err) from None
-    click.echo(result["verdict"]["summary"])
+    click.echo(result.verdict.summary)
     click.echo(f"wrote {paths['json']} and {paths['html']}")
 
 

@@ -20,6 +20,7 @@ from mincam_render.optics.perturbation import PerturbationModel
 from mincam_render.studies.robustness.config import RobustnessConfig
 from mincam_render.studies.sim2real import (
     THRESHOLDS,
+    GainOffsetFit,
     Sim2RealError,
     SurrogatePerturbations,
     analyze_sim2real,
@@ -72,15 +73,16 @@ def test_fit_recovers_injected_gain_and_offset(electronics_only):
     """
     rec_dir, result = electronics_only
     injected = json.loads((rec_dir / "injected.json").read_text())
-    for j, p in enumerate(result["pixels"]):
-        assert p["gain_se"] > 0 and p["offset_se_v"] > 0
-        assert p["injected_offset_v"] == injected["per_pixel"]["offset_v"][j]
-        assert p["expected_offset_v"] == injected["expected_fit"]["offset_v"][j]
-        assert abs(p["gain"] - p["expected_gain"]) <= 5 * p["gain_se"], p
-        assert abs(p["offset_v"] - p["expected_offset_v"]) <= 5 * p["offset_se_v"], p
-        assert p["gain_z"] == pytest.approx((p["gain"] - p["expected_gain"]) / p["gain_se"])
-        assert abs(p["gain_z"]) <= 5 and abs(p["offset_z"]) <= 5
-        assert p["correlation"] > 0.99
+    for j, p in enumerate(result.pixels):
+        fit, inj = p.fit, p.injected
+        assert fit.gain_se > 0 and fit.offset_se_v > 0
+        assert inj.injected_offset_v == injected["per_pixel"]["offset_v"][j]
+        assert inj.expected_offset_v == injected["expected_fit"]["offset_v"][j]
+        assert abs(fit.gain - inj.expected_gain) <= 5 * fit.gain_se, p
+        assert abs(fit.offset_v - inj.expected_offset_v) <= 5 * fit.offset_se_v, p
+        assert inj.gain_z == pytest.approx((fit.gain - inj.expected_gain) / fit.gain_se)
+        assert abs(inj.gain_z) <= 5 and abs(inj.offset_z) <= 5
+        assert fit.correlation > 0.99
 
 
 def test_report_table_separates_injected_and_expected_offsets(electronics_only, tmp_path):
@@ -89,11 +91,11 @@ def test_report_table_separates_injected_and_expected_offsets(electronics_only, 
     html = Path(write_sim2real_report(result, tmp_path)["html"]).read_text()
     for header in ("injected offset (mV)", "expected offset (mV)", "offset − expected (se)"):
         assert f"<th>{header}</th>" in html
-    gaps = [abs(p["expected_offset_v"] - p["injected_offset_v"]) for p in result["pixels"]]
+    gaps = [abs(p.injected.expected_offset_v - p.injected.injected_offset_v) for p in result.pixels]
     assert max(gaps) > 1e-4  # the two columns differ: stray light and dark current
-    for p in result["pixels"]:
-        assert p["explanation"].startswith(f"pixel {p['pixel']}: fitted gain")
-        assert p["explanation"] in html
+    for p in result.pixels:
+        assert p.injected.explanation.startswith(f"pixel {p.pixel}: fitted gain")
+        assert p.injected.explanation in html
 
 
 def test_geometric_perturbations_explain_a_far_fit(tmp_path, variant):
@@ -102,16 +104,23 @@ def test_geometric_perturbations_explain_a_far_fit(tmp_path, variant):
         "per_pixel": {"gain": [1.0], "offset_v": [0.001]},
         "expected_fit": {"gain": [1.0], "offset_v": [0.002], "exact": False},
     }
-    fit = {"gain": 1.05, "gain_se": 0.005, "offset_v": 0.002, "offset_se_v": 1e-4}
+    fit = GainOffsetFit(
+        gain=1.05,
+        gain_se=0.005,
+        offset_v=0.002,
+        offset_se_v=1e-4,
+        correlation=1.0,
+        residual_std_v=0,
+    )
     from mincam_render.studies.sim2real import injected_comparison
 
     far = injected_comparison(injected, 0, fit)
-    assert far["gain_z"] == pytest.approx(10.0)
-    assert "expected to differ" in far["explanation"] and "+10.0 se" in far["explanation"]
-    near = injected_comparison(injected, 0, dict(fit, gain=1.001))
-    assert "within 3 se" in near["explanation"]
+    assert far.gain_z == pytest.approx(10.0)
+    assert "expected to differ" in far.explanation and "+10.0 se" in far.explanation
+    near = injected_comparison(injected, 0, dataclasses.replace(fit, gain=1.001))
+    assert "within 3 se" in near.explanation
     exact = dict(injected, expected_fit=dict(injected["expected_fit"], exact=True))
-    assert "optimistic" in injected_comparison(exact, 0, fit)["explanation"]
+    assert "optimistic" in injected_comparison(exact, 0, fit).explanation
 
 
 def test_frame_index_is_written_as_integers(electronics_only):
@@ -154,8 +163,8 @@ def test_surrogate_is_labelled(electronics_only):
     rec_dir, result = electronics_only
     meta = json.loads((rec_dir / "recording.json").read_text())
     assert meta["surrogate"] is True and "SURROGATE" in meta["note"]
-    assert result["surrogate"] is True and "SURROGATE" in result["banner"]
-    assert result["verdict"]["summary"].startswith("SURROGATE")
+    assert result.surrogate is True and "SURROGATE" in result.banner
+    assert result.verdict.summary.startswith("SURROGATE")
 
 
 def test_json_schema(electronics_only, tmp_path):
@@ -177,7 +186,7 @@ def test_json_schema(electronics_only, tmp_path):
     }
     for key, kind in required.items():
         assert isinstance(data[key], kind), key
-    assert set(data["thresholds"]) == set(THRESHOLDS)
+    assert set(data["thresholds"]) == set(THRESHOLDS.as_json())
     assert set(data["recording_sha256"]) == {
         "recording.json",
         "measurements.csv",
@@ -218,9 +227,9 @@ def test_json_schema(electronics_only, tmp_path):
 def test_gain_offset_fit_closed_form(rng):
     x = rng.normal(size=500)
     fit = fit_gain_offset(x, 2.5 * x - 0.3)
-    assert fit["gain"] == pytest.approx(2.5, rel=1e-9)
-    assert fit["offset_v"] == pytest.approx(-0.3, abs=1e-9)
-    assert fit["correlation"] == pytest.approx(1.0, rel=1e-9)
+    assert fit.gain == pytest.approx(2.5, rel=1e-9)
+    assert fit.offset_v == pytest.approx(-0.3, abs=1e-9)
+    assert fit.correlation == pytest.approx(1.0, rel=1e-9)
 
 
 def _copy_with_meta(src, dst, **changes):

@@ -17,11 +17,13 @@ from mincam_render.studies.energy.config import (
 )
 from mincam_render.studies.energy.consumption import FrameBudget, head_flops
 from mincam_render.studies.energy.report import headline, write_energy_report
+from mincam_render.studies.energy.result import EnergyResult
 from mincam_render.studies.energy.storage import StorageTrace, simulate_storage
 from mincam_render.studies.energy.study import analyze_energy, threshold_lux
 
 __all__ = [
     "EnergyConfig",
+    "EnergyResult",
     "FrameBudget",
     "PanelConfig",
     "StorageConfig",

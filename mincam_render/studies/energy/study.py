@@ -16,11 +16,10 @@ import logging
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from mincam_render.core.config import to_dict
 from mincam_render.core.photometry import WHITE_LIGHT_EFFICACY_LM_PER_W, irradiance_to_lux
 from mincam_render.studies.energy.config import ConsumptionConfig, EnergyConfig
 from mincam_render.studies.energy.consumption import (
@@ -33,10 +32,26 @@ from mincam_render.studies.energy.consumption import (
 from mincam_render.studies.energy.matching import Match, load_match
 from mincam_render.studies.energy.panel import (
     PanelLight,
+    PanelPose,
     day_irradiance,
     render_panel_light,
 )
+from mincam_render.studies.energy.result import (
+    BudgetRecord,
+    ComparedBudget,
+    Comparison,
+    EnergyResult,
+    Estimate,
+    FamilyBudget,
+    RenderStats,
+    StorageDay,
+    Threshold,
+)
 from mincam_render.studies.energy.storage import simulate_storage
+
+if TYPE_CHECKING:
+    from mincam_render.core.labels import LabelSpec
+    from mincam_render.render.irradiance import IrradianceEstimate
 
 log = logging.getLogger(__name__)
 #: Days simulated; the last is reported (the first charges the capacitor from its initial state).
@@ -71,7 +86,7 @@ def available_w(harvest: np.ndarray, config: EnergyConfig) -> np.ndarray:
     return np.maximum(np.asarray(harvest) - leak_w, 0.0) * s.converter_efficiency
 
 
-def mincam_budget(pixels: int, labels: Sequence[Any], config: EnergyConfig) -> FrameBudget:
+def mincam_budget(pixels: int, labels: Sequence[LabelSpec], config: EnergyConfig) -> FrameBudget:
     """Frame budget of ``pixels`` freeform pixels with the paper's head for ``labels``."""
     head = paper_head(pixels, labels)
     return mincam_frame_budget(
@@ -83,7 +98,7 @@ def mincam_budget(pixels: int, labels: Sequence[Any], config: EnergyConfig) -> F
 
 
 def module_budget(
-    match: Match, labels: Sequence[Any], config: EnergyConfig, consumption: ConsumptionConfig
+    match: Match, labels: Sequence[LabelSpec], config: EnergyConfig, consumption: ConsumptionConfig
 ) -> FrameBudget:
     """The conventional module's frame budget at the matched grid with ``consumption``'s policy."""
     rows, cols = match.grid
@@ -99,7 +114,7 @@ def module_budget(
 
 def _day_run(
     light: PanelLight, budget: FrameBudget, config: EnergyConfig
-) -> tuple[float, dict[str, Any]]:
+) -> tuple[float, StorageDay]:
     """Hours running at ``config.fps`` on the last simulated day, and its storage trace."""
     dt = config.schedule.simulation_step_s
     steps = round(SIMULATED_DAYS * 86400.0 / dt)
@@ -112,92 +127,104 @@ def _day_run(
     every = max(1, round(config.schedule.step_min * 60.0 / dt))
     stored = trace.stored_j[last.start : last.stop + 1 : every]
     ran = float(np.sum(trace.running[last]) * dt / 3600.0)
-    return ran, {
-        "hours": (np.arange(len(stored)) * every * dt / 3600.0).tolist(),
-        "voltage_v": trace.voltage_v[last.start : last.stop + 1 : every].tolist(),
-        "stored_j": stored.tolist(),
-        "balance_j": trace.balance_j(),
-        "harvested_j": trace.harvested_j,
-        "consumed_j": trace.consumed_j,
-        "leaked_j": trace.leaked_j,
-        "spilled_j": trace.spilled_j,
-    }
+    return ran, StorageDay(
+        hours=tuple((np.arange(len(stored)) * every * dt / 3600.0).tolist()),
+        voltage_v=tuple(trace.voltage_v[last.start : last.stop + 1 : every].tolist()),
+        stored_j=tuple(stored.tolist()),
+        balance_j=trace.balance_j(),
+        harvested_j=trace.harvested_j,
+        consumed_j=trace.consumed_j,
+        leaked_j=trace.leaked_j,
+        spilled_j=trace.spilled_j,
+    )
 
 
 def family_budget(
-    light: PanelLight, budgets: list[FrameBudget], config: EnergyConfig
-) -> dict[str, Any]:
-    """Lux, power and frame rates of one rendered family over the day (JSON-ready)."""
+    light: PanelLight, pose: PanelPose, budgets: list[FrameBudget], config: EnergyConfig
+) -> FamilyBudget:
+    """Lux, power, frame rates and budgets of one rendered family over the day."""
     hours = light.hours
     irradiance = day_irradiance(light, config.schedule, hours)
     harvest = harvest_w(irradiance, config)
     avail = available_w(harvest, config)
-    fps = [[b.sustainable_fps(float(a)) for a in avail] for b in budgets]
     runs = [_day_run(light, b, config) for b in budgets]
     mean_avail = float(np.mean(available_w(harvest, config)))
-    return {
-        "hours": hours.tolist(),
-        "irradiance_w_m2": irradiance.tolist(),
-        "lux": (irradiance * WHITE_LIGHT_EFFICACY_LM_PER_W).tolist(),
-        "harvest_w": harvest.tolist(),
-        "sustainable_fps": {str(b.pixels): f for b, f in zip(budgets, fps, strict=True)},
-        "hours_at_fps": {str(b.pixels): r[0] for b, r in zip(budgets, runs, strict=True)},
-        "day_mean_sustainable_fps": {str(b.pixels): b.sustainable_fps(mean_avail) for b in budgets},
-        "storage_trace": runs[-1][1],
-        "components": {
-            "lights_w_m2": {n: [e.mean_w_m2, e.stderr_w_m2] for n, e in light.lights.items()},
-            "daylight_w_m2": [
-                None if d is None else [d.mean_w_m2, d.stderr_w_m2] for d in light.daylight
-            ],
+    return FamilyBudget(
+        hours=tuple(hours.tolist()),
+        irradiance_w_m2=tuple(irradiance.tolist()),
+        lux=tuple((irradiance * WHITE_LIGHT_EFFICACY_LM_PER_W).tolist()),
+        harvest_w=tuple(harvest.tolist()),
+        sustainable_fps={
+            b.pixels: tuple(b.sustainable_fps(float(a)) for a in avail) for b in budgets
         },
-        "render": {
-            "seconds": light.seconds,
-            "spp": config.render.spp * config.render.batches,
-            "max_depth": config.render.max_depth,
-            "max_relative_error_component": light.max_relative_error(),
-            "max_relative_error_total": light.max_relative_error_total(config.schedule),
-        },
-    }
+        hours_at_fps={b.pixels: r[0] for b, r in zip(budgets, runs, strict=True)},
+        day_mean_sustainable_fps={b.pixels: b.sustainable_fps(mean_avail) for b in budgets},
+        storage_trace=runs[-1][1],
+        lights_w_m2={n: _estimate(e) for n, e in light.lights.items()},
+        daylight_w_m2=tuple(None if d is None else _estimate(d) for d in light.daylight),
+        render=RenderStats(
+            seconds=light.seconds,
+            spp=config.render.spp * config.render.batches,
+            max_depth=config.render.max_depth,
+            max_relative_error_component=light.max_relative_error(),
+            max_relative_error_total=light.max_relative_error_total(config.schedule),
+        ),
+        panel=pose,
+        panel_area_m2=config.panel.area_m2,
+        budgets=tuple(budget_record(b, config) for b in budgets),
+    )
 
 
-def budget_dict(budget: FrameBudget, config: EnergyConfig) -> dict[str, Any]:
-    """A frame budget with its power and threshold illuminance at ``config.fps`` (JSON-ready)."""
-    return {
-        "pixels": budget.pixels,
-        "energy_per_frame_j": budget.energy_per_frame_j,
-        "wake_j": budget.wake_j,
-        "readout_j": budget.readout_j,
-        "compute_j": budget.compute_j,
-        "radio_j": budget.radio_j,
-        "static_w": budget.static_w,
-        "payload_bytes": budget.payload_bytes,
-        "packets": budget.packets,
-        "head_flops": budget.head_flops,
-        "max_fps": budget.max_fps,
-        "power_at_fps_w": budget.power_w(config.fps),
-        "threshold_lux": threshold_lux(budget, config.fps, config),
-    }
+def _estimate(e: IrradianceEstimate) -> Estimate:
+    return Estimate(mean_w_m2=e.mean_w_m2, stderr_w_m2=e.stderr_w_m2)
+
+
+def budget_record(budget: FrameBudget, config: EnergyConfig) -> BudgetRecord:
+    """A frame budget with its power and threshold illuminance at ``config.fps``."""
+    return BudgetRecord(
+        pixels=budget.pixels,
+        energy_per_frame_j=budget.energy_per_frame_j,
+        wake_j=budget.wake_j,
+        readout_j=budget.readout_j,
+        compute_j=budget.compute_j,
+        radio_j=budget.radio_j,
+        static_w=budget.static_w,
+        payload_bytes=budget.payload_bytes,
+        packets=budget.packets,
+        head_flops=budget.head_flops,
+        max_fps=budget.max_fps,
+        power_at_fps_w=budget.power_w(config.fps),
+        threshold_lux=threshold_lux(budget, config.fps, config),
+    )
 
 
 def _comparison(
-    match: Match, labels: Sequence[Any], config: EnergyConfig, light: PanelLight | None
-) -> dict[str, Any]:
-    """The minimalist design and its matched module side by side (JSON-ready)."""
+    match: Match, labels: Sequence[LabelSpec], config: EnergyConfig, light: PanelLight | None
+) -> Comparison:
+    """The minimalist design and its matched module side by side."""
     mincam = mincam_budget(match.pixels, labels, config)
     # the module as configured, and at its best: the head on the MCU, outputs alone sent
     best = replace(config.consumption, head_on_device=True, send_samples=False)
-    modules = {
-        "module": module_budget(match, labels, config, config.consumption),
-        "module_outputs_only": module_budget(match, labels, config, best),
-    }
-    out: dict[str, Any] = {"match": to_dict(match), "mincam": budget_dict(mincam, config)}
-    for key, module in modules.items():
-        out[key] = {"name": config.camera_module.name, **budget_dict(module, config)}
-        out[key]["power_ratio"] = module.power_w(config.fps) / mincam.power_w(config.fps)
-    if light is not None:
-        for key, budget in (("mincam", mincam), *modules.items()):
-            out[key]["hours_at_fps"] = _day_run(light, budget, config)[0]
-    return out
+    module = module_budget(match, labels, config, config.consumption)
+    outputs_only = module_budget(match, labels, config, best)
+
+    def hours(budget: FrameBudget) -> float | None:
+        return None if light is None else _day_run(light, budget, config)[0]
+
+    def compared(budget: FrameBudget) -> ComparedBudget:
+        return ComparedBudget(
+            budget=budget_record(budget, config),
+            name=config.camera_module.name,
+            power_ratio=budget.power_w(config.fps) / mincam.power_w(config.fps),
+            hours_at_fps=hours(budget),
+        )
+
+    return Comparison(
+        match=match,
+        mincam=ComparedBudget(budget=budget_record(mincam, config), hours_at_fps=hours(mincam)),
+        module=compared(module),
+        module_outputs_only=compared(outputs_only),
+    )
 
 
 def analyze_energy(
@@ -205,8 +232,8 @@ def analyze_energy(
     config: EnergyConfig,
     *,
     studies_dir: str | Path | None = None,
-) -> dict[str, Any]:
-    """The self-powered budget of ``families`` (JSON-ready dict).
+) -> EnergyResult:
+    """The self-powered budget of ``families``.
 
     Args:
         families: indoor scene families (names or TOML paths) to render the day in
@@ -234,28 +261,23 @@ def analyze_energy(
 
     if not families:
         raise ValueError("families is empty: name at least one indoor scene family")
-    result: dict[str, Any] = {"config": to_dict(config), "families": {}, "comparisons": {}}
+    days: dict[str, FamilyBudget] = {}
+    comparisons: dict[str, Comparison] = {}
     for name in families:
         fam = day_family(name, config)
         pose, light = render_panel_light(fam, config)
         budgets = [mincam_budget(k, fam.labels, config) for k in range(1, config.max_pixels + 1)]
-        entry = family_budget(light, budgets, config)
-        entry["panel"] = to_dict(pose) | {"area_m2": config.panel.area_m2}
-        entry["budgets"] = [budget_dict(b, config) for b in budgets]
-        result["families"][fam.name] = entry
-        result.setdefault(
-            "threshold",
-            budget_dict(budgets[-1], config)
-            | {"family": fam.name, "paper_lux": config.paper_threshold_lux},
-        )
+        days[fam.name] = family_budget(light, pose, budgets, config)
         study = Path(studies_dir) / f"study_{fam.name}.json" if studies_dir else None
         match = load_match(fam.name, study)
-        result["comparisons"][fam.name] = _comparison(match, fam.labels, config, light)
+        comparisons[fam.name] = _comparison(match, fam.labels, config, light)
     for path in sorted(Path(studies_dir).glob("study_*.json")) if studies_dir else []:
         other = path.stem.removeprefix("study_")
-        if other in FAMILY_NAMES and other not in result["comparisons"]:
+        if other in FAMILY_NAMES and other not in comparisons:
             labels = load_family(other, seed=0, num_frames=1).labels
-            result["comparisons"][other] = _comparison(
-                load_match(other, path), labels, config, None
-            )
-    return result
+            comparisons[other] = _comparison(load_match(other, path), labels, config, None)
+    first = next(iter(days))
+    threshold = Threshold(
+        budget=days[first].budgets[-1], family=first, paper_lux=config.paper_threshold_lux
+    )
+    return EnergyResult(config=config, families=days, comparisons=comparisons, threshold=threshold)

@@ -14,6 +14,7 @@
   fit) and the verdict against :data:`THRESHOLDS`;
 - :mod:`.tasks` -- task metrics (trained on simulation / tested on real;
   sim-trained head retrained on real, as the paper did; trained and tested on real);
+- :mod:`.result` -- the typed result (:class:`Sim2RealResult`) and its records;
 - :mod:`.study` -- :func:`analyze_sim2real`, all of the above for one recording;
 - :mod:`.figures` and :mod:`.report` -- :func:`write_sim2real_report` writes
   ``sim2real.html`` and ``sim2real.json``.
@@ -26,13 +27,23 @@ torch or Mitsuba.
 from mincam_render.studies.sim2real.fit import THRESHOLDS, fit_gain_offset, injected_comparison
 from mincam_render.studies.sim2real.recording import Sim2RealError, load_recording
 from mincam_render.studies.sim2real.report import write_sim2real_report
+from mincam_render.studies.sim2real.result import (
+    GainOffsetFit,
+    PixelVerdict,
+    Sim2RealResult,
+    Thresholds,
+)
 from mincam_render.studies.sim2real.study import analyze_sim2real
 from mincam_render.studies.sim2real.surrogate import SurrogatePerturbations, make_surrogate
 
 __all__ = [
     "THRESHOLDS",
+    "GainOffsetFit",
+    "PixelVerdict",
     "Sim2RealError",
+    "Sim2RealResult",
     "SurrogatePerturbations",
+    "Thresholds",
     "analyze_sim2real",
     "fit_gain_offset",
     "injected_comparison",

@@ -1,6 +1,6 @@
 """Figures of a sim2real result (matplotlib): fits, time series, residuals, calibration, tasks.
 
-Each function takes the JSON-ready result of
+Each function takes the result of
 :func:`~mincam_render.studies.sim2real.study.analyze_sim2real` and returns
 ``(figure, caption)``; voltages are plotted in millivolts.
 """
@@ -8,8 +8,8 @@ Each function takes the JSON-ready result of
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,8 +19,14 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
+    from mincam_render.studies.sim2real.result import (
+        PixelComparison,
+        Sim2RealResult,
+        TaskMetrics,
+    )
 
-def figures(result: dict[str, Any]) -> list[tuple[Figure, str]]:
+
+def figures(result: Sim2RealResult) -> list[tuple[Figure, str]]:
     """``[(figure, caption)]`` of the report, in page order (the task figure if tasks ran)."""
     figs = [
         _fit_scatter(result),
@@ -28,23 +34,23 @@ def figures(result: dict[str, Any]) -> list[tuple[Figure, str]]:
         _residuals(result),
         _calibration(result),
     ]
-    if result.get("tasks"):
-        figs.append(_task_errors(result))
+    if result.tasks is not None:
+        figs.append(_task_errors(result, result.tasks))
     return figs
 
 
-def _series(result: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _series(result: Sim2RealResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(sim V[N, P], real V[N, P], time_s[N])`` of the result (V, s)."""
-    series = result["series"]
-    return np.asarray(series["sim_v"]), np.asarray(series["real_v"]), np.asarray(series["time_s"])
+    series = result.series
+    return np.asarray(series.sim_v), np.asarray(series.real_v), np.asarray(series.time_s)
 
 
-def _tag(result: dict[str, Any]) -> str:
-    return " [SURROGATE]" if result["surrogate"] else ""
+def _tag(result: Sim2RealResult) -> str:
+    return " [SURROGATE]" if result.surrogate else ""
 
 
 def _pixel_panels(
-    result: dict[str, Any], height_in: float, draw: Callable[[Axes, int], None]
+    result: Sim2RealResult, height_in: float, draw: Callable[[Axes, int], None]
 ) -> Figure:
     """A figure of one 3.2 x ``height_in`` inch panel per pixel, up to 4 per row.
 
@@ -52,7 +58,7 @@ def _pixel_panels(
     """
     from mincam_render.analysis.plots import plt
 
-    p = len(result["pixels"])
+    p = len(result.pixels)
     cols = min(4, p)
     rows = math.ceil(p / cols)
     fig, axes = plt.subplots(
@@ -66,9 +72,9 @@ def _pixel_panels(
     return fig
 
 
-def _fit_scatter(result: dict[str, Any]) -> tuple[Figure, str]:
+def _fit_scatter(result: Sim2RealResult) -> tuple[Figure, str]:
     sim, real, _ = _series(result)
-    pix = result["pixels"]
+    pix = result.pixels
 
     def draw(ax: Axes, j: int) -> None:
         s, r = sim[:, j] * 1e3, real[:, j] * 1e3
@@ -76,13 +82,13 @@ def _fit_scatter(result: dict[str, Any]) -> tuple[Figure, str]:
         xs = np.linspace(s.min(), s.max(), 2)
         ax.plot(
             xs,
-            pix[j]["gain"] * xs + pix[j]["offset_v"] * 1e3,
+            pix[j].fit.gain * xs + pix[j].fit.offset_v * 1e3,
             "r-",
             lw=1,
-            label=f"fit g={pix[j]['gain']:.3f}",
+            label=f"fit g={pix[j].fit.gain:.3f}",
         )
         ax.plot(xs, xs, "k:", lw=1, label="real = sim")
-        ax.set_title(f"pixel {j}: r={pix[j]['correlation']:.3f}", fontsize=9)
+        ax.set_title(f"pixel {j}: r={pix[j].fit.correlation:.3f}", fontsize=9)
         ax.set_xlabel("simulated (mV)")
         ax.set_ylabel("measured (mV)")
         ax.legend(fontsize=6)
@@ -96,11 +102,11 @@ def _fit_scatter(result: dict[str, Any]) -> tuple[Figure, str]:
     )
 
 
-def _time_series(result: dict[str, Any]) -> tuple[Figure, str]:
+def _time_series(result: Sim2RealResult) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
     sim, real, t = _series(result)
-    pix = result["pixels"]
+    pix = result.pixels
     p = len(pix)
     fig, axes = plt.subplots(
         p, 1, figsize=(10, 1.5 * p + 0.8), squeeze=False, sharex=True, constrained_layout=True
@@ -110,7 +116,7 @@ def _time_series(result: dict[str, Any]) -> tuple[Figure, str]:
         ax.plot(t, sim[:, j] * 1e3, lw=0.8, label="simulated")
         ax.plot(
             t,
-            (pix[j]["gain"] * sim[:, j] + pix[j]["offset_v"]) * 1e3,
+            (pix[j].fit.gain * sim[:, j] + pix[j].fit.offset_v) * 1e3,
             lw=0.8,
             ls="--",
             label="simulated, calibrated",
@@ -123,14 +129,14 @@ def _time_series(result: dict[str, Any]) -> tuple[Figure, str]:
     return fig, "Time series overlay per pixel (raw simulation and after the gain/offset fit)."
 
 
-def _residuals(result: dict[str, Any]) -> tuple[Figure, str]:
+def _residuals(result: Sim2RealResult) -> tuple[Figure, str]:
     sim, real, _ = _series(result)
-    pix = result["pixels"]
+    pix = result.pixels
 
     def draw(ax: Axes, j: int) -> None:
-        resid = (real[:, j] - (pix[j]["gain"] * sim[:, j] + pix[j]["offset_v"])) * 1e3
+        resid = (real[:, j] - (pix[j].fit.gain * sim[:, j] + pix[j].fit.offset_v)) * 1e3
         ax.hist(resid, bins=30, color="tab:purple", label="residuals")
-        ax.set_title(f"pixel {j}: std {pix[j]['residual_std_v'] * 1e3:.3g} mV", fontsize=9)
+        ax.set_title(f"pixel {j}: std {pix[j].fit.residual_std_v * 1e3:.3g} mV", fontsize=9)
         ax.set_xlabel("measured - calibrated sim (mV)")
         ax.set_ylabel("samples")
         ax.legend(fontsize=6)
@@ -140,17 +146,17 @@ def _residuals(result: dict[str, Any]) -> tuple[Figure, str]:
     return fig, "Residuals after the gain/offset fit."
 
 
-def _calibration(result: dict[str, Any]) -> tuple[Figure, str]:
+def _calibration(result: Sim2RealResult) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
-    pix = result["pixels"]
+    pix = result.pixels
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
     x = np.arange(len(pix))
     _fitted_gains(a1, x, pix)
     _fitted_offsets(a2, x, pix)
-    a3.bar(x - 0.2, [q["ks_raw"] for q in pix], 0.4, label="raw")
-    a3.bar(x + 0.2, [q["ks_calibrated"] for q in pix], 0.4, label="after fit")
-    a3.axhline(THRESHOLDS["max_ks_calibrated"], color="r", lw=0.8, ls="--", label="threshold")
+    a3.bar(x - 0.2, [q.ks_raw for q in pix], 0.4, label="raw")
+    a3.bar(x + 0.2, [q.ks_calibrated for q in pix], 0.4, label="after fit")
+    a3.axhline(THRESHOLDS.max_ks_calibrated, color="r", lw=0.8, ls="--", label="threshold")
     a3.set_xlabel("pixel")
     a3.set_ylabel("KS statistic (0-1)")
     a3.set_title("Distribution gap sim vs real")
@@ -163,12 +169,15 @@ def _calibration(result: dict[str, Any]) -> tuple[Figure, str]:
     )
 
 
-def _fitted_gains(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
+def _fitted_gains(ax: Axes, x: np.ndarray, pix: Sequence[PixelComparison]) -> None:
     """Fitted gain per pixel with ±2 se, and the expected one of SURROGATE data."""
-    g = np.array([q["gain"] for q in pix])
-    ax.errorbar(x, g, yerr=2 * np.array([q["gain_se"] for q in pix]), fmt="o", label="fitted ±2 se")
-    if "expected_gain" in pix[0]:
-        ax.plot(x, [q["expected_gain"] for q in pix], "rx", label="expected (injected)")
+    g = np.array([q.fit.gain for q in pix])
+    ax.errorbar(
+        x, g, yerr=2 * np.array([q.fit.gain_se for q in pix]), fmt="o", label="fitted ±2 se"
+    )
+    injected = [q.injected for q in pix if q.injected is not None]
+    if injected:
+        ax.plot(x, [q.expected_gain for q in injected], "rx", label="expected (injected)")
     ax.axhline(1.0, color="k", lw=0.6)
     ax.set_xlabel("pixel")
     ax.set_ylabel("gain (measured / simulated)")
@@ -176,16 +185,17 @@ def _fitted_gains(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
     ax.legend(fontsize=7)
 
 
-def _fitted_offsets(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
+def _fitted_offsets(ax: Axes, x: np.ndarray, pix: Sequence[PixelComparison]) -> None:
     """Fitted offset per pixel (mV) with ±2 se, and the expected one of SURROGATE data."""
-    o = np.array([q["offset_v"] for q in pix]) * 1e3
+    o = np.array([q.fit.offset_v for q in pix]) * 1e3
     ax.errorbar(
-        x, o, yerr=2e3 * np.array([q["offset_se_v"] for q in pix]), fmt="o", label="fitted ±2 se"
+        x, o, yerr=2e3 * np.array([q.fit.offset_se_v for q in pix]), fmt="o", label="fitted ±2 se"
     )
-    if "expected_offset_v" in pix[0]:
+    injected = [q.injected for q in pix if q.injected is not None]
+    if injected:
         ax.plot(
             x,
-            [q["expected_offset_v"] * 1e3 for q in pix],
+            [q.expected_offset_v * 1e3 for q in injected],
             "rx",
             label="expected (injected offset + stray light + dark current)",
         )
@@ -195,28 +205,27 @@ def _fitted_offsets(ax: Axes, x: np.ndarray, pix: list[dict[str, Any]]) -> None:
     ax.legend(fontsize=7)
 
 
-def _task_errors(result: dict[str, Any]) -> tuple[Figure, str]:
+def _task_errors(result: Sim2RealResult, tk: TaskMetrics) -> tuple[Figure, str]:
     from mincam_render.analysis.plots import plt
 
-    tk = result["tasks"]
-    names = ["sim_on_sim", "sim_on_real", "sim_head_retrained_on_real", "real_on_real"]
+    evaluations = [tk.sim_on_sim, tk.sim_on_real, tk.sim_head_retrained_on_real, tk.real_on_real]
     fig, ax = plt.subplots(figsize=(7.5, 3.6), constrained_layout=True)
-    vals = [tk[n]["error"] for n in names]
+    vals = [e.error for e in evaluations]
     ax.bar(
-        range(len(names)),
+        range(len(evaluations)),
         vals,
         color=["grey", "tab:red", "tab:orange", "tab:green"],
-        label=tk["real_on_real"]["error_name"],
+        label=tk.real_on_real.error_name,
     )
     ax.set_xticks(
-        range(len(names)),
+        range(len(evaluations)),
         ["sim → sim", "sim → real", "sim head\nretrained → real", "real → real"],
     )
     unit = ""
-    first = tk["real_on_real"]["labels"]
+    first = tk.real_on_real.labels
     if first:
-        unit = next(iter(first.values())).get("unit", "")
-    ax.set_ylabel(f"{tk['real_on_real']['error_name']} {('(' + unit + ')') if unit else ''}")
+        unit = next(iter(first.values())).unit
+    ax.set_ylabel(f"{tk.real_on_real.error_name} {('(' + unit + ')') if unit else ''}")
     ax.set_title("Task error on the test segment (train → test)" + _tag(result))
     ax.legend(fontsize=7)
     return fig, "Task metrics: trained on simulation / real, tested on real."

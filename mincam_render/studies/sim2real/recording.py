@@ -20,6 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from mincam_render.core.strict_json import JsonObject
+
 if TYPE_CHECKING:
     from mincam_render.core.labels import LabelSpec
     from mincam_render.optics.camera import FreeformCamera
@@ -62,7 +64,7 @@ class Recording:
         injected: the SURROGATE's injected values, else None.
     """
 
-    meta: dict
+    meta: JsonObject
     time_s: np.ndarray
     frame_index: np.ndarray
     volts: np.ndarray
@@ -71,7 +73,7 @@ class Recording:
     camera: FreeformCamera
     pixels: np.ndarray
     label_specs: tuple
-    injected: dict | None
+    injected: JsonObject | None
 
     @property
     def surrogate(self) -> bool:
@@ -274,7 +276,7 @@ def _read_masks(path: Path, shape: tuple[int, ...]) -> np.ndarray:
     return masks
 
 
-def _read_injected(root: Path) -> dict | None:
+def _read_injected(root: Path) -> JsonObject | None:
     """A SURROGATE's ``injected.json``, or None when there is none (real data)."""
     path = root / INJECTED_NAME
     if not path.is_file():

@@ -7,9 +7,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from mincam_render.studies.sim2real.figures import figures
+from mincam_render.studies.sim2real.result import PixelVerdict
 
 if TYPE_CHECKING:
     from mincam_render.analysis.report import Report
+    from mincam_render.learn.evaluation import Evaluation
+    from mincam_render.studies.sim2real.result import PixelComparison, Sim2RealResult, TaskMetrics
 
 #: Per-pixel table: the columns of every recording.
 _PIXEL_COLUMNS = [
@@ -25,43 +28,43 @@ _PIXEL_COLUMNS = [
     "W1 raw (mV)",
     "verdict",
 ]
-#: Task table: (row name, key of result["tasks"]).
+#: Task table: the row names, in the order of :func:`_task_rows`.
 _TASK_ROWS = (
-    ("simulation → simulation", "sim_on_sim"),
-    ("simulation → real", "sim_on_real"),
-    ("simulation, head retrained on real → real", "sim_head_retrained_on_real"),
-    ("real → real", "real_on_real"),
+    "simulation → simulation",
+    "simulation → real",
+    "simulation, head retrained on real → real",
+    "real → real",
 )
 
 
-def write_sim2real_report(result: dict, out_dir: str | Path) -> dict[str, str]:
+def write_sim2real_report(result: Sim2RealResult, out_dir: str | Path) -> dict[str, str]:
     """Write ``sim2real.json`` (all numbers) and ``sim2real.html`` to ``out_dir``."""
     from mincam_render.analysis.report import Report
     from mincam_render.data.dataset import atomic_write_bytes, json_bytes
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    title = "Simulation against reality" + (" — SURROGATE data" if result["surrogate"] else "")
-    page = Report(title, banner=result["banner"])
+    title = "Simulation against reality" + (" — SURROGATE data" if result.surrogate else "")
+    page = Report(title, banner=result.banner)
     _verdict_section(page, result)
     _pixel_section(page, result)
     for fig, caption in figures(result):
         page.figure(fig, caption)
     _task_section(page, result)
-    if result.get("injected"):
+    if result.injected:
         page.heading("Injected perturbations (SURROGATE)")
-        page.preformatted(json.dumps(result["injected"], indent=1)[:6000])
-    json_path = atomic_write_bytes(out / "sim2real.json", json_bytes(result))
+        page.preformatted(json.dumps(result.injected, indent=1)[:6000])
+    json_path = atomic_write_bytes(out / "sim2real.json", json_bytes(result.as_json()))
     html_path = page.write(out / "sim2real.html")
     return {"json": str(json_path), "html": str(html_path)}
 
 
-def _verdict_section(page: Report, result: dict[str, Any]) -> None:
+def _verdict_section(page: Report, result: Sim2RealResult) -> None:
     page.heading("Verdict")
-    page.paragraph(result["verdict"]["summary"])
+    page.paragraph(result.verdict.summary)
     page.paragraph(
         "Thresholds: "
-        + ", ".join(f"{k} = {v:g}" for k, v in result["thresholds"].items())
+        + ", ".join(f"{k} = {v:g}" for k, v in result.thresholds.as_json().items())
         + ". A pixel 'agrees' when correlation >= min_correlation, |gain - 1| <= max_gain_error "
         "and |offset| <= max_offset_fraction x its mean simulated voltage; it 'agrees after "
         "calibration' when the correlation holds and the KS statistic after the fit is <= "
@@ -69,18 +72,18 @@ def _verdict_section(page: Report, result: dict[str, Any]) -> None:
     )
 
 
-def _pixel_section(page: Report, result: dict[str, Any]) -> None:
+def _pixel_section(page: Report, result: Sim2RealResult) -> None:
     """The per-pixel table (with the injected values of SURROGATE data, explained)."""
-    has_inj = "expected_gain" in result["pixels"][0]
+    has_inj = result.pixels[0].injected is not None
     cols = list(_PIXEL_COLUMNS)
     if has_inj:
         cols[1:1] = ["injected gain"]
         cols[3:3] = ["gain − injected (se)"]
         cols[6:6] = ["injected offset (mV)", "expected offset (mV)", "offset − expected (se)"]
-    rows = [_pixel_row(p, has_inj) for p in result["pixels"]]
+    rows = [_pixel_row(p) for p in result.pixels]
     classes = [
-        [None] * (len(row) - 1) + [_verdict_class(p["verdict"])]
-        for row, p in zip(rows, result["pixels"], strict=True)
+        [None] * (len(row) - 1) + [_verdict_class(p.verdict)]
+        for row, p in zip(rows, result.pixels, strict=True)
     ]
     page.heading("Per pixel")
     page.table(cols, rows, cell_classes=classes)
@@ -89,56 +92,68 @@ def _pixel_section(page: Report, result: dict[str, Any]) -> None:
             "Expected offset = injected offset + the stray light and dark current a fit sees "
             "as offset; expected gain = injected gain. Differences in standard errors (se):"
         )
-        for p in result["pixels"]:
-            page.paragraph(p["explanation"])
+        for p in result.pixels:
+            if p.injected is not None:
+                page.paragraph(p.injected.explanation)
 
 
-def _pixel_row(p: dict, has_inj: bool) -> list[Any]:
+def _pixel_row(p: PixelComparison) -> list[Any]:
     """One row of the per-pixel table (voltages in mV), columns as in ``_pixel_section``."""
-    row = [
-        p["pixel"],
-        f"{p['gain']:.4f}",
-        f"{p['gain_se']:.2g}",
-        f"{p['offset_v'] * 1e3:.3f}",
-        f"{p['offset_se_v'] * 1e3:.2g}",
-        f"{p['correlation']:.4f}",
-        f"{p['residual_std_v'] * 1e3:.3g}",
-        f"{p['ks_raw']:.3f}",
-        f"{p['ks_calibrated']:.3f}",
-        f"{p['wasserstein_raw_v'] * 1e3:.3g}",
-        p["verdict"],
+    fit = p.fit
+    row: list[Any] = [
+        p.pixel,
+        f"{fit.gain:.4f}",
+        f"{fit.gain_se:.2g}",
+        f"{fit.offset_v * 1e3:.3f}",
+        f"{fit.offset_se_v * 1e3:.2g}",
+        f"{fit.correlation:.4f}",
+        f"{fit.residual_std_v * 1e3:.3g}",
+        f"{p.ks_raw:.3f}",
+        f"{p.ks_calibrated:.3f}",
+        f"{p.wasserstein_raw_v * 1e3:.3g}",
+        p.verdict.value,
     ]
-    if has_inj:
-        row[1:1] = [f"{p['injected_gain']:.4f}"]
-        row[3:3] = [f"{p['gain_z']:+.1f}"]
+    inj = p.injected
+    if inj is not None:
+        row[1:1] = [f"{inj.injected_gain:.4f}"]
+        row[3:3] = [f"{inj.gain_z:+.1f}"]
         row[6:6] = [
-            f"{p['injected_offset_v'] * 1e3:.3f}",
-            f"{p['expected_offset_v'] * 1e3:.3f}",
-            f"{p['offset_z']:+.1f}",
+            f"{inj.injected_offset_v * 1e3:.3f}",
+            f"{inj.expected_offset_v * 1e3:.3f}",
+            f"{inj.offset_z:+.1f}",
         ]
     return row
 
 
-def _verdict_class(verdict: str) -> str:
+def _verdict_class(verdict: PixelVerdict) -> str:
     """The table cell's class of a pixel verdict: pass, warn or fail."""
-    return "pass" if verdict == "agrees" else "warn" if "calibration" in verdict else "fail"
+    return {
+        PixelVerdict.AGREES: "pass",
+        PixelVerdict.AGREES_CALIBRATED: "warn",
+        PixelVerdict.DISAGREES: "fail",
+    }[verdict]
 
 
-def _task_section(page: Report, result: dict[str, Any]) -> None:
+def _task_rows(tk: TaskMetrics) -> tuple[Evaluation, ...]:
+    """The evaluations in the order of ``_TASK_ROWS``."""
+    return (tk.sim_on_sim, tk.sim_on_real, tk.sim_head_retrained_on_real, tk.real_on_real)
+
+
+def _task_section(page: Report, result: Sim2RealResult) -> None:
     page.heading("Task metrics")
-    if result.get("tasks"):
-        tk = result["tasks"]
+    if result.tasks is not None:
+        tk = result.tasks
         page.table(
-            ["trained on → tested on", tk["real_on_real"]["error_name"], "loss"],
+            ["trained on → tested on", tk.real_on_real.error_name, "loss"],
             [
-                [name, f"{tk[key]['error']:.4g}", f"{tk[key]['loss']:.4g}"]
-                for name, key in _TASK_ROWS
+                [name, f"{e.error:.4g}", f"{e.loss:.4g}"]
+                for name, e in zip(_TASK_ROWS, _task_rows(tk), strict=True)
             ],
         )
     else:
         page.paragraph("Task metrics were not computed (--no-tasks).")
     page.paragraph(
         "Video-based simulation (the paper's training-camera method): "
-        + result["video_simulation_note"]
+        + result.video_simulation_note
         + "."
     )

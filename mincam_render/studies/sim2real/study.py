@@ -7,8 +7,8 @@ heads (:mod:`.tasks`) and states a verdict. Arrays are numpy float64; voltages i
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -20,11 +20,16 @@ from mincam_render.studies.sim2real.recording import (
     load_recording,
     recording_checksums,
 )
+from mincam_render.studies.sim2real.result import (
+    PixelComparison,
+    PixelVerdict,
+    Series,
+    Sim2RealResult,
+    TaskMetrics,
+    Verdict,
+)
 from mincam_render.studies.sim2real.simulation import simulate_volts
 from mincam_render.studies.sim2real.tasks import task_metrics
-
-#: The pixel verdicts, in the order the summary counts them.
-PIXEL_VERDICTS = ("agrees", "agrees after gain/offset calibration", "disagrees")
 
 
 def analyze_sim2real(
@@ -35,8 +40,8 @@ def analyze_sim2real(
     seed: int = 0,
     tasks: bool = True,
     progress: bool = False,
-) -> dict[str, Any]:
-    """Compare a recording with its simulation (see the module doc); JSON-ready result.
+) -> Sim2RealResult:
+    """Compare a recording with its simulation (see the module doc).
 
     Args:
         path: recording directory (``docs/sim2real_format.md``).
@@ -51,12 +56,35 @@ def analyze_sim2real(
     """
     rec = load_recording(path)
     sim_volts = _simulate_recording(rec, spp=spp, seed=seed, progress=progress)
-    pixels = compare_pixels(sim_volts, rec.volts, rec.pixels, rec.injected)
-    result = _result(Path(path), rec, sim_volts, pixels, spp=spp, seed=seed)
-    if tasks:
-        result["tasks"] = task_metrics(rec, sim_volts, steps=steps, seed=seed)
-    result["verdict"] = verdict(result)
-    return result
+    pixels = tuple(compare_pixels(sim_volts, rec.volts, rec.pixels, rec.injected))
+    metrics = task_metrics(rec, sim_volts, steps=steps, seed=seed) if tasks else None
+    root = Path(path)
+    return Sim2RealResult(
+        surrogate=rec.surrogate,
+        banner=SURROGATE_BANNER if rec.surrogate else None,
+        recording=str(root.resolve()),
+        recording_sha256=recording_checksums(root),
+        family=rec.meta["family"],
+        num_samples=int(len(rec.time_s)),
+        fps=float(rec.meta["fps"]),
+        units_in_file=rec.meta["units"],
+        spp=spp,
+        seed=seed,
+        thresholds=THRESHOLDS,
+        pixels=pixels,
+        distribution_gap=distribution_gap(list(pixels)),
+        injected=rec.injected,
+        series=Series(time_s=rec.time_s, sim_v=sim_volts, real_v=rec.volts),
+        tasks=metrics,
+        video_simulation_note="omitted: the paper's video-based simulation needs the "
+        "auxiliary camera's frames"
+        + (
+            ""
+            if not (root / "frames").is_dir()
+            else " (frames found but their analysis is not implemented)"
+        ),
+        verdict=verdict(pixels, metrics, surrogate=rec.surrogate),
+    )
 
 
 def _simulate_recording(rec: Recording, *, spp: int, seed: int, progress: bool) -> np.ndarray:
@@ -86,75 +114,42 @@ def _simulate_recording(rec: Recording, *, spp: int, seed: int, progress: bool) 
     return sim_volts
 
 
-def _result(
-    path: Path, rec: Recording, sim_volts: np.ndarray, pixels: list[dict], *, spp: int, seed: int
-) -> dict[str, Any]:
-    """The JSON-ready result without tasks and verdict (``"tasks"`` is None)."""
-    return {
-        "surrogate": rec.surrogate,
-        "banner": SURROGATE_BANNER if rec.surrogate else None,
-        "recording": str(path.resolve()),
-        "recording_sha256": recording_checksums(path),
-        "family": rec.meta["family"],
-        "num_samples": int(len(rec.time_s)),
-        "fps": float(rec.meta["fps"]),
-        "units_in_file": rec.meta["units"],
-        "spp": spp,
-        "seed": seed,
-        "thresholds": dict(THRESHOLDS),
-        "pixels": pixels,
-        "distribution_gap": distribution_gap(pixels),
-        "injected": rec.injected,
-        "series": {
-            "time_s": rec.time_s.tolist(),
-            "sim_v": sim_volts.tolist(),
-            "real_v": rec.volts.tolist(),
-        },
-        "tasks": None,
-        "video_simulation_note": "omitted: the paper's video-based simulation needs the "
-        "auxiliary camera's frames"
-        + (
-            ""
-            if not (path / "frames").is_dir()
-            else " (frames found but their analysis is not implemented)"
-        ),
-    }
-
-
-def verdict(result: dict) -> dict[str, Any]:
+def verdict(
+    pixels: Sequence[PixelComparison], tasks: TaskMetrics | None, *, surrogate: bool
+) -> Verdict:
     """Overall verdict from per-pixel verdicts and task errors (thresholds in THRESHOLDS)."""
     counts: dict[str, int] = {}
-    for p in result["pixels"]:
-        counts[p["verdict"]] = counts.get(p["verdict"], 0) + 1
-    n = len(result["pixels"])
-    lines = [f"{v}: {counts.get(v, 0)} of {n} pixels" for v in PIXEL_VERDICTS]
-    if counts.get("disagrees", 0) == 0 and counts.get("agrees", 0) == n:
+    for p in pixels:
+        counts[p.verdict.value] = counts.get(p.verdict.value, 0) + 1
+    n = len(pixels)
+    lines = [f"{v.value}: {counts.get(v.value, 0)} of {n} pixels" for v in PixelVerdict]
+    disagrees = counts.get(PixelVerdict.DISAGREES.value, 0)
+    if disagrees == 0 and counts.get(PixelVerdict.AGREES.value, 0) == n:
         overall = "simulation matches the measurements without calibration"
-    elif counts.get("disagrees", 0) == 0:
+    elif disagrees == 0:
         overall = "simulation matches the measurements after a per-pixel gain/offset fit"
     else:
         overall = "simulation does not reproduce some pixels' time series (see per pixel)"
-    t = result.get("tasks")
-    task_line = _task_verdict(t) if t else ""
-    prefix = "SURROGATE data: " if result.get("surrogate") else ""
+    task_line = _task_verdict(tasks) if tasks else ""
+    prefix = "SURROGATE data: " if surrogate else ""
     summary = prefix + overall + "; " + ", ".join(lines) + (f"; {task_line}" if task_line else "")
-    return {"overall": overall, "counts": counts, "task": task_line, "summary": summary}
+    return Verdict(overall=overall, counts=counts, task=task_line, summary=summary)
 
 
-def _task_verdict(t: dict) -> str:
+def _task_verdict(t: TaskMetrics) -> str:
     """One line: does the sim-trained head transfer to real data (``max_task_gap``)?"""
-    real = t["real_on_real"]["error"]
-    gap = THRESHOLDS["max_task_gap"]
-    name = t["real_on_real"]["error_name"]
+    real = t.real_on_real.error
+    gap = THRESHOLDS.max_task_gap
+    name = t.real_on_real.error_name
 
     def ok(e: float) -> bool:
         return e <= real * (1 + gap) + 1e-9
 
     return (
-        f"task ({name}): sim-trained head on real {t['sim_on_real']['error']:.3g} "
-        f"({'transfers' if ok(t['sim_on_real']['error']) else 'does not transfer'}), "
-        f"retrained on real {t['sim_head_retrained_on_real']['error']:.3g} "
-        f"({'ok' if ok(t['sim_head_retrained_on_real']['error']) else 'worse'}), "
-        f"real-trained {real:.3g}, sim on sim {t['sim_on_sim']['error']:.3g} "
+        f"task ({name}): sim-trained head on real {t.sim_on_real.error:.3g} "
+        f"({'transfers' if ok(t.sim_on_real.error) else 'does not transfer'}), "
+        f"retrained on real {t.sim_head_retrained_on_real.error:.3g} "
+        f"({'ok' if ok(t.sim_head_retrained_on_real.error) else 'worse'}), "
+        f"real-trained {real:.3g}, sim on sim {t.sim_on_sim.error:.3g} "
         f"(tolerance {gap:.0%} over real-trained)"
     )

@@ -22,12 +22,13 @@ import dataclasses
 import logging
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.core.checks import check_number
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import MM
 from mincam_render.optics.perturbation import DEG, MAGNITUDES, PerturbationDraw, PerturbationModel
 from mincam_render.studies.sim2real.recording import (
@@ -115,7 +116,7 @@ class SurrogatePerturbations:
         electronic = ("gain_mismatch_fraction", "dark_offset_v")
         return any(getattr(self.perturbation, n) for n in MAGNITUDES if n not in electronic)
 
-    def to_record(self) -> dict[str, Any]:
+    def to_record(self) -> JsonObject:
         """``injected.json``'s ``perturbations``, the model in its record's units (mm, deg, %)."""
         return {**dataclasses.asdict(self), "perturbation": self.perturbation.to_record()}
 
@@ -151,7 +152,7 @@ def print_masks(masks: np.ndarray, camera: FreeformCamera, draw: PerturbationDra
 
 def _mount_masks(
     design: np.ndarray, camera: FreeformCamera, draw: PerturbationDraw
-) -> tuple[np.ndarray, dict[str, Any]]:
+) -> tuple[np.ndarray, JsonObject]:
     """Designs ``M[pixel, row, col]`` as printed and mounted by ``draw``.
 
     Returns:
@@ -364,7 +365,7 @@ def _design(
 
 def _expected_fit(
     electronics: dict[str, np.ndarray], e: DetectorElectronics, pert: SurrogatePerturbations
-) -> dict[str, Any]:
+) -> JsonObject:
     """The gain and offset (V) per pixel a fit of ``real = gain * sim + offset`` should find.
 
     Stray light passes the same gain as the signal and the dark current the
@@ -398,7 +399,7 @@ def _label_rows(family: SceneFamily, frame_index: np.ndarray) -> np.ndarray:
 
 def _recording_meta(
     family: SceneFamily, family_name: str, seed: int, camera: FreeformCamera, pixels: np.ndarray
-) -> dict[str, Any]:
+) -> JsonObject:
     """``recording.json``'s content (the checksums are added when the files are written)."""
     from mincam_render.data.dataset import camera_to_dict, label_spec_to_dict
 

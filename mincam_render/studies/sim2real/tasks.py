@@ -8,11 +8,12 @@ says torch; voltages in volts.
 from __future__ import annotations
 
 import copy
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from mincam_render.studies.sim2real.recording import Recording
+from mincam_render.studies.sim2real.result import TaskMetrics
 
 if TYPE_CHECKING:
     import torch
@@ -66,7 +67,7 @@ def _measurement_model(
     return cast("Model", MeasurementHead())
 
 
-def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int) -> dict[str, Any]:
+def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int) -> TaskMetrics:
     """Task errors on the real test segment for heads trained on simulation and/or real data."""
     from mincam_render.learn.train import TrainConfig, TrainingData, evaluate, train_model
     from mincam_render.learn.train_config import GAIN_AUGMENTATION_20
@@ -92,17 +93,19 @@ def task_metrics(rec: Recording, sim_volts: np.ndarray, *, steps: int, seed: int
         max_steps=steps, eval_every=max(10, steps // 20), patience=6, seed=seed, batch_size=64,
         gain_range=GAIN_AUGMENTATION_20,
     )  # fmt: skip
-    out: dict[str, Any] = {}
-
+    # evaluated in this order (the heads' training and evaluation share torch's state)
     sim_model = _measurement_model(n_in, sim_tr, noise, seed)
     train_model(sim_model, sim_tr, sim_va, cfg)
-    out["sim_on_sim"] = evaluate(sim_model, sim_te, noise=False).as_json()
-    out["sim_on_real"] = evaluate(sim_model, real_te, noise=False).as_json()
+    sim_on_sim = evaluate(sim_model, sim_te, noise=False)
+    sim_on_real = evaluate(sim_model, real_te, noise=False)
     retrained = copy.deepcopy(sim_model)
     train_model(retrained, real_tr, real_va, cfg)
-    out["sim_head_retrained_on_real"] = evaluate(retrained, real_te, noise=False).as_json()
+    retrained_on_real = evaluate(retrained, real_te, noise=False)
     real_model = _measurement_model(n_in, real_tr, noise, seed)
     train_model(real_model, real_tr, real_va, cfg)
-    out["real_on_real"] = evaluate(real_model, real_te, noise=False).as_json()
-    out["video_simulation"] = None
-    return out
+    return TaskMetrics(
+        sim_on_sim=sim_on_sim,
+        sim_on_real=sim_on_real,
+        sim_head_retrained_on_real=retrained_on_real,
+        real_on_real=evaluate(real_model, real_te, noise=False),
+    )
