@@ -313,7 +313,11 @@ def test_a_killed_worker_stops_the_render_naming_its_shard(tmp_path, many_shards
         *["--detectors", "2", "--mask-res", "8", "--seed", "2", "--no-progress"],
         *["--out", str(tmp_path / "ds")],
     ]
-    p = cli_process([*args, "--workers", "1"], env={FRAME_DELAY_ENV: "0.5"})
+    # 2 s a frame: the worker found after the first shard still holds a task (it is
+    # recycled after 4 shards, 6 s later); at 0.5 s a loaded machine noticed the shard
+    # late and killed a worker that had just finished its last task (the render then
+    # ended well: failures at load 8-12, and once in a fresh-clone run)
+    p = cli_process([*args, "--workers", "1"], env={FRAME_DELAY_ENV: "2.0"})
     deadline = time.monotonic() + 120
     while not list((tmp_path / "ds" / ds.SHARD_DIR).glob("shard-*.json")):
         assert p.poll() is None and time.monotonic() < deadline, p.communicate()
