@@ -52,16 +52,21 @@ def cuda_variant() -> str:
 # tmp_path, never the shared folder.
 
 
+def _render_shared(tmp_path_factory, request, folder: str) -> Path:
+    """``request`` rendered once in this process into a fresh ``folder``/ds."""
+    from mincam_render.data.render_job import render_dataset
+
+    out = tmp_path_factory.mktemp(folder) / "ds"
+    render_dataset(request, out, workers=0)
+    return out
+
+
 @pytest.fixture(scope="session")
 def tiny_patches(tmp_path_factory, variant) -> Path:
     """``support.TINY_PATCHES`` rendered in this process: read it, never write into it."""
     from support import TINY_PATCHES
 
-    from mincam_render.data.render_job import render_dataset
-
-    out = tmp_path_factory.mktemp("tiny-patches") / "ds"
-    render_dataset(TINY_PATCHES, out, workers=0)
-    return out
+    return _render_shared(tmp_path_factory, TINY_PATCHES, "tiny-patches")
 
 
 @pytest.fixture
@@ -75,11 +80,7 @@ def differential_dataset(tmp_path_factory, variant) -> Path:
     """``support.TINY_DIFFERENTIAL`` rendered in this process: read it, never write into it."""
     from support import TINY_DIFFERENTIAL
 
-    from mincam_render.data.render_job import render_dataset
-
-    out = tmp_path_factory.mktemp("differential") / "ds"
-    render_dataset(TINY_DIFFERENTIAL, out, workers=0)
-    return out
+    return _render_shared(tmp_path_factory, TINY_DIFFERENTIAL, "differential")
 
 
 @pytest.fixture
