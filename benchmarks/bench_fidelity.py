@@ -17,12 +17,7 @@ import argparse
 import logging
 
 from mincam_render.scenes import FAMILY_NAMES
-from mincam_render.studies.fidelity.study import (
-    FidelityBenchConfig,
-    bench_fidelity,
-    pareto_table,
-    write_fidelity_report,
-)
+from mincam_render.studies.fidelity import FidelityBenchConfig, pareto_table, run, write_report
 
 
 def main() -> None:
@@ -36,18 +31,17 @@ def main() -> None:
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     cfg = FidelityBenchConfig(
+        families=tuple(args.families.split(",")),
         num_frames=args.frames,
         reference_spp=args.reference_spp,
         base_spp=args.base_spp,
         repeats=args.repeats,
     )
-    results = []
-    for name in args.families.split(","):
-        res = bench_fidelity(name, cfg)
-        results.append(res)
-        print(f"== {name}\n{pareto_table(res)}")
-        print("\n".join(res["statements"]))
-    paths = write_fidelity_report(results, args.out)
+    result = run(cfg)
+    for res in result.families:
+        print(f"== {res.family}\n{pareto_table(res)}")
+        print("\n".join(res.statements))
+    paths = write_report(result, args.out)
     print(f"wrote {paths['json']} and {paths['html']}")
 
 

@@ -1,7 +1,7 @@
 """``mincam-render bench``: benchmarks of measured error against run time.
 
 The options of ``bench fidelity`` fill
-:class:`~mincam_render.studies.fidelity.study.FidelityBenchConfig`: each
+:class:`~mincam_render.studies.fidelity.config.FidelityBenchConfig`: each
 option's parameter name is the field's name and its default the field's default
 (``--no-auto`` is ``include_auto=False``).
 """
@@ -14,7 +14,7 @@ from typing import Any
 
 import click
 
-from mincam_render.studies.fidelity.study import FidelityBenchConfig
+from mincam_render.studies.fidelity.config import FidelityBenchConfig
 
 from .errors import user_error
 from .options import field_default, out_option
@@ -74,18 +74,14 @@ def bench_fidelity_cmd(families: tuple[str, ...], out: Path, no_auto: bool, **fi
       mincam-render bench fidelity workspace --out runs/bench-fidelity
     """
     from mincam_render.core.config import ConfigError
-    from mincam_render.studies.fidelity.study import (
-        bench_fidelity,
-        pareto_table,
-        write_fidelity_report,
-    )
+    from mincam_render.studies.fidelity import pareto_table, run, write_report
 
     try:
-        cfg = FidelityBenchConfig(include_auto=not no_auto, **fields)
-        results = [bench_fidelity(f, cfg) for f in families]
-        paths = write_fidelity_report(results, out)
+        cfg = FidelityBenchConfig(families=families, include_auto=not no_auto, **fields)
+        result = run(cfg)
+        paths = write_report(result, out)
     except (ValueError, ConfigError, OSError) as err:
         raise user_error(err) from None
-    for r in results:
-        click.echo(f"== {r['family']}\n{pareto_table(r)}\n" + "\n".join(r["statements"]))
+    for r in result.families:
+        click.echo(f"== {r.family}\n{pareto_table(r)}\n" + "\n".join(r.statements))
     click.echo(f"wrote {paths['json']} and {paths['html']}")

@@ -67,14 +67,16 @@ def test_headless_screenshot_is_not_blank(tmp_path):
 
 
 def test_fidelity_rows_tiny(variant, tmp_path):
-    from mincam_render.studies.fidelity.study import (
+    from mincam_render.studies.fidelity import (
         KNOBS,
         FidelityBenchConfig,
-        bench_fidelity,
-        write_fidelity_report,
+        FidelityBenchResult,
+        run,
+        write_report,
     )
 
     cfg = FidelityBenchConfig(
+        families=("patches",),
         num_frames=1,
         sequence_frames=4,
         reference_spp=8,
@@ -87,22 +89,33 @@ def test_fidelity_rows_tiny(variant, tmp_path):
         include_auto=True,
         signal_seconds=1.0,
     )
-    res = bench_fidelity("patches", cfg)
-    assert {r["knob"] for r in res["rows"]} == set(KNOBS)
-    for r in res["rows"]:
-        for key in ("error", "error_random", "error_trained", "effect", "seconds"):
-            assert math.isfinite(r[key]) and r[key] >= 0, (r["knob"], r["level"], key)
-        assert r["family"] == "patches"
+    result = run(cfg)
+    (res,) = result.families
+    assert {r.knob for r in res.rows} == set(KNOBS)
+    for r in res.rows:
+        e = r.errors
+        for key, value in (
+            ("error", r.error),
+            ("error_random", e.error_random),
+            ("error_trained", e.error_trained),
+            ("effect", r.effect),
+            ("seconds", r.seconds),
+        ):
+            assert math.isfinite(value) and value >= 0, (r.knob, r.level, key)
+        assert r.family == "patches"
         # beside them, relative to the label signal (no single texel at a coarser resolution)
-        assert math.isfinite(r["error_signal_random"]) and r["error_signal_random"] >= 0
-        assert (r["error_signal_finest_box"] is None) == (r["knob"] == "mask_res")
+        assert e.signal is not None and math.isfinite(e.signal.random) and e.signal.random >= 0
+        assert (e.signal.finest_box is None) == (r.knob == "mask_res")
     # float16 adds at most its rounding (2^-11 relative) to the base render
-    base = next(r for r in res["rows"] if r["knob"] == "spp" and r["level"] == 2)
-    f16 = next(r for r in res["rows"] if r["knob"] == "storage")
-    assert abs(f16["error"] - base["error"]) < 1e-3
-    assert res["statements"] and all("patches" in s for s in res["statements"])
-    paths = write_fidelity_report([res], tmp_path)
+    base = next(r for r in res.rows if r.knob == "spp" and r.level == 2)
+    f16 = next(r for r in res.rows if r.knob == "storage")
+    assert abs(f16.error - base.error) < 1e-3
+    assert res.statements and all("patches" in s for s in res.statements)
+    paths = write_report(result, tmp_path)
     assert Path(paths["html"]).read_text().count("data:image/png;base64,") == 1
+    written = json.loads(paths["json"].read_text())
+    assert FidelityBenchResult.from_json(written).as_json() == written
+    assert FidelityBenchResult.from_json(written).families[0].rows == res.rows
 
 
 @pytest.fixture(scope="module")

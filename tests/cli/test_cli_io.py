@@ -11,7 +11,7 @@ from mincam_render.data.render_job import RenderRequest
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.optics.perturbation import PerturbationModel
 from mincam_render.studies.comparison.config import ComparisonConfig
-from mincam_render.studies.fidelity.study import FidelityBenchConfig
+from mincam_render.studies.fidelity import FidelityBenchConfig
 from mincam_render.studies.privacy.config import AttackConfig
 from mincam_render.studies.robustness.config import RobustnessConfig
 
@@ -231,7 +231,7 @@ def test_robust_options_are_the_perturbation_record_with_its_defaults():
         (("prune",), ["--run", "r"], TrainConfig, 11),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
-        (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 5),
+        (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 6),
         (("pipeline",), [], ComparisonConfig, 15),
         (("study",), ["--out", "o"], ComparisonConfig, 15),
     ],
