@@ -58,11 +58,12 @@ from __future__ import annotations
 import enum
 import hashlib
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import TYPE_CHECKING, Protocol, cast
 
 import numpy as np
 
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.capabilities import DifferentialBackground
 
@@ -153,9 +154,9 @@ class BackgroundSettings:
             seeds_recorded="difference_seeds" in d,
         )
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         """The record :meth:`from_dict` reads (``max_depth`` 0: the scene's integrator)."""
-        record: dict[str, Any] = {
+        record: JsonObject = {
             "interval_s": self.interval_s,
             "spp": self.spp,
             "max_depth": self.max_depth or 0,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,9 +26,10 @@ from mincam_render.render.fidelity.constants import (
     REFERENCE_SPP_FACTOR,
 )
 from mincam_render.render.fidelity.probes import Probes
-from mincam_render.render.fidelity.records import Achieved, Decision
+from mincam_render.render.fidelity.records import Achieved, Decision, ReferenceCheck, SppRaise
 
 if TYPE_CHECKING:
+    from mincam_render.optics.camera import FreeformCamera
     from mincam_render.render.differential import BackgroundSettings
 
 log = logging.getLogger(__name__)
@@ -48,7 +49,7 @@ class Draft:
     """
 
     shared: bool
-    render_cam: Any
+    render_cam: FreeformCamera
     max_depth: int = 0
     spp: int = 1
     e_pilot: float | None = None
@@ -113,13 +114,15 @@ def check_against_reference(
     error = p.error(chosen, ref)
     # the reference's own Monte Carlo error is part of the figure
     ref_noise = draft.e_pilot * math.sqrt(PILOT_SPP / ref_spp) if draft.e_pilot is not None else 0.0
-    check: dict[str, Any] = {"error_vs_reference": error, "reference_spp": ref_spp}
-    if draft.e_pilot is not None:
-        check["reference_noise_rms"] = ref_noise
+    check = ReferenceCheck(
+        error_vs_reference=error,
+        reference_spp=ref_spp,
+        reference_noise_rms=ref_noise if draft.e_pilot is not None else None,
+    )
     if draft.background is not None:
-        chosen = _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen)
+        chosen, check = _raise_differential_spp(p, decisions, draft, ref, ref_noise, check, chosen)
     checked = "differential" if draft.background is not None else "spp"
-    decisions[checked] = decisions[checked].with_measured(**check)
+    decisions[checked] = decisions[checked].with_measured(**check.as_json())
     found, advice = achieved(check, ref_noise, decisions, p, draft.spp)
     return chosen, Achieved(
         error_rms=found,
@@ -153,15 +156,19 @@ def _raise_differential_spp(
     draft: Draft,
     ref: np.ndarray,
     ref_noise: float,
-    check: dict[str, Any],
+    check: ReferenceCheck,
     chosen: np.ndarray,
-) -> np.ndarray:
-    """Raise the differential spp the request left to us while the check misses the target."""
+) -> tuple[np.ndarray, ReferenceCheck]:
+    """Raise the differential spp the request left to us while the check misses the target.
+
+    Returns:
+        ``(the plan's probes, the check)``: both after the last raise.
+    """
     assert draft.background is not None  # called only with differential rendering
     request, background = p.request, draft.background
-    raises = []
+    raises: list[SppRaise] = []
     own_spp = request.spp is None, request.background_spp is None
-    error = check["error_vs_reference"]
+    error = check.error_vs_reference
     for _ in range(MAX_SPP_RAISES if any(own_spp) else 0):
         found = math.sqrt(max(error["rms"] ** 2 - ref_noise**2, 0.0))
         if found <= p.target_error:
@@ -173,13 +180,12 @@ def _raise_differential_spp(
             bg_spp = round_up_spp(background.spp * factor, MAX_BACKGROUND_SPP)
             background = draft.background = replace(background, spp=bg_spp)
         raises.append(
-            {"error_found_rms": found, "frame_spp": draft.spp, "background_spp": background.spp}
+            SppRaise(error_found_rms=found, frame_spp=draft.spp, background_spp=background.spp)
         )
         chosen = render_plan(p, draft)
         error = p.error(chosen, ref)
     if raises:
-        check["spp_raised"] = raises
-        check["error_vs_reference"] = error
+        check = replace(check, spp_raised=tuple(raises), error_vs_reference=error)
         decisions["spp"] = replace(decisions["spp"], value=draft.spp)
         diff = decisions["differential"].with_measured(
             frame_spp=draft.spp, background_spp=background.spp
@@ -189,7 +195,7 @@ def _raise_differential_spp(
             reason=f"{diff.reason}; raised to {draft.spp} spp (backgrounds {background.spp}) "
             "after the check against the reference missed the target",
         )
-    return chosen
+    return chosen, check
 
 
 def _per_detector_error(
@@ -206,7 +212,7 @@ def _per_detector_error(
 
 
 def achieved(
-    check: dict[str, Any], ref_noise: float, decisions: dict[str, Decision], p: Probes, spp: int
+    check: ReferenceCheck, ref_noise: float, decisions: dict[str, Decision], p: Probes, spp: int
 ) -> tuple[float, str | None]:
     """The plan's error against the reference vs the target; a warning naming the knob if missed.
 
@@ -220,7 +226,7 @@ def achieved(
         ``(error, advice)``: the error (reference noise out), and the flags to
         pass when it misses the target (else None).
     """
-    found = math.sqrt(max(check["error_vs_reference"]["rms"] ** 2 - ref_noise**2, 0.0))
+    found = math.sqrt(max(check.error_vs_reference["rms"] ** 2 - ref_noise**2, 0.0))
     target, request = p.target_error, p.request
     if found <= target:
         return found, None

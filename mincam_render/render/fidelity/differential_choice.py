@@ -11,11 +11,13 @@ over the dataset) decides. ``X - C`` is traced at the plain depth.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.core.seeds import frame_seed, stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.render.capabilities import DifferentialBackground
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity.budget import split_noise_budget, spp_for
@@ -33,7 +35,12 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
-from mincam_render.render.fidelity.records import Decision, Source
+from mincam_render.render.fidelity.records import (
+    Decision,
+    DifferentialCost,
+    Interpolation,
+    Source,
+)
 from mincam_render.render.fidelity.signal import difference_pair
 
 if TYPE_CHECKING:
@@ -50,7 +57,7 @@ def decide_differential(
     """
     from mincam_render.render.differential import background_parts
 
-    record: dict[str, Any] = {"background_interval_s": p.request.background_interval_s}
+    record: JsonObject = {"background_interval_s": p.request.background_interval_s}
     settled = _settled_without_measuring(p, auto, record)
     if settled is not None:
         return settled
@@ -60,16 +67,17 @@ def decide_differential(
     record["converged_renders"] = len(components)
     record["difference_seeds"] = _difference_seeds(p).as_json()
     pilots = _pilots(p, render_cam, max_depth or None, record)
-    record.update(_settings_and_cost(p, pilots, len(parts), len(components), plain_spp))
+    cost = _settings_and_cost(p, pilots, len(parts), len(components), plain_spp)
+    record.update(cost.as_json())
     if p.request.differential:
         value, source, reason = True, Source.FLAG, "set by --differential"
     else:
-        value, source = record["cost_per_frame"] < record["plain_cost_per_frame"], Source.AUTO
-        reason = _reason(record, pilots, plain_spp)
+        value, source = cost.cost_per_frame < cost.plain_cost_per_frame, Source.AUTO
+        reason = _reason(p, cost, pilots, len(parts), len(components), plain_spp)
     return Decision(value=value, source=source, reason=reason, measured=record)
 
 
-def _settled_without_measuring(p: Probes, auto: bool, record: dict) -> Decision | None:
+def _settled_without_measuring(p: Probes, auto: bool, record: JsonObject) -> Decision | None:
     """The decision when a flag, full fidelity or the family settles it; else None."""
     family, request = p.family, p.request
     available = isinstance(family, DifferentialBackground)
@@ -119,9 +127,32 @@ def _difference_pair(
     return np.stack([x for x, _ in pairs]), np.stack([c for _, c in pairs])
 
 
-def _pilots(
-    p: Probes, render_cam: FreeformCamera, deep: int | None, record: dict
-) -> dict[str, Any]:
+@dataclass(frozen=True, kw_only=True)
+class _Pilots:
+    """What the differential estimator's pilots measured on the probes.
+
+    Args:
+        deep: path depth of ``X - C`` and the backgrounds (None: the scene's integrator).
+        rendered_detectors: detectors rendered (1 when the plain render is shared).
+        shared_difference: ``X - C`` is rendered once from the board centre.
+        frame_paths: detectors ``X - C`` is rendered for.
+        difference: relative noise of ``X - C`` at ``PILOT_SPP``.
+        background: relative noise of a background at ``PILOT_SPP``.
+        interpolation: the backgrounds' interpolation within a window.
+        parallax: the relative error of sharing ``X - C`` (0 when not shared).
+    """
+
+    deep: int | None
+    rendered_detectors: int
+    shared_difference: bool
+    frame_paths: int
+    difference: float
+    background: float
+    interpolation: Interpolation
+    parallax: float
+
+
+def _pilots(p: Probes, render_cam: FreeformCamera, deep: int | None, record: JsonObject) -> _Pilots:
     """Noises and biases of the differential estimator on the probes (see the module doc).
 
     Adds ``record["shared_difference"]`` where there is more than one detector.
@@ -131,7 +162,7 @@ def _pilots(
     # depth once Russian roulette and escapes through the window set in
     # (workspace, 12 spp: 12.7 ms per frame at depth 4, 16 at 6, 17.8 at 12).
     x_ref = _frames_in_window(p, render_cam, deep)
-    shared_difference = _shared_difference(p, render_cam, deep, x_ref, record)
+    shared_difference, parallax = _shared_difference(p, render_cam, deep, x_ref, record)
     diff_cam = render_cam.rendered_camera(shared_difference)
     x1, c1 = _difference_pair(p, deep, 1, DIFFERENCE_PILOT_SPP, diff_cam)
     x2, c2 = _difference_pair(p, deep, 2, DIFFERENCE_PILOT_SPP, diff_cam)
@@ -142,17 +173,16 @@ def _pilots(
         / math.sqrt(2.0)
         * math.sqrt(DIFFERENCE_PILOT_SPP / PILOT_SPP)
     )
-    parallax = record.get("shared_difference", {}).get("parallax_error_rms", 0.0)
-    return {
-        "deep": deep,
-        "rendered_detectors": render_cam.num_detectors,
-        "shared_difference": shared_difference,
-        "frame_paths": diff_cam.num_detectors,
-        "difference": e_diff,
-        "background": _background_noise(p, render_cam, deep),
-        "interpolation": _interpolation_error(p, render_cam, deep),
-        "parallax": parallax if shared_difference else 0.0,
-    }
+    return _Pilots(
+        deep=deep,
+        rendered_detectors=render_cam.num_detectors,
+        shared_difference=shared_difference,
+        frame_paths=diff_cam.num_detectors,
+        difference=e_diff,
+        background=_background_noise(p, render_cam, deep),
+        interpolation=_interpolation_error(p, render_cam, deep),
+        parallax=parallax if shared_difference else 0.0,
+    )
 
 
 def _frames_in_window(p: Probes, render_cam: FreeformCamera, deep: int | None) -> np.ndarray:
@@ -173,19 +203,20 @@ def _frames_in_window(p: Probes, render_cam: FreeformCamera, deep: int | None) -
 
 
 def _shared_difference(
-    p: Probes, render_cam: FreeformCamera, deep: int | None, x_ref: np.ndarray, record: dict
-) -> bool:
-    """One render of ``X - C`` from the board centre for all detectors?
+    p: Probes, render_cam: FreeformCamera, deep: int | None, x_ref: np.ndarray, record: JsonObject
+) -> tuple[bool, float]:
+    """One render of ``X - C`` from the board centre for all detectors? And its parallax error.
 
     Its parallax error ``p`` is measured against the noise of independent seeds:
-    ``e_shared^2 ~ noise^2 + p^2`` and ``e_noise^2 ~ noise^2`` (same spp).
+    ``e_shared^2 ~ noise^2 + p^2`` and ``e_noise^2 ~ noise^2`` (same spp); 0 where
+    it is not measured (a flag, or one detector). Records the choice in ``record``.
     """
     k = render_cam.num_detectors
     if k > 1 and p.request.shared_difference is not None:
         record["shared_difference"] = {"value": p.request.shared_difference, "source": "flag"}
-        return p.request.shared_difference
+        return p.request.shared_difference, 0.0
     if k <= 1:
-        return False
+        return False, 0.0
     xa, ca = _difference_pair(p, deep, 3, SHARED_DIFFERENCE_SPP, render_cam)
     xb, cb = _difference_pair(p, deep, 4, SHARED_DIFFERENCE_SPP, render_cam)
     centre_cam = render_cam.centre_camera()
@@ -203,7 +234,7 @@ def _shared_difference(
         "probe_spp": SHARED_DIFFERENCE_SPP,
         "bound": bound,
     }
-    return parallax_error < bound
+    return parallax_error < bound, parallax_error
 
 
 def _background_noise(p: Probes, camera: FreeformCamera, depth: int | None) -> float:
@@ -234,7 +265,7 @@ def _background_noise(p: Probes, camera: FreeformCamera, depth: int | None) -> f
     return error * math.sqrt(BACKGROUND_PILOT_SPP / PILOT_SPP)
 
 
-def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -> dict[str, Any]:
+def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -> Interpolation:
     """Error of the background halfway through the probes' windows, interpolated from its ends.
 
     ``B`` at the start, the middle and the end of each probe frame's window with
@@ -258,12 +289,12 @@ def _interpolation_error(p: Probes, camera: FreeformCamera, depth: int | None) -
             )
         ends.append(0.5 * (renders[0] + renders[2]))
         middles.append(renders[1])
-    return {"error": p.error(np.stack(ends), np.stack(middles)), "probe_spp": spp, "at": 0.5}
+    return Interpolation(error=p.error(np.stack(ends), np.stack(middles)), probe_spp=spp, at=0.5)
 
 
 def _settings_and_cost(
-    p: Probes, pilots: dict, backgrounds: int, components: int, plain_spp: int
-) -> dict[str, Any]:
+    p: Probes, pilots: _Pilots, backgrounds: int, components: int, plain_spp: int
+) -> DifferentialCost:
     """Frame and background spp from the error budget, and both estimators' cost per frame.
 
     The biases measured on the probes are fixed; the two noises share what is
@@ -275,16 +306,16 @@ def _settings_and_cost(
     roulette, escapes through the window, per-path camera and light sampling).
     """
     # detectors rendered: 1 when the plain render is shared from the board centre
-    request, k, frames = p.request, pilots["rendered_detectors"], p.family.num_frames
+    request, k, frames = p.request, pilots.rendered_detectors, p.family.num_frames
     # per-frame seeds render C again with every frame: twice the frames' paths
     per_frame = DifferenceSeeds(p.request.difference_seeds or DIFFERENCE_SEEDS)
     seed_factor = 2 if per_frame is DifferenceSeeds.FRAME else 1
     biases = {
-        "shared_difference_parallax": pilots["parallax"],
-        "daylight_interpolation": pilots["interpolation"]["error"]["rms"],
+        "shared_difference_parallax": pilots.parallax,
+        "daylight_interpolation": pilots.interpolation.error["rms"],
     }
-    e_diff, e_bg = pilots["difference"], pilots["background"]
-    frame_paths = seed_factor * pilots["frame_paths"]
+    e_diff, e_bg = pilots.difference, pilots.background
+    frame_paths = seed_factor * pilots.frame_paths
     background_paths = k * components / frames
     planned_error = PLAN_ERROR_SHARE * p.target_error
     budget = split_noise_budget(
@@ -312,39 +343,43 @@ def _settings_and_cost(
     )
     frame_cost = frame_spp * frame_paths
     # every window's own C at the frames' samples (rendered with either seeds)
-    background_cost = (
-        components * background_spp * k + backgrounds * frame_spp * pilots["frame_paths"]
-    )
-    deep = pilots["deep"]
-    return {
-        "frame_max_depth": 0 if deep is None else deep,
-        "frame_spp": frame_spp,
-        "background_spp": background_spp,
-        "difference_pilot_error_rms": e_diff,
-        "background_pilot_error_rms": e_bg,
-        "background_pilot_spp": BACKGROUND_PILOT_SPP,
-        "daylight_interpolation": pilots["interpolation"],
-        "error_budget": budget.as_json(),
-        "predicted_error_rms": math.hypot(
+    background_cost = components * background_spp * k + backgrounds * frame_spp * pilots.frame_paths
+    deep = pilots.deep
+    return DifferentialCost(
+        frame_max_depth=0 if deep is None else deep,
+        frame_spp=frame_spp,
+        background_spp=background_spp,
+        difference_pilot_error_rms=e_diff,
+        background_pilot_error_rms=e_bg,
+        background_pilot_spp=BACKGROUND_PILOT_SPP,
+        daylight_interpolation=pilots.interpolation,
+        error_budget=budget,
+        predicted_error_rms=math.hypot(
             e_diff * math.sqrt(PILOT_SPP / frame_spp),
             e_bg * math.sqrt(PILOT_SPP / background_spp),
             *biases.values(),
         ),
-        "cost_per_frame": frame_cost + background_cost / frames,
-        "plain_cost_per_frame": plain_spp * k,
-        "cost_unit": "paths per texel (samples x detectors rendered), backgrounds amortized",
-    }
+        cost_per_frame=frame_cost + background_cost / frames,
+        plain_cost_per_frame=plain_spp * k,
+    )
 
 
-def _reason(record: dict, pilots: dict, plain_spp: int) -> str:
-    shared = " from the board centre" if pilots["shared_difference"] else ""
-    interval = record["background_interval_s"]
+def _reason(
+    p: Probes,
+    cost: DifferentialCost,
+    pilots: _Pilots,
+    backgrounds: int,
+    components: int,
+    plain_spp: int,
+) -> str:
+    shared = " from the board centre" if pilots.shared_difference else ""
+    interval = p.request.background_interval_s
     return (
-        f"B + X - C: X at depth {record['frame_max_depth']} x {record['frame_spp']} spp"
-        f"{shared} (difference noise {pilots['difference']:.3g} at {PILOT_SPP} spp), "
-        f"{record['backgrounds']} background(s) from {record['converged_renders']} converged "
-        f"components at {record['background_spp']} spp, daylight interpolated within "
-        f"{interval:g} s windows (error {pilots['interpolation']['error']['rms']:.3g} rms "
-        f"halfway): cost {record['cost_per_frame']:.4g} vs plain {plain_spp} spp "
-        f"{record['plain_cost_per_frame']:.4g} (paths per texel)"
+        f"B + X - C: X at depth {cost.frame_max_depth} x {cost.frame_spp} spp"
+        f"{shared} (difference noise {pilots.difference:.3g} at {PILOT_SPP} spp), "
+        f"{backgrounds} background(s) from {components} converged "
+        f"components at {cost.background_spp} spp, daylight interpolated within "
+        f"{interval:g} s windows (error {pilots.interpolation.error['rms']:.3g} rms "
+        f"halfway): cost {cost.cost_per_frame:.4g} vs plain {plain_spp} spp "
+        f"{cost.plain_cost_per_frame:.4g} (paths per texel)"
     )

@@ -9,10 +9,11 @@ measured figures are the errors the choice was made from.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.render.capabilities import history_frames
 from mincam_render.render.fidelity.budget import spp_for
 from mincam_render.render.fidelity.constants import (
@@ -24,7 +25,7 @@ from mincam_render.render.fidelity.constants import (
     SHARED_ERROR_SHARE,
 )
 from mincam_render.render.fidelity.probes import Probes
-from mincam_render.render.fidelity.records import Decision, Source
+from mincam_render.render.fidelity.records import Decision, Parallax, SharingChange, Source
 from mincam_render.render.precision import (
     ErrorScale,
     StorageDtype,
@@ -39,9 +40,12 @@ if TYPE_CHECKING:
 def decide_shared_render(p: Probes, auto: bool) -> Decision:
     """One render at the board centre for all detectors, or one per detector."""
     request = p.request
-    measured = _parallax(p)
+    parallax = _parallax(p)
+    measured = parallax.as_json()
+    change = None
     if p.k > 1 and request.shared_render is None and auto:
-        measured.update(_sharing_change(p))
+        change = _sharing_change(p)
+        measured.update(change.as_json())
     if request.shared_render is not None:
         value, source = bool(request.shared_render), Source.FLAG
         reason = "set by --shared-render/--per-detector"
@@ -50,15 +54,17 @@ def decide_shared_render(p: Probes, auto: bool) -> Decision:
     elif p.k == 1:
         value, source, reason = False, Source.AUTO, "one detector: nothing to share"
     else:
+        assert change is not None  # measured above for auto with several detectors
         value, reason = shared_render_choice(
-            measured["parallax_texels"], request.parallax_fraction, measured
+            parallax.parallax_texels, request.parallax_fraction, change
         )
-        z_min, z_max = measured["depth_range_m"]
-        source, reason = Source.AUTO, f"{reason} (depths {z_min:.3g}-{z_max:.3g} m)"
+        depth = parallax.depth_range
+        reason = f"{reason} (depths {depth.min_m:.3g}-{depth.max_m:.3g} m)"
+        source = Source.AUTO
     return Decision(value=value, source=source, reason=reason, measured=measured)
 
 
-def _parallax(p: Probes) -> dict[str, Any]:
+def _parallax(p: Probes) -> Parallax:
     """The largest parallax on the mask plane (texels) from the nearest depth seen."""
     camera = p.camera
     rows, cols = camera.mask_resolution
@@ -69,39 +75,41 @@ def _parallax(p: Probes) -> dict[str, Any]:
     parallax = (
         0.0 if not math.isfinite(z_min) else baseline * camera.mask_distance_m / z_min / texel_m
     )
-    return {
-        "parallax_texels": parallax,
-        "depth_range_m": depth.as_json(),
-        "largest_detector_offset_m": baseline,
-        "bound_texels": p.request.parallax_fraction,
-    }
+    return Parallax(
+        parallax_texels=parallax,
+        depth_range=depth,
+        largest_detector_offset_m=baseline,
+        bound_texels=p.request.parallax_fraction,
+    )
 
 
-def _sharing_change(p: Probes) -> dict[str, Any]:
+def _sharing_change(p: Probes) -> SharingChange:
     """How much sharing changes measurements, against the noise of two seeds."""
     # common random numbers: the same samples with every detector moved to the
     # board centre, so the difference is the parallax alone, not noise
     per_det = p.render(p.camera, spp=PILOT_SPP)
     no_parallax = p.render(p.camera, spp=PILOT_SPP, parallax=False)
     other = p.render(p.camera, spp=PILOT_SPP, seed_offset=1)
-    return {
-        "error_shared_vs_per_detector": p.error(no_parallax, per_det),
-        "noise_floor_two_seeds": p.error(other, per_det),
-        "probe_spp": PILOT_SPP,
-        "error_bound": SHARED_ERROR_SHARE * p.target_error,
-    }
+    return SharingChange(
+        error_shared_vs_per_detector=p.error(no_parallax, per_det),
+        noise_floor_two_seeds=p.error(other, per_det),
+        probe_spp=PILOT_SPP,
+        error_bound=SHARED_ERROR_SHARE * p.target_error,
+    )
 
 
-def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tuple[bool, str]:
+def shared_render_choice(
+    parallax: float, fraction: float, measured: SharingChange
+) -> tuple[bool, str]:
     """Share one centre render? ``(choice, reason)`` from the measured change it makes.
 
     The change (common random numbers, so the parallax alone plus the noise of
     rays that land elsewhere) decides; only where it is within the noise of two
     independent renders does the geometric parallax estimate decide instead.
     """
-    err = measured["error_shared_vs_per_detector"]["rms"]
-    noise = measured["noise_floor_two_seeds"]["rms"]
-    bound = measured["error_bound"]
+    err = measured.error_shared_vs_per_detector["rms"]
+    noise = measured.noise_floor_two_seeds["rms"]
+    bound = measured.error_bound
     geometry = (
         f"parallax {parallax:.3g} texel ({'<' if parallax < fraction else '>='} {fraction:g})"
     )
@@ -111,7 +119,7 @@ def shared_render_choice(parallax: float, fraction: float, measured: dict) -> tu
     if parallax < fraction and err <= noise:
         return True, (
             f"{geometry}; {change} >= bound {bound:.3g} but within the noise of two seeds "
-            f"({noise:.3g} rms at {measured['probe_spp']} spp), so the geometry decides"
+            f"({noise:.3g} rms at {measured.probe_spp} spp), so the geometry decides"
         )
     return False, f"{change} >= bound {bound:.3g} (a share of the target error); {geometry}"
 
@@ -126,7 +134,7 @@ def decide_max_depth(p: Probes, auto: bool, render_cam: FreeformCamera, shared: 
 
     request = p.request
     scene_depth = scene_max_depth(p.scene)
-    measured: dict[str, Any] = {
+    measured: JsonObject = {
         "scene_integrator_max_depth": scene_depth,
         "bound": request.indirect_fraction,
     }
@@ -163,7 +171,7 @@ def decide_max_depth(p: Probes, auto: bool, render_cam: FreeformCamera, shared: 
 
 def _depth_changes(
     p: Probes, render_cam: FreeformCamera, shared: bool, scene_depth: int | None
-) -> tuple[int, dict]:
+) -> tuple[int, dict[int, dict[str, float]]]:
     """``(chosen depth, {depth: change vs a deep reference})`` with common random numbers.
 
     Same seeds: paths agree up to the truncation, so each difference is the light
@@ -172,7 +180,7 @@ def _depth_changes(
     """
     bound = p.request.indirect_fraction
     deep = p.render(render_cam, spp=PILOT_SPP, max_depth=DEEP_REFERENCE_DEPTH, shared=shared)
-    changes = {}
+    changes: dict[int, dict[str, float]] = {}
     max_depth = DEEP_REFERENCE_DEPTH
     for depth in CANDIDATE_DEPTHS:
         trial = p.render(render_cam, spp=PILOT_SPP, max_depth=depth, shared=shared)
@@ -197,7 +205,7 @@ def decide_spp(
     """
     request = p.request
     target = p.target_error
-    measured: dict[str, Any] = {"target_error": target, "error_scale": p.scale.value}
+    measured: JsonObject = {"target_error": target, "error_scale": p.scale.value}
     e_pilot = None
     if auto:
         a = p.render(render_cam, spp=PILOT_SPP, max_depth=max_depth, shared=shared)

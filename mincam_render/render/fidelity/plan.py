@@ -150,8 +150,8 @@ class FidelityPlan:
             check_int(name, getattr(self, name), low)
         object.__setattr__(self, "dtype", storage_dtype(self.dtype))
 
-    def settings(self) -> dict[str, Any]:
-        """The settings as the manifest's ``job.render`` and the plan cache hold them."""
+    def settings(self) -> JsonObject:
+        """The settings' JSON form, as the manifest's ``job.render`` and the plan cache hold it."""
         return {
             "spp": self.spp,
             "max_depth": self.max_depth,

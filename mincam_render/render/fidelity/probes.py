@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -17,7 +17,7 @@ from mincam_render.render.fidelity.constants import (
     SIGNAL_FRAMES,
     SIGNAL_SPP,
 )
-from mincam_render.render.fidelity.records import DepthRange
+from mincam_render.render.fidelity.records import DepthRange, ReferenceFigures, SignalRms
 from mincam_render.render.fidelity.signal import SignalSource, render_label_signal
 from mincam_render.render.precision import (
     ErrorScale,
@@ -243,22 +243,19 @@ class Probes:
             a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
         )
 
-    def figures(self, a: np.ndarray, b: np.ndarray) -> dict[str, Any]:
+    def figures(self, a: np.ndarray, b: np.ndarray) -> ReferenceFigures:
         """``a`` against ``b`` in every metric: relative to the total and to the label signal.
 
-        Returns:
-            ``{"total_relative": {rms, max}, "signal_relative": {rms, max},
-            "signal_relative_finest_box": {rms, max}, "total_scale"}``: random
-            printable masks and, for the box, single-texel pixels.
+        Random printable masks and, for the finest box, single-texel pixels.
         """
-        return {
-            "total_relative": self.error(a, b, self.total_scale),
-            "total_scale": self.total_scale.value,
-            "signal_relative": self.error(a, b, ErrorScale.SIGNAL),
-            "signal_relative_finest_box": self.error(
+        return ReferenceFigures(
+            total_relative=self.error(a, b, self.total_scale),
+            total_scale=self.total_scale.value,
+            signal_relative=self.error(a, b, ErrorScale.SIGNAL),
+            signal_relative_finest_box=self.error(
                 a, b, ErrorScale.SIGNAL, box_texels=FINEST_BOX_TEXELS
             ),
-        }
+        )
 
     def label_signal(self) -> LabelSignal:
         """The label signal of the planning episode (rendered once, then kept).
@@ -287,15 +284,15 @@ class Probes:
             )
         return self._signal
 
-    def signal_rms(self) -> dict[str, float]:
+    def signal_rms(self) -> SignalRms:
         """The label signal's RMS (W) for the random masks and the finest box pixels."""
         signal, shape = self.label_signal(), (self.k, *self.camera.mask_resolution)
-        return {
-            "random_masks_w": signal.rms(measurements_of(shape, self.lo_hi)),
-            "finest_box_w": signal.rms(
+        return SignalRms(
+            random_masks_w=signal.rms(measurements_of(shape, self.lo_hi)),
+            finest_box_w=signal.rms(
                 measurements_of(shape, self.lo_hi, box_texels=FINEST_BOX_TEXELS)
             ),
-        }
+        )
 
     def depth_range_m(self) -> DepthRange:
         """Nearest and farthest depth (m) seen from the board centre over the probe frames."""
