@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from pathlib import Path
@@ -11,6 +12,7 @@ import click
 import numpy as np
 
 from mincam_render.core import strict_json
+from mincam_render.core.strict_json import JsonObject
 
 from . import __name__ as _pkg
 from .errors import user_error
@@ -20,9 +22,32 @@ if TYPE_CHECKING:
     import mitsuba as mi
 
     from mincam_render.optics.camera import FreeformCamera
+    from mincam_render.render.user_scene import Pose
 
 MM = 1e-3
 log = logging.getLogger(_pkg)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _PoseOptions:
+    """The options placing the camera in the scene (lengths in m)."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float]
+    pose_from_sensor: bool
+    sensor_id: str | None
+    scene_scale: float
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class _TransportRun:
+    """One render: its backend, seconds, per-detector relative noise and warnings."""
+
+    backend: dict[str, str]
+    seconds: float
+    noise: np.ndarray
+    warnings: list[str]
 
 
 @click.command("transport")
@@ -124,39 +149,40 @@ def transport_cmd(
     from mincam_render.render import backend, user_scene
     from mincam_render.render.mitsuba_scene import SceneError
 
+    options = _PoseOptions(**pose)
     try:
-        mi_scene, camera = _scene_and_camera(ctx, scene, mask_res, grid, pitch_mm, pose)
+        mi_scene, camera = _scene_and_camera(ctx, scene, mask_res, grid, pitch_mm, options)
         t, run = _render(mi_scene, camera, spp, seed, max_depth)
     except (ValueError, SceneError, backend.BackendUnavailableError) as err:
         raise user_error(err) from None
-    noise = run.pop("noise")
+    noise = run.noise
     spp_target = user_scene.spp_for_noise(spp, noise)
     worst = float(np.nanmax(noise))
     if worst > user_scene.TARGET_RELATIVE_NOISE:
-        run["warnings"].append(
+        run.warnings.append(
             f"worst detector relative error {worst:.1%}: --spp {spp_target} reaches 1 %"
         )
-        log.warning("%s", run["warnings"][-1])
+        log.warning("%s", run.warnings[-1])
     config = {
         "scene": str(scene) if scene is not None else "builtin:demo",
         "scene_scale": ctx.params["scene_scale"],
-        "pose_from_sensor": pose["pose_from_sensor"],
+        "pose_from_sensor": options.pose_from_sensor,
         "spp": spp,
         "seed": seed,
         "max_depth": max_depth,
         "camera": camera.to_dict(),
-        "backend": run["backend"],
-        "render_seconds": run["seconds"],
+        "backend": run.backend,
+        "render_seconds": run.seconds,
         "relative_noise": [None if np.isnan(x) else float(x) for x in noise],
         "spp_for_1_percent": spp_target,
-        "warnings": run["warnings"],
+        "warnings": run.warnings,
         "units": {"transport": "W per unit transmittance", "lengths": "m"},
         "array_axes": "T[detector, row, col]; row 0 = up side, col 0 = left, seen from the camera",
     }
     _write(out, config, t, camera)
     click.echo(
         f"wrote {out / 'transport.exr'} ({t.shape[0]} detectors, {t.shape[1]}x{t.shape[2]}), "
-        f"transport.png, config.json; render {run['seconds']:.2f} s; total power at M=1: "
+        f"transport.png, config.json; render {run.seconds:.2f} s; total power at M=1: "
         f"{t.sum(axis=(1, 2)).mean():.3e} W per detector; worst detector relative error "
         f"{worst:.2%} (--spp {spp_target} for 1 %)"
     )
@@ -168,27 +194,29 @@ def _scene_and_camera(
     mask_res: int,
     grid: tuple[int, int],
     pitch_mm: float,
-    pose: dict[str, Any],
+    options: _PoseOptions,
 ) -> tuple[mi.Scene, FreeformCamera]:
     """The Mitsuba scene (rescaled) and the freeform camera the options describe."""
     from mincam_render.optics.camera import DetectorLayout, FreeformCamera
     from mincam_render.render import user_scene
     from mincam_render.render.mitsuba_scene import demo_scene, load_scene
 
-    pose = dict(pose)
     mi_scene = load_scene(str(scene) if scene is not None else demo_scene())
-    user_scene.rescale_scene(mi_scene, pose.pop("scene_scale"))
+    user_scene.rescale_scene(mi_scene, options.scene_scale)
+    pose = _transport_pose(ctx, mi_scene, options)
     camera = FreeformCamera(
         mask_resolution=(mask_res, mask_res),
         layout=DetectorLayout.grid(rows=grid[0], cols=grid[1], pitch_m=pitch_mm * MM),
-        **_transport_pose(ctx, mi_scene, **pose),
+        position=pose.position,
+        look_at=pose.look_at,
+        up=pose.up,
     )
     return mi_scene, camera
 
 
 def _render(
     mi_scene: mi.Scene, camera: FreeformCamera, spp: int, seed: int, max_depth: int | None
-) -> tuple[np.ndarray, dict[str, Any]]:
+) -> tuple[np.ndarray, _TransportRun]:
     """``T[detector, row, col]`` (W) and the run's backend, seconds, noise and warnings."""
     from mincam_render.render import backend, user_scene
     from mincam_render.render.transport import render_transport_with_noise
@@ -210,10 +238,10 @@ def _render(
     )
     seconds = time.perf_counter() - t0
     warnings += user_scene.check_transport(t, mi_scene)
-    return t, {"backend": info, "seconds": seconds, "noise": noise, "warnings": warnings}
+    return t, _TransportRun(backend=info, seconds=seconds, noise=noise, warnings=warnings)
 
 
-def _write(out: Path, config: dict[str, Any], t: np.ndarray, camera: FreeformCamera) -> None:
+def _write(out: Path, config: JsonObject, t: np.ndarray, camera: FreeformCamera) -> None:
     """transport.exr, transport.png and config.json into ``out`` (created)."""
     from mincam_render.analysis.plots import plot_transport_grid
     from mincam_render.data.exr import write_transport_exr
@@ -229,30 +257,20 @@ def _write(out: Path, config: dict[str, Any], t: np.ndarray, camera: FreeformCam
     (out / "config.json").write_text(strict_json.dumps(config))
 
 
-def _transport_pose(
-    ctx: click.Context,
-    mi_scene: mi.Scene,
-    *,
-    position: tuple[float, ...],
-    look_at: tuple[float, ...],
-    up: tuple[float, ...],
-    pose_from_sensor: bool,
-    sensor_id: str | None,
-) -> dict[str, Any]:
-    """Camera pose keywords from the options, or from the scene's sensor."""
-    from mincam_render.render.user_scene import sensor_pose
+def _transport_pose(ctx: click.Context, mi_scene: mi.Scene, options: _PoseOptions) -> Pose:
+    """The camera pose from the options, or from the scene's sensor."""
+    from mincam_render.render.user_scene import Pose, sensor_pose
 
     given = [
         name
         for name in ("position", "look_at", "up")
         if ctx.get_parameter_source(name) is not click.core.ParameterSource.DEFAULT
     ]
-    if not pose_from_sensor:
-        if sensor_id is not None:
+    if not options.pose_from_sensor:
+        if options.sensor_id is not None:
             raise click.UsageError("--sensor-id needs --pose-from-sensor")
-        return {"position": position, "look_at": look_at, "up": up}
+        return Pose(position=options.position, look_at=options.look_at, up=options.up)
     if given:
         flags = ", ".join("--" + name.replace("_", "-") for name in given)
         raise click.UsageError(f"--pose-from-sensor takes the pose from the scene: drop {flags}")
-    p = sensor_pose(mi_scene, sensor_id)
-    return {"position": p.position, "look_at": p.look_at, "up": p.up}
+    return sensor_pose(mi_scene, options.sensor_id)

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.data import dataset as ds
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.render.capabilities import history_frames
@@ -74,8 +75,8 @@ def source_revision() -> str | None:
     return head.stdout.strip() or None
 
 
-def _describe_family(request: RenderRequest) -> tuple[SceneFamily, dict[str, Any], bool]:
-    """``(family, description dict, rebuild flag)`` for a request."""
+def _describe_family(request: RenderRequest) -> tuple[SceneFamily, JsonObject, bool]:
+    """``(family, description, rebuild flag)``: the description is the family config's JSON."""
     from mincam_render.core.config import parse, to_dict
     from mincam_render.scenes.registry import load_family
 
@@ -149,7 +150,7 @@ def _job_section(
     from mincam_render.render.differential import background_family, background_parts
     from mincam_render.scenes.registry import family_reference
 
-    job: dict[str, Any] = {
+    job: JsonObject = {
         "request_sha256": hashlib.sha256(ds.json_bytes(identity)).hexdigest(),
         "family": {
             "name": family_reference(type(family)),

@@ -7,11 +7,12 @@ scene state ``i``, so a shard re-renders bit-identically in any process.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -32,7 +33,22 @@ if TYPE_CHECKING:
 #: one mid-way). Read by workers from the environment; unset in normal use.
 FRAME_DELAY_ENV = "MINCAM_RENDER_TEST_FRAME_DELAY_S"
 
-_WORKER: dict[str, Any] = {"parent": None, "cache": {}}
+
+@dataclasses.dataclass
+class _WorkerState:
+    """This process's part of a render: the parent to watch, the scene built once.
+
+    Attributes:
+        parent: the process that started this worker (None: none to watch).
+        cache: ``{job's request_sha256: (family, scene, camera, render camera)}``,
+            one job at a time.
+    """
+
+    parent: int | None = None
+    cache: dict[str, tuple] = dataclasses.field(default_factory=dict)
+
+
+_WORKER = _WorkerState()
 
 
 def _worker_init(threads: int, parent_pid: int | None, variant: str | None = None) -> None:
@@ -56,7 +72,7 @@ def _worker_init(threads: int, parent_pid: int | None, variant: str | None = Non
     else:
         use_variant(backend_of(variant))
     dr.set_thread_count(max(1, int(threads)))
-    _WORKER["parent"] = parent_pid
+    _WORKER.parent = parent_pid
 
 
 def render_shard(
@@ -112,12 +128,12 @@ def render_shard(
 def _cached_scene(job: dict) -> tuple:
     """``(family, scene, camera, render camera)`` of ``job``, built once per process."""
     key = job["request_sha256"]
-    cached = _WORKER["cache"].get(key)
+    cached = _WORKER.cache.get(key)
     if cached is None:
-        _WORKER["cache"].clear()  # one job per process: free the previous scene
+        _WORKER.cache.clear()  # one job per process: free the previous scene
         family = _load_family(job)
         cached = (family, family.build_scene(), *_render_camera(job))
-        _WORKER["cache"][key] = cached
+        _WORKER.cache[key] = cached
     return cached
 
 
@@ -139,7 +155,7 @@ def _render_frames(
     frames, images = [], []
     labels: dict[str, list] = {s.name: [] for s in family.labels}
     for i in range(start, stop):
-        if _WORKER["parent"] is not None and os.getppid() != _WORKER["parent"]:
+        if _WORKER.parent is not None and os.getppid() != _WORKER.parent:
             os._exit(1)  # the render was killed: do not linger as an orphan
         background = _frame_background(job, family, i, backgrounds)
         t, lab, seed = _render_frame(job, family, scene, render_cam, i, background)
