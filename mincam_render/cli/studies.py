@@ -95,6 +95,12 @@ episode_options = apply_options([
                  "end sooner)."),
     click.option("--workers", type=click.IntRange(0), default=2, show_default=True,
                  help="Render worker processes (0 = in this process)."),
+    click.option("--episodes-dir", type=click.Path(file_okay=False, path_type=Path),
+                 default=None,
+                 help="Where the episodes are rendered and read (default: OUT/episodes). "
+                 "Studies sharing one directory render each episode once: an episode "
+                 "there is reused when its render request is the same, and refused "
+                 "otherwise."),
     *executor_options,
     click.option("--spp", type=click.IntRange(1, 1 << 20), default=None,
                  help="Render at a fixed quick fidelity (SPP samples per texel, every "
@@ -153,6 +159,7 @@ def _compare(
     ray_address: str | None,
     overrides: dict[str, Any],
     detectors: int | None,
+    episodes_dir: Path | None,
     **episode: Any,
 ) -> ComparisonResult:
     """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
@@ -189,6 +196,7 @@ def _compare(
             train_workers=train_workers,
             ray_address=ray_address,
             masks_dir=out / "masks",
+            episodes_dir=episodes_dir,
         )
     except (
         ConfigError, SceneError, RenderError, TrainingError, RayError, ValueError, OSError

@@ -190,6 +190,42 @@ def test_cli_pipeline_tests_on_independent_episodes_with_intervals_and_resumes(
     assert "episodes" not in left and "earlier comparison" in left["note"]
 
 
+def test_cli_study_reads_shared_episodes_without_rendering_them_again(variant, tmp_path):
+    from mincam_render.data.dataset import sha256_file
+
+    shared = tmp_path / "episodes"
+    args = [
+        "study", "--family", "patches", "--train-frames", "40", "--val-frames", "30",
+        "--val-episodes", "1", "--test-frames", "30", "--test-episodes", "1", "--seeds", "1",
+        "--steps", "20", "--workers", "0", "--spp", "1", "--pixels", "2",
+        "--baseline-grids", "2x2", "--reference-pixels", "2", "--episodes-dir", str(shared),
+    ]  # fmt: skip
+    first = CliRunner().invoke(main, [*args, "--out", str(tmp_path / "a")])
+    assert first.exit_code == 0, first.output
+    assert sorted(p.name for p in shared.iterdir() if p.is_dir()) == [
+        "test-0", "train-0", "train-1", "val-0"
+    ]  # fmt: skip
+    assert not (tmp_path / "a" / "episodes").exists()
+    logs = {p: p.read_text() for p in shared.glob("*/render_log.jsonl")}
+    assert len(logs) == 4
+    second = CliRunner().invoke(main, [*args, "--out", str(tmp_path / "b")])
+    assert second.exit_code == 0, second.output
+    for path, before in logs.items():  # the second study rendered no shard of them
+        added = path.read_text().removeprefix(before).splitlines()
+        ends = [json.loads(e) for e in added if '"end"' in e]
+        assert ends and all(e["rendered"] == [] for e in ends), added
+    a, b = (json.loads((tmp_path / o / "metrics.json").read_text()) for o in "ab")
+    assert a["episodes"] == b["episodes"]
+    assert a["episodes"]["train-0"]["manifest_sha256"] == sha256_file(
+        shared / "train-0" / "manifest.json"
+    )
+    assert b["designs"]["mincam-2px"]["error"] == a["designs"]["mincam-2px"]["error"]
+    # the same directory with episodes of another request is refused, not mixed
+    other = CliRunner().invoke(main, [*args[:-2], "--episodes-dir", str(shared), "--seed", "7",
+                                      "--out", str(tmp_path / "c")])  # fmt: skip
+    assert other.exit_code != 0 and "Traceback" not in other.output
+
+
 def test_cli_train_refuses_more_pixels_than_rendered_detectors(variant, tmp_path):
     args = ["train", "--family", "patches", "--frames", "40", "--spp", "1", "--steps", "5",
             "--pixels", "8", "--out", str(tmp_path / "t")]  # fmt: skip
