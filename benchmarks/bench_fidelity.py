@@ -37,7 +37,7 @@ def main() -> None:
         base_spp=args.base_spp,
         repeats=args.repeats,
     )
-    result = run(cfg)
+    result = run(cfg, args.out)
     for res in result.families:
         print(f"== {res.family}\n{pareto_table(res)}")
         print("\n".join(res.statements))

@@ -78,7 +78,7 @@ def bench_fidelity_cmd(families: tuple[str, ...], out: Path, no_auto: bool, **fi
 
     try:
         cfg = FidelityBenchConfig(families=families, include_auto=not no_auto, **fields)
-        result = run(cfg)
+        result = run(cfg, out)
         paths = write_report(result, out)
     except (ValueError, ConfigError, OSError) as err:
         raise user_error(err) from None

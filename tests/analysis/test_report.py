@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -66,7 +67,7 @@ def test_headless_screenshot_is_not_blank(tmp_path):
     assert img.std() > 10 and len(np.unique(img)) > 20
 
 
-def test_fidelity_rows_tiny(variant, tmp_path):
+def test_fidelity_rows_tiny(variant, tmp_path, monkeypatch):
     from mincam_render.studies.fidelity import (
         KNOBS,
         FidelityBenchConfig,
@@ -89,7 +90,7 @@ def test_fidelity_rows_tiny(variant, tmp_path):
         include_auto=True,
         signal_seconds=1.0,
     )
-    result = run(cfg)
+    result = run(cfg, tmp_path)
     (res,) = result.families
     assert {r.knob for r in res.rows} == set(KNOBS)
     for r in res.rows:
@@ -116,6 +117,16 @@ def test_fidelity_rows_tiny(variant, tmp_path):
     written = json.loads(paths["json"].read_text())
     assert FidelityBenchResult.from_json(written).as_json() == written
     assert FidelityBenchResult.from_json(written).families[0].rows == res.rows
+    # the family was kept as it was measured: run again, it is read back, not measured
+    import mincam_render.studies.fidelity.study as bench
+
+    def measured(*args, **kwargs):
+        raise AssertionError("measured again")
+
+    monkeypatch.setattr(bench, "measure_family", measured)
+    assert run(cfg, tmp_path) == result
+    with pytest.raises(AssertionError, match="measured again"):  # other sizes: measured
+        run(dataclasses.replace(cfg, base_spp=1), tmp_path)
 
 
 @pytest.fixture(scope="module")

@@ -53,10 +53,13 @@ decode time to the base render.
 from __future__ import annotations
 
 import dataclasses
+import json
 import logging
+import os
 import platform
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -140,20 +143,43 @@ def _median_time(fn: Callable[..., np.ndarray], repeats: int) -> tuple[np.ndarra
     return result, float(np.median(times)), float(np.max(times) - np.min(times))
 
 
-def run(config: FidelityBenchConfig) -> FidelityBenchResult:
+def run(config: FidelityBenchConfig, out: str | os.PathLike) -> FidelityBenchResult:
     """Measure error against run time of every fidelity knob, for every family of ``config``.
 
-    Writes nothing (:func:`~.report.write_report` does); the families are
-    measured one after the other, each in a few minutes on 2 CPU cores at the
-    default sizes.
+    The families are measured one after the other, each in a few minutes on 2
+    CPU cores at the default sizes; each family's result is kept in
+    ``out/families/<family>.json`` as soon as it is measured, so a killed
+    benchmark run again with the same sizes measures only the families it
+    had not finished (a kept family of other sizes is measured again). The
+    report is :func:`~.report.write_report`'s.
 
     Raises:
         ConfigError: an unknown family.
     """
+    kept_dir = Path(out) / "families"
     return FidelityBenchResult(
         config=config,
-        families=tuple(measure_family(name, config) for name in config.families),
+        families=tuple(_kept_or_measured(name, config, kept_dir) for name in config.families),
     )
+
+
+def _kept_or_measured(
+    family_name: str, config: FidelityBenchConfig, kept_dir: Path
+) -> FamilyFidelity:
+    """The family's result kept in ``kept_dir`` for these sizes, or measured and kept there."""
+    from mincam_render.data.dataset import atomic_write_bytes, json_bytes
+
+    path = kept_dir / f"{Path(family_name).stem}.json"
+    if path.is_file():
+        record = json.loads(path.read_text())
+        if record.get("family") == family_name and record.get("config") == config.sizes_json():
+            log.info("fidelity bench: %s read back from %s", family_name, path)
+            return FamilyFidelity.from_json(record, config)
+        log.info("fidelity bench: %s kept at other sizes in %s; measuring again", family_name, path)
+    family = measure_family(family_name, config)
+    kept_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, json_bytes(family.as_json()))
+    return family
 
 
 def measure_family(family_name: str, config: FidelityBenchConfig) -> FamilyFidelity:
