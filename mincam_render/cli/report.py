@@ -347,23 +347,16 @@ def report_privacy_cmd(
       mincam-render report privacy --out runs/privacy
       mincam-render report privacy --train-frames 60 --attack-steps 200 --out runs/privacy-tiny
     """
-    import numpy as np
-
     from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
     from mincam_render.data.run_dispatch import TrainingError
-    from mincam_render.studies.privacy import (
-        PrivacyConfig,
-        analyze_privacy,
-        headline,
-        write_privacy_report,
-    )
+    from mincam_render.studies.privacy import PrivacyConfig, headline, run, write_report
 
     try:
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
         cfg = PrivacyConfig.sized(train_frames=train_frames, task_seeds=task_seeds,
                                   detectors=detectors, texels=mask_res, attack=attack)  # fmt: skip
-        privacy = analyze_privacy(
+        privacy = run(
             cfg,
             out,
             workers=workers,

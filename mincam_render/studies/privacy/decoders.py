@@ -23,7 +23,6 @@ difference, the state of the lowest validation loss kept):
 
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -33,19 +32,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from mincam_render.studies.privacy.attacks import Fitted, Standardise, fit_adam, mlp, seeded
-from mincam_render.studies.privacy.config import AttackConfig
+from mincam_render.studies.privacy.config import DECODERS, AttackConfig, DecoderKind
 
-
-class DecoderKind(enum.StrEnum):
-    """A decoder of the people (module docstring); the values are ``privacy.json``'s keys."""
-
-    MLP = "mlp"
-    CONV = "conv"
-    RIDGE = "ridge"
-
-
-#: The decoders an attacker trains, in ``privacy.json``'s order.
-DECODERS = tuple(DecoderKind)
 #: The coarsest grid of the convolutional decoder: it halves the view while the
 #: side stays even and the half at least this many pixels.
 CONV_MIN_GRID = 8
