@@ -93,10 +93,10 @@ def table(privacy: PrivacyResult) -> str:
 
 def rederive_verdicts(path: Path) -> None:
     """Derive the corner verdicts again from a kept ``privacy.json``; rewrite it and its table."""
-    from mincam_render.studies.privacy.curve import rederive_verdicts
+    from mincam_render.studies.privacy.curve import rederive_verdicts as derive
 
     record = json.loads(path.read_text())
-    privacy = rederive_verdicts(PrivacyResult.from_json(record))
+    privacy = derive(PrivacyResult.from_json(record))
     record["corner"] = privacy.as_json()["corner"]  # the benchmark's own keys kept
     path.write_text(strict_json.dumps(record, indent=2) + "\n")
     path.with_suffix(".md").write_text(table(privacy))

@@ -30,7 +30,7 @@ import logging
 import math
 import os
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 
@@ -221,7 +221,7 @@ def label_spec_to_dict(spec: LabelSpec) -> LabelSpecRecord:
     return out
 
 
-def label_spec_from_dict(d: dict) -> LabelSpec:
+def label_spec_from_dict(d: Mapping[str, Any]) -> LabelSpec:
     """Inverse of :func:`label_spec_to_dict`."""
     return LabelSpec(
         name=d["name"],

@@ -46,8 +46,9 @@ from mincam_render.studies.privacy.study import (
 )
 
 REPO = Path(__file__).resolve().parents[2]
-#: Keys the benchmark adds around the audit's result in benchmarks/results/privacy*.json.
-BENCHMARK_KEYS = ("benchmark", "machine", "wall_time_s", "report")
+#: Keys kept beside the audit's result in benchmarks/results/privacy*.json (the
+#: benchmark's, and the command that made privacy_16det.json).
+BENCHMARK_KEYS = ("benchmark", "machine", "wall_time_s", "report", "command")
 
 
 def test_identical_images_have_infinite_psnr_and_ssim_one(rng):

@@ -23,6 +23,7 @@ difference, the state of the lowest validation loss kept):
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -41,6 +42,11 @@ CONV_MIN_GRID = 8
 
 class Decoder(Protocol):
     """What every trained decoder offers: the difference images of read-outs."""
+
+    @property
+    def history(self) -> Sequence[Mapping[str, float]] | None:
+        """Its validation checks ``{"step", "val_loss"}`` (None: solved in closed form)."""
+        ...
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """Differences ``[frame, row, col]`` (display units) of read-outs ``[frame, pixel]``."""

@@ -112,7 +112,7 @@ class AttackFigures:
         value = getattr(self, name, None) if name in FIGURES else None
         if value is None:
             raise KeyError(f"{name}: not an attack figure of this record")
-        return value  # type: ignore[no-any-return]
+        return value
 
     def as_json(self) -> JsonObject:
         """``{figure: {"mean", "ci95"}}`` in :data:`FIGURES` order."""
@@ -437,7 +437,7 @@ class PrivacyResult:
     error_name: str
     config: JsonObject
     roster: int
-    episodes: Mapping[str, JsonObject]
+    episodes: Mapping[str, Mapping[str, Any]]
     designs: Mapping[str, DesignAudit]
     trivial: TrivialAudit
     prior: PriorAudit

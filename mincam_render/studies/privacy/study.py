@@ -1,4 +1,4 @@
-"""The privacy audit: task error against attack success, per design (:func:`analyze_privacy`).
+"""The privacy audit: task error against attack success, per design (:func:`run`).
 
 1. Render and train as the comparison does (:func:`run_comparison`): workspace
    episodes with a roster of people, each design trained for the task (people
@@ -124,8 +124,10 @@ def load_episodes(
 
 def score_reconstruction(episode: Episode, recon: np.ndarray) -> EpisodeScores:
     """:data:`IMAGE_FIGURES` of reconstructions ``[frame, row, col]`` of ``episode``'s views."""
-    quality = foreground_quality(episode.views, recon, episode.mask)
-    return EpisodeScores(**{k: quality[k] for k in IMAGE_FIGURES})
+    q = foreground_quality(episode.views, recon, episode.mask)
+    return EpisodeScores(
+        fg_psnr_db=q["fg_psnr_db"], fg_ssim=q["fg_ssim"], psnr_db=q["psnr_db"], ssim=q["ssim"]
+    )
 
 
 def _errors(
@@ -247,7 +249,10 @@ def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, EpisodeScores]:
         quality = foreground_quality(ep.views, ep.background, ep.mask)
         scores = prior_scores(present, len(ep.present))
         out[name] = EpisodeScores(
-            **{k: quality[k] for k in IMAGE_FIGURES},
+            fg_psnr_db=quality["fg_psnr_db"],
+            fg_ssim=quality["fg_ssim"],
+            psnr_db=quality["psnr_db"],
+            ssim=quality["ssim"],
             fg_fraction=quality["fg_fraction"],
             fg_frames=int(quality["fg_frames"]),
             reid_top1=reid_top1(scores, ep.present),
@@ -294,7 +299,8 @@ def attack_design(
             paired people PSNR gain over it (``fg_psnr_gain_db``).
         prior: the prior attacker's, likewise (``fg_psnr_over_prior_db``).
     """
-    results, examples = [], {}
+    results: list[AttackerSeed] = []
+    examples: dict[str, np.ndarray] = {}
     for i in range(cfg.attack.seeds):
         seed = stream_seed(cfg.comparison.seed, f"attack/{name}", i)
         result, ex = _attack_once(runs[i % len(runs)], data, episodes, cfg, seed)

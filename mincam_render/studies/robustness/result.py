@@ -148,7 +148,8 @@ class Curve:
 
 def config_record(config: RobustnessConfig) -> JsonObject:
     """``config`` as a design's record holds it: the perturbation in record units."""
-    return {**asdict(config), "perturbation": config.perturbation.to_record()}
+    record = asdict(config) | {"perturbation": config.perturbation.to_record()}
+    return record | {"levels": list(config.levels)}  # JSON's list, in place
 
 
 def config_from_record(record: Mapping[str, Any]) -> RobustnessConfig:
