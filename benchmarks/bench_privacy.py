@@ -4,7 +4,7 @@ Usage:
     PYTHONPATH=. python benchmarks/bench_privacy.py [--work runs/privacy]
         [--out benchmarks/results/privacy.json] [--workers 2]
 
-1. **Episodes and designs.** :func:`analyze_privacy` at its defaults: the
+1. **Episodes and designs.** the audit (:func:`run`) at its defaults: the
    workspace at 1 fps with a roster of 6 people (3 training episodes of 300
    frames, 1 validation episode of 200, 3 test episodes of 200), rendered at a
    fixed cheap fidelity (4 spp, depth 3); mincam 1, 2, 4, 8 px, 8 px with the
@@ -23,7 +23,7 @@ Usage:
 
 Everything resumes from ``--work`` (episodes, views, backgrounds, task runs);
 attacks run again. ``--verdicts-only`` runs nothing: it derives the verdicts
-(:func:`corner_verdicts`) again from ``--out``'s kept figures and rewrites it
+(:func:`rederive_verdicts`) again from ``--out``'s kept figures and rewrites it
 and its table.
 """
 
@@ -39,6 +39,7 @@ import time
 from pathlib import Path
 
 from mincam_render.core import strict_json
+from mincam_render.studies.privacy.result import PrivacyResult
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -59,7 +60,7 @@ def machine() -> dict:
     }
 
 
-def table(privacy: dict) -> str:
+def table(privacy: PrivacyResult) -> str:
     """Markdown: every design's task error and attack success, the trivial row, the verdicts."""
     from mincam_render.studies.privacy.report import (
         DESIGN_COLUMNS,
@@ -77,11 +78,11 @@ def table(privacy: dict) -> str:
             *("| " + " | ".join(map(str, row)) + " |" for row in rows),
         ]
 
-    header = ["design", "pixels", f"task {privacy['error_name']}", *DESIGN_COLUMNS]
+    header = ["design", "pixels", f"task {privacy.error_name}", *DESIGN_COLUMNS]
     lines = ["# Privacy audit: workspace, roster of 6", "", f"**{headline(privacy)}**", ""]
     lines += markdown(header, design_rows(privacy))
     lines += ["", "Verdicts (only where 95 % intervals separate):", ""]
-    lines += [f"- {c['verdict']}" for c in privacy["corner"].values()]
+    lines += [f"- {c.verdict}" for c in privacy.corner.values()]
     lines += ["", "Attack figures design − task-matched baseline, paired on the test episodes "
               "(beside the verdict, not as it):", ""]  # fmt: skip
     lines += markdown(PAIRED_HEADER, paired_rows(privacy))
@@ -92,13 +93,14 @@ def table(privacy: dict) -> str:
 
 def rederive_verdicts(path: Path) -> None:
     """Derive the corner verdicts again from a kept ``privacy.json``; rewrite it and its table."""
-    from mincam_render.studies.privacy import corner_verdicts
+    from mincam_render.studies.privacy.curve import rederive_verdicts as derive
 
     record = json.loads(path.read_text())
-    record["corner"] = corner_verdicts(record)
+    privacy = derive(PrivacyResult.from_json(record))
+    record["corner"] = privacy.as_json()["corner"]  # the benchmark's own keys kept
     path.write_text(strict_json.dumps(record, indent=2) + "\n")
-    path.with_suffix(".md").write_text(table(record))
-    print(table(record))
+    path.with_suffix(".md").write_text(table(privacy))
+    print(table(privacy))
 
 
 def main() -> None:
@@ -113,18 +115,15 @@ def main() -> None:
         rederive_verdicts(args.out)
         return
 
-    import numpy as np
-
-    from mincam_render.studies.privacy import PrivacyConfig, analyze_privacy, write_privacy_report
+    from mincam_render.studies.privacy import PrivacyConfig, run, write_report
 
     t0 = time.perf_counter()
-    privacy = analyze_privacy(PrivacyConfig(), args.work, workers=args.workers, progress=True)
+    privacy = run(PrivacyConfig(), args.work, workers=args.workers, progress=True)
     seconds = time.perf_counter() - t0
-    with np.load(args.work / "examples.npz") as examples:
-        paths = write_privacy_report(privacy, dict(examples), args.work)
+    paths = write_report(privacy, args.work)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     record = {"benchmark": "bench_privacy", "machine": machine(), "wall_time_s": seconds,
-              "report": paths["html"], **privacy}  # fmt: skip
+              "report": paths["html"], **privacy.as_json()}  # fmt: skip
     args.out.write_text(strict_json.dumps(record, indent=2) + "\n")
     args.out.with_suffix(".md").write_text(table(privacy))
     shutil.copyfile(paths["png"], args.out.with_suffix(".png"))

@@ -120,7 +120,7 @@ def task_entry(
         "train_config": dataclasses.asdict(cfg.train),
         "designs": {k: summary(d) for k, d in designs.items()},
         "runs": {
-            k: [{"run": r["name"], "nominal_error": r["nominal_error"]} for r in records[k]]
+            k: [{"run": r.name, "nominal_error": r.nominal_error} for r in records[k]]
             for k in KINDS
         },
         "trivial_error": trivial,
@@ -191,9 +191,9 @@ def main() -> None:
     designs, text = res.designs, res.verdict
     print(text)
     for d in designs.values():
-        print(f"{d['name']}: nominal error {d['nominal_error']:.4f}")
-        for c in d["curves"].values():
-            print(f"  {c['spec']}")
+        print(f"{d.name}: nominal error {d.nominal_error:.4f}")
+        for c in d.curves.values():
+            print(f"  {c.spec}")
     paths = write_report(list(designs.values()), args.work / "report", notes=[text])
     entry = task_entry(cfg, args, designs, res.records, text, res.trivial)
     if args.keep_masks is not None:

@@ -5,13 +5,16 @@ from __future__ import annotations
 import logging
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.render.capabilities import Preview
 from mincam_render.scenes.base import SceneFamily
+
+if TYPE_CHECKING:
+    import mitsuba as mi
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +38,7 @@ def _format_labels(family: SceneFamily, labels: dict[str, np.ndarray]) -> str:
     return "\n".join(parts)
 
 
-def _view_sensors(family: SceneFamily, width: int) -> dict[str, Any]:
+def _view_sensors(family: SceneFamily, width: int) -> dict[str, mi.Sensor]:
     """The perspective sensors of a preview, ``{title: Mitsuba sensor}``.
 
     The camera's view, and a bird's-eye view when the family has one

@@ -14,6 +14,8 @@ from typing import Any
 
 import click
 
+from mincam_render.core.config import SceneOverrides
+
 
 class FiniteFloat(click.FloatRange):
     """A float range that also refuses NaN and infinities (click's FloatRange passes NaN)."""
@@ -101,11 +103,11 @@ def grid_list(ctx: click.Context, param: click.Parameter, value: str) -> list[tu
 
 def scene_settings(
     ctx: click.Context, param: click.Parameter, values: tuple[str, ...]
-) -> dict[str, Any]:
+) -> SceneOverrides:
     """Callback: repeated ``KEY=VALUE`` (TOML values, dotted keys) -> a nested override dict."""
     import tomllib
 
-    out: dict = {}
+    out: SceneOverrides = {}
     for item in values:
         key, sep, raw = item.partition("=")
         if not sep or not key.strip():
@@ -122,7 +124,7 @@ def scene_settings(
     return out
 
 
-def with_detectors(overrides: dict[str, Any], detectors: int | None) -> dict[str, Any]:
+def with_detectors(overrides: SceneOverrides, detectors: int | None) -> SceneOverrides:
     """``overrides`` with ``camera.detectors`` set (the ``--detectors`` shorthand); None: as is.
 
     Raises:

@@ -13,6 +13,7 @@ from typing import Any
 
 import click
 
+from mincam_render.core.config import SceneOverrides
 from mincam_render.data.render_job import RenderRequest
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity import Fidelity
@@ -227,7 +228,7 @@ def render_cmd(
     )
 
 
-def _request(*, detectors: int | None, overrides: dict[str, Any], **fields: Any) -> RenderRequest:
+def _request(*, detectors: int | None, overrides: SceneOverrides, **fields: Any) -> RenderRequest:
     """The request the options describe; ``fields`` are named like RenderRequest's fields."""
     return RenderRequest(overrides=with_detectors(overrides, detectors) or None, **fields)
 

@@ -250,11 +250,11 @@ def report_robustness_cmd(
     except (ValueError, KeyError, OSError) as err:
         raise user_error(err) from None
     for d in designs:
-        mix = d["curves"]["mix"]["tolerance"]
+        mix = d.curves["mix"].tolerance
         click.echo(
-            f"{d['name']} ({'robust' if d['robust'] else 'nominal'}): nominal error "
-            f"{d['nominal_error']:.4g}; all perturbations at once within the limit up to "
-            f"{'>= ' if not mix['bounded'] else ''}{mix['factor']:.2g}x the default ranges"
+            f"{d.name} ({'robust' if d.robust else 'nominal'}): nominal error "
+            f"{d.nominal_error:.4g}; all perturbations at once within the limit up to "
+            f"{'>= ' if not mix.bounded else ''}{mix.factor:.2g}x the default ranges"
         )
     click.echo(f"wrote {paths['html']}, {paths['png'].name}, {paths['json'].name}")
 
@@ -347,23 +347,16 @@ def report_privacy_cmd(
       mincam-render report privacy --out runs/privacy
       mincam-render report privacy --train-frames 60 --attack-steps 200 --out runs/privacy-tiny
     """
-    import numpy as np
-
     from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
     from mincam_render.data.run_dispatch import TrainingError
-    from mincam_render.studies.privacy import (
-        PrivacyConfig,
-        analyze_privacy,
-        headline,
-        write_privacy_report,
-    )
+    from mincam_render.studies.privacy import PrivacyConfig, headline, run, write_report
 
     try:
         attack = AttackConfig(seeds=seeds, max_steps=max_steps)
         cfg = PrivacyConfig.sized(train_frames=train_frames, task_seeds=task_seeds,
                                   detectors=detectors, texels=mask_res, attack=attack)  # fmt: skip
-        privacy = analyze_privacy(
+        privacy = run(
             cfg,
             out,
             workers=workers,
@@ -371,8 +364,7 @@ def report_privacy_cmd(
             ray_address=ray_address,
             progress=True,
         )
-        with np.load(out / "examples.npz") as examples:
-            paths = write_privacy_report(privacy, dict(examples), out)
+        paths = write_report(privacy, out)
     except (ValueError, KeyError, OSError, RenderError, TrainingError, RayError) as err:
         raise user_error(err) from None
     click.echo(headline(privacy))

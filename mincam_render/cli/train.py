@@ -179,8 +179,8 @@ robust_options = apply_options(
 )
 
 
-def _recipe_with_perturbation(recipe: dict[str, Any], robust: bool) -> TrainConfig:
-    """The TrainConfig of the options; with ``robust``, its perturbation model's."""
+def _recipe_with_perturbation(robust: bool, **recipe: Any) -> TrainConfig:
+    """The TrainConfig of the options (``recipe``: the command's); with ``robust``, its model's."""
     halves = {name: recipe.pop(name) for name in PerturbationModel().to_record()}
     return TrainConfig(
         **recipe, perturbation=PerturbationModel.from_record(halves) if robust else None
@@ -271,7 +271,7 @@ def train_cmd(
     try:
         if robust and baseline is not None:
             raise InputError("--robust perturbs masks and diodes: not with --baseline")
-        config = _recipe_with_perturbation(recipe, robust)
+        config = _recipe_with_perturbation(robust, **recipe)
         train, val, test = training_splits(dataset, family, frames, spp, config.seed)
         metrics = train_run(
             train,

@@ -33,6 +33,13 @@ from mincam_render.core.checks import check_number
 
 T = TypeVar("T")
 
+#: A TOML table as :mod:`tomllib` reads it (a scene description or a part of
+#: one): free-form by design, its schema is the dataclass :func:`parse` reads it into.
+TomlTable = dict[str, Any]
+#: Values replacing a scene description's (``--set KEY=VALUE``, a scene file's
+#: overrides): a partial :data:`TomlTable`, nested by the dotted keys.
+SceneOverrides = TomlTable
+
 
 class ConfigError(ValueError):
     """A scene description is malformed; the message names file, field and reason."""
@@ -259,7 +266,7 @@ def _is_instance(value: Any) -> bool:
     return dataclasses.is_dataclass(value) and not isinstance(value, type)
 
 
-def _as_table(obj: Any) -> dict[str, Any]:
+def _as_table(obj: Any) -> TomlTable:
     """A dataclass instance as the table :func:`parse` reads back into an equal instance."""
     return {
         f.name: _as_table(v) if _is_instance(v := getattr(obj, f.name)) else v

@@ -30,9 +30,9 @@ import logging
 import math
 import os
 import uuid
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -187,13 +187,26 @@ def npy_bytes(array: np.ndarray) -> bytes:
 # ---- descriptions <-> JSON -------------------------------------------------------------
 
 
-def label_spec_to_dict(spec: LabelSpec) -> dict:
+class LabelSpecRecord(TypedDict):
+    """A label's description as manifests and run records hold it (:func:`label_spec_to_dict`)."""
+
+    name: str
+    kind: str
+    size: int
+    unit: str
+    element_names: list[str]
+    median_filter_s: float
+    zero_below_true: NotRequired[float]
+    headline: NotRequired[str]
+
+
+def label_spec_to_dict(spec: LabelSpec) -> LabelSpecRecord:
     """JSON-ready description of a label.
 
     The evaluation rules ``zero_below_true`` and ``headline`` are written only
     when set, so manifests of labels without them are unchanged.
     """
-    out: dict[str, Any] = {
+    out: LabelSpecRecord = {
         "name": spec.name,
         "kind": spec.kind.value,
         "size": int(spec.size),
@@ -208,7 +221,7 @@ def label_spec_to_dict(spec: LabelSpec) -> dict:
     return out
 
 
-def label_spec_from_dict(d: dict) -> LabelSpec:
+def label_spec_from_dict(d: Mapping[str, Any]) -> LabelSpec:
     """Inverse of :func:`label_spec_to_dict`."""
     return LabelSpec(
         name=d["name"],

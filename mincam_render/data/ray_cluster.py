@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Hashable, Iterator, Mapping
 from pathlib import Path
 from types import ModuleType
-from typing import Any
+from typing import Any, TypedDict
 
 from mincam_render.data.worker_pool import (
     DEFAULT_STALL_FLOOR_S,
@@ -32,7 +32,14 @@ class RayError(RuntimeError):
     """Ray is missing or unreachable, or one of its tasks failed or stalled."""
 
 
-def ray_runtime_env() -> dict[str, Any]:
+class RuntimeEnv(TypedDict):
+    """The part of Ray's ``runtime_env`` we set (Ray's schema)."""
+
+    py_modules: list[str]
+    excludes: list[str]
+
+
+def ray_runtime_env() -> RuntimeEnv:
     """Ray's ``runtime_env`` that ships this package to the workers.
 
     Other nodes may not have it installed. Ray makes a shipped directory
@@ -64,18 +71,16 @@ def ray_session(address: str) -> Iterator[ModuleType]:
         RayError: ray is not installed, or the cluster cannot be reached.
     """
     ray = _import_ray()
-    init_kwargs: dict[str, Any] = {
-        "ignore_reinit_error": True,
-        "log_to_driver": False,
-        "include_dashboard": False,
-        "runtime_env": ray_runtime_env(),
-    }
-    if address != "local":
-        init_kwargs["address"] = address
     started = not ray.is_initialized()
     if started:
         try:
-            ray.init(**init_kwargs)
+            ray.init(
+                address=None if address == "local" else address,  # None: Ray's default
+                ignore_reinit_error=True,
+                log_to_driver=False,
+                include_dashboard=False,
+                runtime_env=dict(ray_runtime_env()),
+            )
         except Exception as err:  # ray raises ConnectionError, RuntimeError, ValueError ...
             raise RayError(f"could not connect to Ray at {address!r}: {err}") from None
     try:

@@ -24,9 +24,10 @@ from __future__ import annotations
 
 import json
 import tempfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Generic, Protocol, TypeVar
 
 from mincam_render.core.checks import check_int
 
@@ -61,26 +62,51 @@ class RunJob(Protocol):
         ...
 
 
+#: A run's figures: whatever the study's train function returns (this module
+#: only carries them back and hands them to ``done``).
+Figures = TypeVar("Figures")
+#: A study's run (its job type).
+Job = TypeVar("Job", bound=RunJob)
+#: The splits a run trains on, ``{split or episode: its data}`` (the study's type;
+#: sent once to each worker, or put once into Ray's object store).
+Splits = Mapping[str, object]
+
 #: Trains one run: ``(job, splits, runs_dir, *, on_progress=None) -> its figures``;
 #: a module-level function (a worker receives it pickled by reference).
-TrainRun = Callable[..., dict[str, Any]]
+TrainRun = Callable[..., Figures]
 #: A run's figures with its paths moved out of a Ray task's temporary directory:
 #: ``(figures, move) -> figures``, ``move`` maps a path below it to one below ``runs_dir``.
-Relocate = Callable[[dict[str, Any], Callable[[str], str]], dict[str, Any]]
+Relocate = Callable[[Figures, Callable[[str], str]], Figures]
 #: Called in this process with each finished run and its figures.
-Done = Callable[[Any, dict[str, Any]], None]
+Done = Callable[[Job, Figures], None]
+
+
+@dataclass(frozen=True)
+class RayRun(Generic[Figures]):
+    """What a Ray task sends back: the run's figures and its directory's files.
+
+    Attributes:
+        figures: what the train function returned.
+        files: ``{relative path: bytes}`` of the run's directory.
+        worker_runs: the task's temporary runs directory, which the figures'
+            and files' paths point into.
+    """
+
+    figures: Figures
+    files: dict[str, bytes]
+    worker_runs: str
 
 
 def dispatch_runs(
-    train: TrainRun,
-    jobs: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    train: TrainRun[Figures],
+    jobs: Sequence[Job],
+    splits: Splits,
     runs_dir: Path,
-    done: Done,
+    done: Done[Job, Figures],
     *,
     train_workers: int,
     ray_address: str | None,
-    relocate: Relocate,
+    relocate: Relocate[Figures],
 ) -> None:
     """Train ``jobs`` as Ray tasks (``ray_address``) or in ``train_workers`` local workers.
 
@@ -97,10 +123,10 @@ def dispatch_runs(
 # ---- local worker processes ------------------------------------------------------------------
 
 #: A pool worker's splits, received once when it starts (:func:`_pool_init`).
-_WORKER_SPLITS: dict[str, Any] = {}
+_WORKER_SPLITS: dict[str, object] = {}
 
 
-def _pool_init(threads: int, splits: Mapping[str, Any]) -> None:
+def _pool_init(threads: int, splits: Splits) -> None:
     import torch
 
     torch.set_num_threads(threads)
@@ -108,8 +134,8 @@ def _pool_init(threads: int, splits: Mapping[str, Any]) -> None:
 
 
 def _pool_train(
-    train: TrainRun, task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
-) -> dict:
+    train: TrainRun[Figures], task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
+) -> Figures:
     """A pool worker's task: one run; its error names the run (a ValueError stays one)."""
     try:
         return train(task, _WORKER_SPLITS, Path(runs_dir), on_progress=on_progress)
@@ -123,11 +149,11 @@ def _pool_train(
 
 def _on_pool(
     workers: int,
-    train: TrainRun,
-    tasks: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    train: TrainRun[Figures],
+    tasks: Sequence[Job],
+    splits: Splits,
     runs_dir: Path,
-    done: Done,
+    done: Done[Job, Figures],
 ) -> None:
     from mincam_render.data.worker_pool import PoolError, run_tasks, threads_per_worker
 
@@ -156,20 +182,20 @@ def _on_pool(
 
 def _on_ray(
     address: str,
-    train: TrainRun,
-    tasks: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    train: TrainRun[Figures],
+    tasks: Sequence[Job],
+    splits: Splits,
     runs_dir: Path,
-    done: Done,
-    relocate: Relocate,
+    done: Done[Job, Figures],
+    relocate: Relocate[Figures],
 ) -> None:
     from mincam_render.data.ray_cluster import RayError, collect, ray_session
 
     by_name = {t.name: t for t in tasks}
 
-    def write(name: Any, returned: tuple[dict[str, Any], dict[str, bytes], str]) -> None:
-        task = by_name[name]
-        done(task, _write_run(runs_dir, task, *returned, relocate=relocate))
+    def write(name: Hashable, returned: RayRun[Figures]) -> None:
+        task = by_name[str(name)]
+        done(task, _write_run(runs_dir, task, returned, relocate=relocate))
 
     try:
         with ray_session(address) as ray:
@@ -185,13 +211,13 @@ def _on_ray(
 
 
 def _ray_train(
-    train: TrainRun, splits: Mapping[str, Any], task: RunJob, files: Mapping[str, bytes]
-) -> tuple[dict[str, Any], dict[str, bytes], str]:
+    train: TrainRun[Figures], splits: Splits, task: RunJob, files: Mapping[str, bytes]
+) -> RayRun[Figures]:
     """A Ray task: the run resumed from ``files`` in a temporary directory.
 
     Returns:
-        ``(run metrics, {relative path: bytes} of the run directory, the
-        temporary runs directory the metrics' and files' paths point into)``.
+        The run's figures, its directory's files and the temporary runs
+        directory their paths point into.
     """
     import torch
 
@@ -200,7 +226,7 @@ def _ray_train(
         runs = Path(tmp)
         _write_files(runs / task.name, files)
         result = train(task, splits, runs)
-        return result, run_files(runs / task.name), str(runs)
+        return RayRun(figures=result, files=run_files(runs / task.name), worker_runs=str(runs))
 
 
 def run_files(run_dir: Path) -> dict[str, bytes]:
@@ -232,12 +258,10 @@ def _write_files(run_dir: Path, files: Mapping[str, bytes]) -> None:
 def _write_run(
     runs_dir: Path,
     task: RunJob,
-    result: dict[str, Any],
-    files: dict[str, bytes],
-    worker_runs: str,
+    returned: RayRun[Figures],
     *,
-    relocate: Relocate,
-) -> dict[str, Any]:
+    relocate: Relocate[Figures],
+) -> Figures:
     """Write a Ray run's files into ``runs_dir/<run>``; its metrics with the paths moved there.
 
     The run's JSON files (``run.json``'s ``frozen_masks_from`` in the ablation)
@@ -245,11 +269,11 @@ def _write_run(
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
-    new = str(runs_dir)
+    new, worker_runs = str(runs_dir), returned.worker_runs
     old_json, new_json = json.dumps(worker_runs)[1:-1].encode(), json.dumps(new)[1:-1].encode()
     moved = {
         rel: data.replace(old_json, new_json) if rel.endswith((".json", ".jsonl")) else data
-        for rel, data in files.items()
+        for rel, data in returned.files.items()
     }
     with exclusive_writer(runs_dir / task.name, "training") as run_dir:
         _write_files(run_dir, moved)
@@ -257,4 +281,4 @@ def _write_run(
     def move(path: str) -> str:
         return new + path[len(worker_runs) :] if path.startswith(worker_runs) else path
 
-    return relocate(result, move)
+    return relocate(returned.figures, move)

@@ -24,7 +24,7 @@ import json
 import logging
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, NotRequired, TypedDict
 
 import numpy as np
 
@@ -42,6 +42,19 @@ def view_paths(out_dir: str | os.PathLike, width: int, *, people: bool = True) -
     """
     out, stem = Path(out_dir), "views" if people else "background"
     return out / f"{stem}_{width}.npy", out / f"{stem}_{width}.json"
+
+
+class ViewSettings(TypedDict):
+    """What a views sidecar records of how they were made, checked when they are reused.
+
+    ``people`` is ``"removed"`` for backgrounds; views keep the sidecars of
+    before backgrounds existed, without it.
+    """
+
+    width: int
+    spp: int
+    dataset_manifest_sha256: str
+    people: NotRequired[str]
 
 
 def _check_settings(width: int, spp: int) -> None:
@@ -80,7 +93,7 @@ def render_views(
     _check_settings(width, spp)
     data = ds.open_dataset(dataset_dir)
     npy, meta = view_paths(out_dir, width, people=people)
-    settings: dict[str, Any] = {
+    settings: ViewSettings = {
         "width": width,
         "spp": spp,
         "dataset_manifest_sha256": ds.sha256_file(Path(dataset_dir) / ds.MANIFEST_NAME),

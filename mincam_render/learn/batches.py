@@ -6,14 +6,24 @@ Both have ``next(generator) -> Batch`` and a resumable ``state()`` /
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from typing import Any, TypedDict
 
 import torch
 
 from mincam_render.learn.training_data import Batch, GatherBuffer, TrainingData, render_frames
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.capabilities import history_frames
+
+
+class SourceState(TypedDict, total=False):
+    """A batch source's resumable state, as a checkpoint stores it.
+
+    Attributes:
+        next_frame: the next frame an on-the-fly source renders (absent for a
+            split's random samples: they depend only on the generator).
+    """
+
+    next_frame: int
 
 
 class DatasetBatches:
@@ -38,11 +48,11 @@ class DatasetBatches:
             return self.data.sample_all_frames(idx)
         return self.data.sample(idx, self._buffer)
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> SourceState:
         """Resumable state (none: batches depend only on the generator)."""
         return {}
 
-    def load_state(self, state: Mapping[str, Any]) -> None:
+    def load_state(self, state: SourceState) -> None:
         """Restore :meth:`state`."""
 
 
@@ -109,10 +119,10 @@ class RenderedBatches:
         tt = torch.from_numpy(t).reshape(self.batch_size, self.history, *t.shape[1:])
         return Batch(tt, None, {k: torch.from_numpy(v) for k, v in labels.items()})
 
-    def state(self) -> dict[str, Any]:
+    def state(self) -> SourceState:
         """Resumable state: the next frame to render."""
         return {"next_frame": self.next_frame}
 
-    def load_state(self, state: Mapping[str, Any]) -> None:
+    def load_state(self, state: SourceState) -> None:
         """Restore :meth:`state`."""
         self.next_frame = int(state.get("next_frame", self.next_frame))

@@ -66,7 +66,13 @@ def atomic_save(obj: Any, path: Path) -> None:
     atomic_write_bytes(path, buf.getvalue())
 
 
-def load_checkpoint(path: Path) -> dict[str, Any]:
+#: A checkpoint as ``torch.save`` writes it and ``torch.load`` returns it (torch's
+#: format): the model's description, the config, the model's, optimiser's and
+#: generator's state dicts, the batch source's state and :class:`TrainingState`'s fields.
+Checkpoint = dict[str, Any]
+
+
+def load_checkpoint(path: Path) -> Checkpoint:
     """``torch.load`` of a checkpoint; a damaged file is a one-line ValueError naming it."""
     try:
         return torch.load(path, weights_only=False)

@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from mincam_render.core.strict_json import JsonObject
+from mincam_render.data.dataset import LabelSpecRecord
 from mincam_render.learn.builders import ModelRecord, build_head
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.models import BaselineCamera, MincamCamera, Model
@@ -73,7 +74,7 @@ class RunRecord(TypedDict):
     config: JsonObject
     fps: float
     history: int
-    label_specs: list[JsonObject]
+    label_specs: list[LabelSpecRecord]
     frozen_masks_from: NotRequired[str]
     reference: NotRequired[JsonObject]
 

@@ -18,13 +18,14 @@ import os
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import torch
 
 from mincam_render.core.labels import LabelSpec
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render.capabilities import history_frames
 
@@ -48,7 +49,9 @@ class TrainingData:
         camera: the camera the transport was rendered for.
         fps: frame rate (1/s), for the temporal median filter.
         history: frames per sample (1 = static; 30 for traffic).
-        source: provenance (dataset path, split, family, seed) for sidecars.
+        source: provenance for sidecars, free-form JSON whose keys its maker
+            chooses (a dataset's path, checksum, split and range; a render's family,
+            seed and frames; concatenated episodes' sources; what a transform did).
         scales: ``[frame]`` factor from ``transport`` to watts; None: already watts.
 
     """
@@ -59,7 +62,7 @@ class TrainingData:
     camera: FreeformCamera
     fps: float
     history: int = 1
-    source: dict[str, Any] = field(default_factory=dict)
+    source: JsonObject = field(default_factory=dict)
     scales: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -415,6 +418,14 @@ class GatherBuffer:
         return t if len(t) == n else t[:n]
 
 
+class CameraInputs(TypedDict):
+    """A batch as the keyword arguments of a camera's ``forward`` / ``measure`` (torch)."""
+
+    transport: torch.Tensor
+    windows: torch.Tensor | None
+    frame_scales: torch.Tensor | None
+
+
 @dataclass(frozen=True)
 class Batch:
     """Training samples (torch).
@@ -433,7 +444,7 @@ class Batch:
     labels: dict[str, torch.Tensor]
     frame_scales: torch.Tensor | None = None
 
-    def inputs(self) -> dict[str, Any]:
+    def inputs(self) -> CameraInputs:
         """Keyword arguments of a camera's ``forward`` / ``measure`` for this batch."""
         return {
             "transport": self.transport,

@@ -11,6 +11,8 @@ from __future__ import annotations
 import enum
 import functools
 import json
+from collections.abc import Mapping
+from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
@@ -26,11 +28,51 @@ _TABLE_ANGLES_DEG = np.arange(0.0, 91.0)
 _LAST_DIVIDED_DEG = 89.0
 
 
+@dataclass(frozen=True, kw_only=True)
+class DirectivityFit:
+    """A diode's directivity as a polynomial fit (the record of :data:`S9119_01_DATA`).
+
+    Attributes:
+        detector: the diode.
+        quantity: what the fit gives (total relative response, cosine included).
+        angle_unit: the unit of the polynomial's variable (``"deg"``).
+        form: how to evaluate it.
+        coefficients: highest power first (``numpy.polyval``).
+        valid_range_deg: ``(lo, hi)`` angles of the fit (deg).
+        notes: what to know about it.
+        source: where it comes from.
+    """
+
+    detector: str
+    quantity: str
+    angle_unit: str
+    form: str
+    coefficients: tuple[float, ...]
+    valid_range_deg: tuple[float, float]
+    notes: tuple[str, ...]
+    source: str
+
+    @classmethod
+    def from_json(cls, record: Mapping[str, Any]) -> DirectivityFit:
+        """The fit of a record as the JSON file holds it."""
+        lo, hi = record["valid_range_deg"]
+        return cls(
+            detector=record["detector"],
+            quantity=record["quantity"],
+            angle_unit=record["angle_unit"],
+            form=record["form"],
+            coefficients=tuple(record["coefficients"]),
+            valid_range_deg=(lo, hi),
+            notes=tuple(record["notes"]),
+            source=record["source"],
+        )
+
+
 @functools.cache
-def s9119_01_data() -> dict[str, Any]:
-    """The S9119-01 directivity record: coefficients, angle unit, source, notes."""
+def s9119_01_data() -> DirectivityFit:
+    """The S9119-01 directivity fit: coefficients, angle unit, source, notes."""
     text = resources.files("mincam_render.optics").joinpath(S9119_01_DATA).read_text()
-    return json.loads(text)
+    return DirectivityFit.from_json(json.loads(text))
 
 
 def s9119_01_total_response(theta_deg: np.ndarray) -> np.ndarray:
@@ -46,7 +88,7 @@ def s9119_01_total_response(theta_deg: np.ndarray) -> np.ndarray:
     Returns:
         Relative response, same shape, float64.
     """
-    coefficients = s9119_01_data()["coefficients"]
+    coefficients = s9119_01_data().coefficients
     peak = float(np.polyval(coefficients, np.linspace(0.0, 90.0, 9001)).max())
     return np.polyval(coefficients, np.abs(np.asarray(theta_deg, np.float64))) / peak
 

@@ -24,8 +24,6 @@ is the straight-through surrogate gradient of rounding to the LSB (an actual
 
 from __future__ import annotations
 
-from typing import Any
-
 import torch
 
 from mincam_render.optics.camera import DetectorElectronics
@@ -76,18 +74,14 @@ def detector_voltage(
     # V = G (R P + I_dark), the constants folded in float64 once
     voltage_v = torch.add(power_w * (g * e.responsivity_a_per_w), g * e.dark_current_a)
     if noise:
-        kw: dict[str, Any] = {
-            "dtype": power_w.dtype,
-            "device": power_w.device,
-            "generator": generator,
-        }
         # shot variance G^2 q I / t = (G q / t) V, folded in float64: q I alone
         # underflows float32 for I < ~1e-20 A
         variance = torch.add(
             voltage_v * (g * ELEMENTARY_CHARGE_C / e.integration_time_s), e.read_noise_v**2
         ).clamp_min(_MIN_VARIANCE_V2)
-        eps = torch.randn(power_w.shape, **kw)
-        quant = torch.rand(power_w.shape, **kw)
+        dtype, device = power_w.dtype, power_w.device
+        eps = torch.randn(power_w.shape, generator=generator, dtype=dtype, device=device)
+        quant = torch.rand(power_w.shape, generator=generator, dtype=dtype, device=device)
         voltage_v = torch.addcmul(voltage_v, torch.sqrt(variance), eps).add_(quant, alpha=e.lsb_v)
     if offset_v is not None:
         voltage_v = voltage_v + offset_v

@@ -14,6 +14,7 @@ import pytest
 from support import chromium, needs_chromium
 
 from mincam_render.analysis.report import Report
+from mincam_render.studies.privacy import PrivacyResult
 
 
 def _page(tmp_path: Path) -> Path:
@@ -167,48 +168,52 @@ def _interval(mean: float, half: float) -> dict:
     return {"mean": mean, "ci95": [mean - half, mean + half]}
 
 
-def _privacy_result() -> dict:
-    """A privacy audit's result of two designs (the structure ``analyze_privacy`` writes)."""
-    from mincam_render.studies.privacy import corner_verdicts, default_comparison
+def _privacy_result() -> PrivacyResult:
+    """A privacy audit's result of two designs (as ``privacy.json`` holds it)."""
+    from mincam_render.studies.privacy import default_comparison
     from mincam_render.studies.privacy.config import AttackConfig, PrivacyConfig
+    from mincam_render.studies.privacy.curve import rederive_verdicts
 
-    conv = {"decoder": {"converged": True}, "reid": {"converged": False}}
+    conv = {"decoder": {"converged": True}, "reid": {"converged": False}, "decoders": {}}
     image = {
         "fg_psnr_db": _interval(15.0, 0.4),
         "fg_ssim": _interval(0.6, 0.02),
         "psnr_db": _interval(30.0, 0.4),
         "ssim": _interval(0.9, 0.02),
     }
-    kept = {"decoder": "conv", "decoder_val_mse": {"mlp": 2.0, "conv": 1.0, "ridge": 3.0}}
+    kept = {"decoder": "conv", "decoder_val_mse": {"mlp": 2.0, "conv": 1.0, "ridge": 3.0},
+            "ridge_penalty": 1.0}  # fmt: skip
+    scores = {"fg_ssim": 0.6, "psnr_db": 30.0, "ssim": 0.9}
     design = {
         "pixels": 2, "task_state": "converged", "task_seeds": 2, "convergence": [conv] * 3,
         "task_error": _interval(1.0, 0.1), **image, "fg_psnr_db": _interval(14.5, 0.3),
         "fg_psnr_gain_db": _interval(0.1, 0.05), "fg_psnr_over_prior_db": _interval(0.0, 0.05),
         "reid_top1": _interval(0.4, 0.05),
-        "per_seed": [{"test-0": {"fg_psnr_db": 14.5, "reid_top1": 0.4}}] * 3,
+        "per_seed": [{"test-0": {"fg_psnr_db": 14.5, **scores, "reid_top1": 0.4}}] * 3,
         "decoders": [kept, kept, dict(kept, decoder="ridge")],
         "by_decoder": {k: image for k in ("mlp", "conv", "ridge")},
     }  # fmt: skip
     baseline = dict(design, pixels=64, fg_psnr_db=_interval(18.0, 0.4),
                     reid_top1=_interval(0.8, 0.05),
-                    per_seed=[{"test-0": {"fg_psnr_db": 18.0, "reid_top1": 0.8}}] * 3)  # fmt: skip
+                    per_seed=[{"test-0": {"fg_psnr_db": 18.0, **scores, "reid_top1": 0.8}}] * 3,
+                    )  # fmt: skip
     privacy = {
         "task": "workspace", "error_name": "people_count RMSE", "roster": 6,
         "designs": {"mincam-2px": design, "baseline-8x8": baseline},
         "episodes": {"test-0": {"samples": 200}},
         "trivial": {"task_error": _interval(1.6, 0.2), **image, "fg_fraction": 0.04,
-                    "reid_top1": _interval(0.35, 0.04)},
-        "prior": {**image, "fg_psnr_gain_db": _interval(0.2, 0.05)},
+                    "reid_top1": _interval(0.35, 0.04), "episodes": {}},
+        "prior": {**image, "fg_psnr_gain_db": _interval(0.2, 0.05), "episodes": {}},
+        "comparison": "metrics.json", "corner": {},
         "config": json.loads(json.dumps(asdict(PrivacyConfig(
             comparison=default_comparison(), attack=AttackConfig())), default=str)),
     }  # fmt: skip
-    privacy["corner"] = corner_verdicts(privacy)
-    return privacy
+    return rederive_verdicts(PrivacyResult.from_json(privacy))
 
 
 @pytest.fixture(scope="module")
 def privacy_page(tmp_path_factory):
-    from mincam_render.studies.privacy import write_privacy_report
+    from mincam_render.studies.privacy import write_report
 
     rng = np.random.default_rng(0)
     examples = {
@@ -220,7 +225,7 @@ def privacy_page(tmp_path_factory):
         "recon": rng.uniform(0, 1, (2, 2, 16, 16)).astype(np.float32),
     }
     out = tmp_path_factory.mktemp("privacy")
-    return write_privacy_report(_privacy_result(), examples, out)
+    return write_report(_privacy_result(), out, examples)
 
 
 @needs_chromium

@@ -42,7 +42,7 @@ def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs_of_eac
     assert [r.pixels for r in records] == [2, 1]
     cfg = RobustnessConfig(levels=(0.0, 1.0), draws=2)
     curves = robustness_curves(model, {"test": test}, cfg, name=kind)
-    assert curves["nominal_error"] > 0 and "mix" in curves["curves"]
+    assert curves.nominal_error > 0 and "mix" in curves.curves
 
 
 def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs_of_each_kind):

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from support import linear_task
 
+from mincam_render.analysis.statistics import Interval
+from mincam_render.core import strict_json
 from mincam_render.learn import train as tr
+from mincam_render.studies.comparison.config import Design
 from mincam_render.studies.privacy import attacks, decoders
 from mincam_render.studies.privacy.config import (
     ROSTER_OVERRIDES,
@@ -25,13 +30,25 @@ from mincam_render.studies.privacy.metrics import (
     reid_top1,
     white_level,
 )
+from mincam_render.studies.privacy.result import (
+    AttackFigures,
+    CornerVerdict,
+    DesignAttack,
+    DesignAudit,
+    EpisodeScores,
+    PrivacyResult,
+)
 from mincam_render.studies.privacy.study import (
-    IMAGE_FIGURES,
     Episode,
     prior_attack,
     score_reconstruction,
     trivial_attack,
 )
+
+REPO = Path(__file__).resolve().parents[2]
+#: Keys kept beside the audit's result in benchmarks/results/privacy*.json (the
+#: benchmark's, and the command that made privacy_16det.json).
+BENCHMARK_KEYS = ("benchmark", "machine", "wall_time_s", "report", "command")
 
 
 def test_identical_images_have_infinite_psnr_and_ssim_one(rng):
@@ -134,8 +151,10 @@ def test_a_decoder_that_sees_no_one_scores_exactly_the_trivial_attacker(rng):
         recon = decoders.reconstruct(nobody, x, ep.background)
         np.testing.assert_array_equal(recon, ep.background)
         scored = score_reconstruction(ep, recon)
-        assert scored == {k: trivial[name][k] for k in IMAGE_FIGURES}
-        assert 0 < trivial[name]["fg_fraction"] < 1 and np.isfinite(scored["fg_psnr_db"])
+        assert scored == dataclasses.replace(
+            trivial[name], fg_fraction=None, fg_frames=None, reid_top1=None
+        )
+        assert 0 < trivial[name].fg_fraction < 1 and np.isfinite(scored.fg_psnr_db)
 
 
 def test_the_prior_knows_where_people_usually_are_not_where_they_are_now(rng):
@@ -152,12 +171,12 @@ def test_the_prior_knows_where_people_usually_are_not_where_they_are_now(rng):
     episodes = {"train-0": episode("train-0", usual), "test-0": episode("test-0", usual),
                 "test-1": episode("test-1", moved)}  # fmt: skip
     prior, trivial = prior_attack(episodes), trivial_attack(episodes)
-    assert prior["test-0"]["fg_psnr_db"] > 100  # the usual place: right (float32 rounding)
-    assert trivial["test-0"]["fg_psnr_db"] == pytest.approx(-20 * np.log10(0.2))
+    assert prior["test-0"].fg_psnr_db > 100  # the usual place: right (float32 rounding)
+    assert trivial["test-0"].fg_psnr_db == pytest.approx(-20 * np.log10(0.2))
     # elsewhere, the prior paints a person where none is: no better on the people's pixels,
     # worse on the whole view
-    assert prior["test-1"]["fg_psnr_db"] <= trivial["test-1"]["fg_psnr_db"] + 1e-9
-    assert prior["test-1"]["psnr_db"] < trivial["test-1"]["psnr_db"]
+    assert prior["test-1"].fg_psnr_db <= trivial["test-1"].fg_psnr_db + 1e-9
+    assert prior["test-1"].psnr_db < trivial["test-1"].psnr_db
 
 
 def test_display_maps_the_white_level_to_one_with_gamma():
@@ -272,74 +291,90 @@ def test_attack_config_bad_input():
         AttackConfig(lr=2.0)
 
 
-def _iv(mean: float, half: float) -> dict:
-    return {"mean": mean, "ci95": [mean - half, mean + half]}
+def _iv(mean: float, half: float) -> Interval:
+    return Interval(mean, mean - half, mean + half)
 
 
 #: Test episodes of the synthetic audits: hard, middling, easy for every attacker.
 _EPISODE_OFFSETS = (-1.0, 0.0, 1.0)
 
 
-def _per_seed(psnr: float, reid: float) -> list[dict]:
+def _per_seed(psnr: float, reid: float) -> tuple[dict[str, EpisodeScores], ...]:
     """3 attacker seeds x 3 test episodes around the means; episodes move every design alike."""
-    return [
-        {f"test-{e}": {"fg_psnr_db": psnr + 2.0 * o + 0.01 * s, "reid_top1": reid + 0.1 * o}
+    return tuple(
+        {f"test-{e}": EpisodeScores(fg_psnr_db=psnr + 2.0 * o + 0.01 * s, fg_ssim=0.5,
+                                    psnr_db=20.0, ssim=0.9, reid_top1=reid + 0.1 * o)
          for e, o in enumerate(_EPISODE_OFFSETS)}
         for s in range(3)
-    ]  # fmt: skip
+    )  # fmt: skip
 
 
-def _design(task: float, task_half: float, psnr: float, reid: float, view: float) -> dict:
+def _design(task: float, task_half: float, psnr: float, reid: float, view: float) -> DesignAudit:
     # the whole view's PSNR (psnr_db) is the other way round: the corner ignores it
-    return {"task_error": _iv(task, task_half), "fg_psnr_db": _iv(psnr, 0.5),
-            "psnr_db": _iv(view, 0.5), "reid_top1": _iv(reid, 0.05),
-            "per_seed": _per_seed(psnr, reid)}  # fmt: skip
+    figures = AttackFigures(fg_psnr_db=_iv(psnr, 0.5), fg_ssim=_iv(0.5, 0.1),
+                            psnr_db=_iv(view, 0.5), ssim=_iv(0.9, 0.01),
+                            reid_top1=_iv(reid, 0.05))  # fmt: skip
+    attack = DesignAttack(figures=figures, fg_psnr_gain_db=_iv(0.0, 0.1),
+                          fg_psnr_over_prior_db=_iv(0.0, 0.1), by_decoder={},
+                          per_seed=_per_seed(psnr, reid), convergence=(), decoders=())  # fmt: skip
+    return DesignAudit(pixels=2, task_error=_iv(task, task_half), task_state="converged",
+                       task_seeds=2, attack=attack)  # fmt: skip
 
 
-def _result(mincam_psnr: float, mincam_reid: float) -> dict:
-    return {
-        "designs": {
-            "mincam-2px": _design(1.0, 0.1, mincam_psnr, mincam_reid, 40.0),
-            "baseline-2x2": _design(1.5, 0.1, 15.0, 0.6, 10.0),
-            "baseline-8x8": _design(1.0, 0.1, 18.0, 0.8, 10.0),
-            "baseline-32x32": _design(0.5, 0.1, 22.0, 0.9, 10.0),
-        },
-        "episodes": {f"test-{e}": {"samples": 200} for e in range(3)},
-        "config": {"comparison": {"seed": 0, "designs": [  # kinds come from here, not names
-            {"pixels": 2, "grid": None}, *({"pixels": None, "grid": [g, g]} for g in (2, 8, 32))]}},
-    }  # fmt: skip
+def _corner(mincam_psnr: float, mincam_reid: float) -> dict[str, CornerVerdict]:
+    designs = {
+        "mincam-2px": _design(1.0, 0.1, mincam_psnr, mincam_reid, 40.0),
+        "baseline-2x2": _design(1.5, 0.1, 15.0, 0.6, 10.0),
+        "baseline-8x8": _design(1.0, 0.1, 18.0, 0.8, 10.0),
+        "baseline-32x32": _design(0.5, 0.1, 22.0, 0.9, 10.0),
+    }
+    # kinds come from the designs, not the names
+    kinds = {"mincam-2px": Design(pixels=2),
+             **{f"baseline-{g}x{g}": Design(grid=(g, g)) for g in (2, 8, 32)}}  # fmt: skip
+    return corner_verdicts(designs, kinds, {f"test-{e}": 200 for e in range(3)}, 0)
 
 
 def test_corner_needs_a_task_match_and_separated_attack_intervals():
-    corner = corner_verdicts(_result(13.0, 0.4))["mincam-2px"]
+    corner = _corner(13.0, 0.4)["mincam-2px"]
     # 32x32 is better at the task: no match; 2x2 and 8x8 are no better
-    assert corner["task_matched"] == ["baseline-2x2", "baseline-8x8"]
-    assert corner["in_corner_against"] == ["baseline-2x2", "baseline-8x8"]
+    assert corner.task_matched == ("baseline-2x2", "baseline-8x8")
+    assert corner.in_corner_against == ("baseline-2x2", "baseline-8x8")
     # less re-identifiable than both, but its PSNR is not below either: not in the corner
-    close = corner_verdicts(_result(17.8, 0.4))["mincam-2px"]
-    assert close["more_private_than"] == {
-        "fg_psnr_db": [], "reid_top1": ["baseline-2x2", "baseline-8x8"]}  # fmt: skip
-    assert close["in_corner_against"] == []
-    none = corner_verdicts(_result(20.0, 0.85))["mincam-2px"]
-    assert none["in_corner_against"] == [] and "not in the corner" in none["verdict"]
-    assert none["paired_more_private_than"] == []
-    json.dumps(none)  # JSON-ready
+    close = _corner(17.8, 0.4)["mincam-2px"]
+    assert close.more_private_than == {
+        "fg_psnr_db": (), "reid_top1": ("baseline-2x2", "baseline-8x8")}  # fmt: skip
+    assert close.in_corner_against == ()
+    none = _corner(20.0, 0.85)["mincam-2px"]
+    assert none.in_corner_against == () and "not in the corner" in none.verdict
+    assert none.paired_more_private_than == ()
+    assert CornerVerdict.from_json(json.loads(json.dumps(none.as_json()))) == none
 
 
 def test_corner_reports_the_paired_reading_beside_the_interval_verdict():
     # 0.4 dB and 0.05 below 8x8 on every episode: the intervals (episode spread) overlap,
     # the paired differences (the episodes drop out) do not
-    corner = corner_verdicts(_result(17.6, 0.75))["mincam-2px"]
-    assert corner["in_corner_against"] == []
-    assert corner["paired_more_private_than"] == ["baseline-8x8"]
-    paired = corner["paired"]["baseline-8x8"]
-    assert paired["fg_psnr_db"]["mean"] == pytest.approx(17.6 - 18.0)
-    assert paired["reid_top1"]["mean"] == pytest.approx(0.75 - 0.8)
-    assert paired["fg_psnr_db"]["ci95"][1] < 0 and paired["reid_top1"]["ci95"][1] < 0
-    assert corner["verdict"].startswith("mincam-2px: not in the corner")
-    assert corner["verdict"].endswith("lower on both attacks than: baseline-8x8")
+    corner = _corner(17.6, 0.75)["mincam-2px"]
+    assert corner.in_corner_against == ()
+    assert corner.paired_more_private_than == ("baseline-8x8",)
+    paired = corner.paired["baseline-8x8"]
+    assert paired["fg_psnr_db"].mean == pytest.approx(17.6 - 18.0)
+    assert paired["reid_top1"].mean == pytest.approx(0.75 - 0.8)
+    assert paired["fg_psnr_db"].high < 0 and paired["reid_top1"].high < 0
+    assert corner.verdict.startswith("mincam-2px: not in the corner")
+    assert corner.verdict.endswith("lower on both attacks than: baseline-8x8")
     # more re-identifiable than 2x2 on the same episodes: not paired-private against it
-    assert corner["paired"]["baseline-2x2"]["reid_top1"]["ci95"][0] > 0
+    assert corner.paired["baseline-2x2"]["reid_top1"].low > 0
+
+
+# privacy_16det.json was written with sorted keys: its order is not the result's
+@pytest.mark.parametrize(("name", "sort"), [("privacy.json", False), ("privacy_16det.json", True)])
+def test_a_result_read_from_the_kept_json_writes_the_same_json(name, sort):
+    """The typed result holds every key of the audits kept in benchmarks/results, in order."""
+    kept = json.loads((REPO / "benchmarks" / "results" / name).read_text())
+    body = {k: v for k, v in kept.items() if k not in BENCHMARK_KEYS}
+    result = PrivacyResult.from_json(body)
+    assert json.dumps(result.as_json(), sort_keys=sort) == json.dumps(body, sort_keys=sort)
+    assert PrivacyResult.from_json(json.loads(strict_json.dumps(result.as_json()))) == result
 
 
 def test_ridge_decoder_recovers_a_linear_view_and_picks_its_penalty(rng):
@@ -365,25 +400,26 @@ def test_every_attacker_seed_scores_every_decoder_and_the_gains_are_paired(varia
                           view_width=8)  # fmt: skip
     trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     result, examples = attack_design(
-        {"runs": [str(tmp_path)]}, data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
-        {"trivial": trivial, "prior": prior},
+        [str(tmp_path)], data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
+        trivial=trivial, prior=prior,
     )  # fmt: skip
     for f in FIGURES:
-        assert result[f]["ci95"][0] <= result[f]["mean"] <= result[f]["ci95"][1]
-    assert len(result["per_seed"]) == 3 and set(result["per_seed"][0]) == {"test-0", "test-1"}
-    assert set(result["by_decoder"]) == set(decoders.DECODERS)
-    for kept in result["decoders"]:  # each seed keeps its best decoder on validation
-        errors = kept["decoder_val_mse"]
-        assert kept["decoder"] == min(errors, key=errors.__getitem__)
+        iv = result.figures.figure(f)
+        assert iv.low <= iv.mean <= iv.high
+    assert len(result.per_seed) == 3 and set(result.per_seed[0]) == {"test-0", "test-1"}
+    assert set(result.by_decoder) == set(decoders.DECODERS)
+    for kept in result.decoders:  # each seed keeps its best decoder on validation
+        errors = kept.decoder_val_mse
+        assert kept.decoder == min(errors, key=errors.__getitem__)
     # paired on the same test episodes (equal frames): the point is the difference of means
-    nobody = np.mean([trivial[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
-    gain = result["fg_psnr_gain_db"]
-    assert gain["mean"] == pytest.approx(result["fg_psnr_db"]["mean"] - nobody, rel=1e-9)
-    usual = np.mean([prior[e]["fg_psnr_db"] for e in ("test-0", "test-1")])
-    over = result["fg_psnr_over_prior_db"]["mean"]
-    assert over == pytest.approx(result["fg_psnr_db"]["mean"] - usual, rel=1e-9)
+    psnr = result.figures.fg_psnr_db.mean
+    nobody = np.mean([trivial[e].fg_psnr_db for e in ("test-0", "test-1")])
+    assert result.fg_psnr_gain_db.mean == pytest.approx(psnr - nobody, rel=1e-9)
+    usual = np.mean([prior[e].fg_psnr_db for e in ("test-0", "test-1")])
+    assert result.fg_psnr_over_prior_db.mean == pytest.approx(psnr - usual, rel=1e-9)
     assert examples["test-0"].shape == (40, 8, 8)
-    json.dumps(result)  # JSON-ready
+    record = json.loads(strict_json.dumps(result.as_json()))  # JSON-ready
+    assert DesignAttack.from_json(record) == result
 
 
 def test_examples_round_trip_with_backgrounds_and_masks(rng, tmp_path):

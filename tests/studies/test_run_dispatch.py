@@ -116,14 +116,11 @@ def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_pr
     out, runs = sequential
     task = comparison_tasks(CFG)[0]  # the ablation: its head's run.json names its masks' run
     assert task.name == "mincam-2px-nosensor-seed0"
-    result, files, worker_runs = run_dispatch._ray_train(
-        train_design_run, rendered_splits, task, {}
-    )
+    returned = run_dispatch._ray_train(train_design_run, rendered_splits, task, {})
+    worker_runs = returned.worker_runs
     assert not Path(worker_runs).exists()  # the task's directory is gone with the task
-    assert any(worker_runs.encode() in data for data in files.values())
-    written = run_dispatch._write_run(
-        tmp_path / "runs", task, result, files, worker_runs, relocate=relocate_run
-    )
+    assert any(worker_runs.encode() in data for data in returned.files.values())
+    written = run_dispatch._write_run(tmp_path / "runs", task, returned, relocate=relocate_run)
     assert _figures({"d": [written]}) == _figures({"d": [runs["mincam-2px-nosensor"][0]]})
     run = tmp_path / "runs" / task.name
     assert written["run_dir"] == str(run / "head-with-sensor")
@@ -148,7 +145,7 @@ def test_finished_runs_are_read_back_and_a_killed_one_resumes_from_its_shipped_c
         dispatched.extend(t.name for t in tasks)
         for t in tasks:  # what a Ray task does with the run's files
             returned = run_dispatch._ray_train(train, splits, t, run_files(runs_dir / t.name))
-            done(t, run_dispatch._write_run(runs_dir, t, *returned, relocate=relocate_run))
+            done(t, run_dispatch._write_run(runs_dir, t, returned, relocate=relocate_run))
 
     monkeypatch.setattr(run_dispatch, "_on_pool", pool)
     again = _one_task(train_runs(CFG, rendered_splits, tmp_path, train_workers=2, progress=False))

@@ -6,8 +6,9 @@ the frames' scene states), ``metrics`` (display images, the foreground mask,
 PSNR/SSIM via scikit-image, re-identification top-1), ``attacks`` (the trained
 design's read-out, the training loop and the re-identifier; torch),
 ``decoders`` (MLP, convolutional and ridge decoders of what the people add to
-the view; torch), ``curve`` (which designs sit in the private, useful corner),
-``study`` (:func:`analyze_privacy`), ``figures`` and ``report``. Importing
+the view; torch), ``result`` (the typed :class:`PrivacyResult`, ``privacy.json``), ``curve``
+(which designs sit in the private, useful corner), ``study`` (:func:`run`),
+``figures`` and ``report`` (:func:`write_report`). Importing
 this package loads numpy, not torch or Mitsuba.
 """
 
@@ -20,13 +21,14 @@ from mincam_render.studies.privacy.metrics import (
     reconstruction_quality,
     reid_top1,
 )
-from mincam_render.studies.privacy.report import headline, write_privacy_report
-from mincam_render.studies.privacy.study import analyze_privacy
+from mincam_render.studies.privacy.report import headline, write_report
+from mincam_render.studies.privacy.result import PrivacyResult
+from mincam_render.studies.privacy.study import run
 
 __all__ = [
     "AttackConfig",
     "PrivacyConfig",
-    "analyze_privacy",
+    "PrivacyResult",
     "corner_verdicts",
     "default_comparison",
     "foreground_mask",
@@ -35,5 +37,6 @@ __all__ = [
     "presence",
     "reconstruction_quality",
     "reid_top1",
-    "write_privacy_report",
+    "run",
+    "write_report",
 ]

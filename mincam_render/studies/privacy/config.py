@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 from mincam_render.core.checks import check_int, check_number
@@ -22,6 +23,17 @@ AUDIT_FIDELITY = {
     "differential": False,
 }
 
+
+class DecoderKind(enum.StrEnum):
+    """A decoder of the people (:mod:`.decoders`); the values are ``privacy.json``'s keys."""
+
+    MLP = "mlp"
+    CONV = "conv"
+    RIDGE = "ridge"
+
+
+#: The decoders an attacker trains, in ``privacy.json``'s order.
+DECODERS = tuple(DecoderKind)
 
 #: Weight of the privacy term of the audit's privacy-trained design (8 px).
 AUDIT_PRIVACY_WEIGHT = 1.0

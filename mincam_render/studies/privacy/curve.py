@@ -15,48 +15,60 @@ both paired intervals lie wholly below 0. It is reported, not the verdict.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, Pooling, paired_difference
-from mincam_render.studies.comparison.config import Design, designs_by_name
+from mincam_render.analysis.statistics import (
+    EpisodeErrors,
+    Interval,
+    Pooling,
+    paired_difference,
+)
+from mincam_render.studies.comparison.config import Design
+from mincam_render.studies.privacy.result import CornerVerdict, DesignAudit, PrivacyResult
 
 #: Attack figures where a higher value means a more successful attacker.
 ATTACK_FIGURES = ("fg_psnr_db", "reid_top1")
 
 
-def audit_designs(privacy: Mapping[str, Any]) -> dict[str, Design]:
+def audit_designs(privacy: PrivacyResult) -> dict[str, Design]:
     """``{name: design}`` of a privacy audit's designs (from its ``config``, not their names)."""
-    return designs_by_name(privacy["config"]["comparison"]["designs"])
+    return privacy.design_kinds()
 
 
-def _below(a: Mapping[str, Any], b: Mapping[str, Any]) -> bool:
-    """Interval ``a`` lies wholly below interval ``b`` (``{"mean", "ci95"}``)."""
-    return bool(a["ci95"][1] < b["ci95"][0])
+def _below(a: Interval, b: Interval) -> bool:
+    """Interval ``a`` lies wholly below interval ``b``."""
+    return bool(a.high < b.low)
 
 
-def _episode_figure(privacy: Mapping[str, Any], design: str, figure: str) -> EpisodeErrors:
+def _episode_figure(design: DesignAudit, figure: str, samples: Mapping[str, int]) -> EpisodeErrors:
     """``figure`` of ``design``'s attacker seeds as ``[seed, test episode]`` (mean pooling)."""
-    per_seed = privacy["designs"][design]["per_seed"]
+    per_seed = design.attack.per_seed
     names = sorted(per_seed[0])
     return EpisodeErrors(
-        error=np.array([[s[e][figure] for e in names] for s in per_seed]),
-        frames=np.array([privacy["episodes"][e]["samples"] for e in names]),
+        error=np.array([[s[e].figure(figure) for e in names] for s in per_seed]),
+        frames=np.array([samples[e] for e in names]),
         pooling=Pooling.MEAN,
     )
 
 
 def paired_attack_differences(
-    privacy: Mapping[str, Any], design: str, baseline: str
-) -> dict[str, dict[str, Any]]:
-    """``{figure: {"mean", "ci95"}}``: ``design``'s attack figure minus ``baseline``'s, paired."""
-    seed = int(privacy["config"]["comparison"]["seed"])
+    design: DesignAudit, baseline: DesignAudit, samples: Mapping[str, int], seed: int
+) -> dict[str, Interval]:
+    """``{figure: interval}``: ``design``'s attack figure minus ``baseline``'s, paired.
+
+    Args:
+        design: the minimalist design's audit.
+        baseline: the baseline's audit.
+        samples: frames of every test episode.
+        seed: the bootstrap's seed (the comparison's).
+    """
     return {
         f: paired_difference(
-            _episode_figure(privacy, design, f), _episode_figure(privacy, baseline, f), seed=seed
-        ).as_dict()
+            _episode_figure(design, f, samples), _episode_figure(baseline, f, samples), seed=seed
+        )
         for f in ATTACK_FIGURES
     }
 
@@ -76,41 +88,51 @@ def _verdict(name: str, matched: list[str], corner: list[str], paired: list[str]
     return f"{line}; paired on the same episodes, lower on both attacks than: {both}"
 
 
-def corner_verdicts(privacy: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+def corner_verdicts(
+    designs: Mapping[str, DesignAudit],
+    kinds: Mapping[str, Design],
+    samples: Mapping[str, int],
+    seed: int,
+) -> dict[str, CornerVerdict]:
     """Per minimalist design: the task-matched baselines, and those it is more private than.
 
     Args:
-        privacy: ``privacy.json``'s contents (``designs`` with ``task_error``,
-            ``fg_psnr_db``, ``reid_top1`` as ``{"mean", "ci95"}`` and ``per_seed``
-            figures per test episode; ``episodes`` with their ``samples``;
-            ``config.comparison`` with its ``designs`` and ``seed``).
+        designs: every design's audit (task error, attack figures with
+            intervals, per attacker seed figures per test episode).
+        kinds: ``{name: design}`` (:meth:`~.result.PrivacyResult.design_kinds`).
+        samples: frames of every test episode.
+        seed: the bootstrap's seed of the paired differences (the comparison's).
 
     Returns:
-        ``{design: {"task_matched": [baselines no better at the task],
-        "more_private_than": {figure: [matched baselines it beats on that figure]},
-        "in_corner_against": [matched baselines it beats on every figure],
-        "paired": {baseline: {figure: design - baseline, paired}},
-        "paired_more_private_than": [matched baselines below on every figure, paired],
-        "verdict": one line}}``.
+        ``{minimalist design: its verdict}``.
     """
-    designs = privacy["designs"]
-    kinds = audit_designs(privacy)
     baselines = [n for n in designs if not kinds[n].is_mincam]
     out = {}
     for name, d in designs.items():
         if not kinds[name].is_mincam:
             continue
-        matched = [b for b in baselines if not _below(designs[b]["task_error"], d["task_error"])]
-        beats = {f: [b for b in matched if _below(d[f], designs[b][f])] for f in ATTACK_FIGURES}
-        corner = [b for b in matched if all(b in beats[f] for f in ATTACK_FIGURES)]
-        paired = {b: paired_attack_differences(privacy, name, b) for b in matched}
-        below = [b for b in matched if all(p["ci95"][1] < 0 for p in paired[b].values())]
-        out[name] = {
-            "task_matched": matched,
-            "more_private_than": beats,
-            "in_corner_against": corner,
-            "paired": paired,
-            "paired_more_private_than": below,
-            "verdict": _verdict(name, matched, corner, below),
+        matched = [b for b in baselines if not _below(designs[b].task_error, d.task_error)]
+        beats = {
+            f: tuple(b for b in matched if _below(d.figure(f), designs[b].figure(f)))
+            for f in ATTACK_FIGURES
         }
+        corner = [b for b in matched if all(b in beats[f] for f in ATTACK_FIGURES)]
+        paired = {b: paired_attack_differences(d, designs[b], samples, seed) for b in matched}
+        below = [b for b in matched if all(p.high < 0 for p in paired[b].values())]
+        out[name] = CornerVerdict(
+            task_matched=tuple(matched),
+            more_private_than=beats,
+            in_corner_against=tuple(corner),
+            paired=paired,
+            paired_more_private_than=tuple(below),
+            verdict=_verdict(name, matched, corner, below),
+        )
     return out
+
+
+def rederive_verdicts(privacy: PrivacyResult) -> PrivacyResult:
+    """``privacy`` with its corner verdicts derived again from its figures."""
+    corner = corner_verdicts(
+        privacy.designs, privacy.design_kinds(), privacy.samples(), privacy.seed
+    )
+    return dataclasses.replace(privacy, corner=corner)

@@ -23,7 +23,7 @@ difference, the state of the lowest validation loss kept):
 
 from __future__ import annotations
 
-import enum
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -33,19 +33,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from mincam_render.studies.privacy.attacks import Fitted, Standardise, fit_adam, mlp, seeded
-from mincam_render.studies.privacy.config import AttackConfig
+from mincam_render.studies.privacy.config import DECODERS, AttackConfig, DecoderKind
 
-
-class DecoderKind(enum.StrEnum):
-    """A decoder of the people (module docstring); the values are ``privacy.json``'s keys."""
-
-    MLP = "mlp"
-    CONV = "conv"
-    RIDGE = "ridge"
-
-
-#: The decoders an attacker trains, in ``privacy.json``'s order.
-DECODERS = tuple(DecoderKind)
 #: The coarsest grid of the convolutional decoder: it halves the view while the
 #: side stays even and the half at least this many pixels.
 CONV_MIN_GRID = 8
@@ -53,6 +42,11 @@ CONV_MIN_GRID = 8
 
 class Decoder(Protocol):
     """What every trained decoder offers: the difference images of read-outs."""
+
+    @property
+    def history(self) -> Sequence[Mapping[str, float]] | None:
+        """Its validation checks ``{"step", "val_loss"}`` (None: solved in closed form)."""
+        ...
 
     def predict(self, x: np.ndarray) -> np.ndarray:
         """Differences ``[frame, row, col]`` (display units) of read-outs ``[frame, pixel]``."""

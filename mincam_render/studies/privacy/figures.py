@@ -1,6 +1,6 @@
 """Figures of a privacy audit (matplotlib): the privacy-utility curve, example reconstructions.
 
-Each function takes ``privacy.json``'s contents (and the examples written
+Each function takes a :class:`~.result.PrivacyResult` (and the examples written
 beside it) and returns ``(figure, caption)``.
 """
 
@@ -13,6 +13,7 @@ import numpy as np
 
 from mincam_render.studies.comparison.config import Design
 from mincam_render.studies.privacy.curve import audit_designs
+from mincam_render.studies.privacy.result import PrivacyResult
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -25,36 +26,37 @@ CURVE_AXES = (
 )
 
 
-def _style(design: Design) -> dict[str, Any]:
+def _style(design: Design) -> tuple[str, str]:
+    """``(colour, marker)`` of a design's point."""
     if design.privacy_weight:
-        return {"color": "C2", "marker": "D"}
-    return {"color": "C0", "marker": "o"} if design.is_mincam else {
-        "color": "C1", "marker": "s"}  # fmt: skip
+        return "C2", "D"
+    return ("C0", "o") if design.is_mincam else ("C1", "s")
 
 
-def _plot_curve(ax: Axes, privacy: Mapping[str, Any], key: str, label: str) -> None:
+def _plot_curve(ax: Axes, privacy: PrivacyResult, key: str, label: str) -> None:
     kinds = audit_designs(privacy)
-    for name, d in privacy["designs"].items():
-        x, y = d[key], d["task_error"]
+    for name, d in privacy.designs.items():
+        x, y = d.figure(key), d.task_error
+        color, marker = _style(kinds[name])
         ax.errorbar(
-            x["mean"], y["mean"],
-            xerr=[[x["mean"] - x["ci95"][0]], [x["ci95"][1] - x["mean"]]],
-            yerr=[[y["mean"] - y["ci95"][0]], [y["ci95"][1] - y["mean"]]],
-            ls="none", capsize=2, **_style(kinds[name]),
+            x.mean, y.mean, xerr=[[x.mean - x.low], [x.high - x.mean]],
+            yerr=[[y.mean - y.low], [y.high - y.mean]], ls="none", capsize=2, color=color,
+            marker=marker,
         )  # fmt: skip
-        ax.annotate(name.replace("baseline-", "").replace("mincam-", ""), (x["mean"], y["mean"]),
+        ax.annotate(name.replace("baseline-", "").replace("mincam-", ""), (x.mean, y.mean),
                     fontsize=7, xytext=(3, 3), textcoords="offset points")  # fmt: skip
-    t = privacy["trivial"]
-    ax.axvline(t[key]["mean"], color="0.4", ls="--", lw=1, label="trivial attacker")
-    if key in privacy["prior"]:
-        ax.axvline(privacy["prior"][key]["mean"], color="C3", ls="-.", lw=1, label="prior")
-    ax.axhline(t["task_error"]["mean"], color="0.4", ls=":", lw=1, label="trivial task predictor")
+    t = privacy.trivial
+    ax.axvline(t.figures.figure(key).mean, color="0.4", ls="--", lw=1, label="trivial attacker")
+    prior = getattr(privacy.prior.figures, key)
+    if prior is not None:
+        ax.axvline(prior.mean, color="C3", ls="-.", lw=1, label="prior")
+    ax.axhline(t.task_error.mean, color="0.4", ls=":", lw=1, label="trivial task predictor")
     ax.set_xlabel(label)
-    ax.set_ylabel(f"task error ({privacy['error_name']})")
+    ax.set_ylabel(f"task error ({privacy.error_name})")
     ax.legend(fontsize=7, loc="upper right")
 
 
-def curve_figure(privacy: Mapping[str, Any]) -> tuple[Figure, str]:
+def curve_figure(privacy: PrivacyResult) -> tuple[Figure, str]:
     """Task error against attack success for every design (95 % intervals as bars)."""
     from mincam_render.analysis.plots import plt
 
@@ -75,17 +77,17 @@ def curve_figure(privacy: Mapping[str, Any]) -> tuple[Figure, str]:
     )
 
 
-def matched_baseline(privacy: Mapping[str, Any], design: str) -> str | None:
+def matched_baseline(privacy: PrivacyResult, design: str) -> str | None:
     """The baseline whose mean task error is closest to ``design``'s (None without baselines)."""
-    designs = privacy["designs"]
-    target = designs[design]["task_error"]["mean"]
+    designs = privacy.designs
+    target = designs[design].task_error.mean
     kinds = audit_designs(privacy)
     names = [n for n in designs if not kinds[n].is_mincam]
-    return min(names, key=lambda n: abs(designs[n]["task_error"]["mean"] - target), default=None)
+    return min(names, key=lambda n: abs(designs[n].task_error.mean - target), default=None)
 
 
 def _design_order(
-    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+    privacy: PrivacyResult, examples: Mapping[str, np.ndarray]
 ) -> tuple[list[str], list[str]]:
     """``(names in the file's order, names to show: minimalist, then baselines)``."""
     kinds = audit_designs(privacy)
@@ -118,7 +120,7 @@ def _grid(
 
 
 def examples_figure(
-    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+    privacy: PrivacyResult, examples: Mapping[str, np.ndarray]
 ) -> tuple[Figure, str]:
     """Rows: test frames; columns: the true view, each design's reconstruction (first seed)."""
     names, order = _design_order(privacy, examples)
@@ -141,7 +143,7 @@ DIFFERENCE_RANGE = 0.4
 
 
 def foreground_figure(
-    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray]
+    privacy: PrivacyResult, examples: Mapping[str, np.ndarray]
 ) -> tuple[Figure, str]:
     """The same frames as :func:`examples_figure`, as differences from the frame's background."""
     names, order = _design_order(privacy, examples)

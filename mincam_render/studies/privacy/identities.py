@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from mincam_render.core.strict_json import JsonObject
+
+if TYPE_CHECKING:
+    from mincam_render.data.dataset import TransportDataset
 
 
 def presence(states: Sequence[Mapping[str, Any]], roster: int) -> np.ndarray:
@@ -38,12 +43,15 @@ def presence(states: Sequence[Mapping[str, Any]], roster: int) -> np.ndarray:
     return out
 
 
-def episode_states(dataset: Any) -> list[dict[str, Any]]:
-    """Every frame's scene state of an opened dataset (its shards' frame records)."""
+def episode_states(dataset: TransportDataset) -> list[JsonObject]:
+    """Every frame's scene state of an opened dataset (its shards' frame records).
+
+    A state is the family's own record (``frame_state``), free-form JSON.
+    """
     return [dataset.frame_metadata(i)["state"] for i in range(dataset.num_frames)]
 
 
-def roster_of(dataset: Any) -> int:
+def roster_of(dataset: TransportDataset) -> int:
     """The roster size of a dataset's resolved scene description (0: none)."""
     description = dataset.manifest["job"]["family"]["description"]
     return int(description.get("people", {}).get("roster", 0))

@@ -1,10 +1,14 @@
-"""The privacy report: ``privacy.json`` (numbers), ``privacy.html`` (tables, figures), a PNG."""
+"""The privacy report: ``privacy.json`` (numbers), ``privacy.html`` (tables, figures), a PNG.
+
+:func:`write_report` takes the :class:`~.result.PrivacyResult` of
+:func:`~.study.run` and the examples it wrote beside it.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,20 +18,21 @@ from mincam_render.studies.privacy.figures import (
     foreground_figure,
 )
 from mincam_render.studies.privacy.metrics import FOREGROUND_SPECK_PX, FOREGROUND_THRESHOLD
+from mincam_render.studies.privacy.result import DecoderChoice, PrivacyResult
 
 if TYPE_CHECKING:
     from mincam_render.analysis.report import Report
+    from mincam_render.analysis.statistics import Interval
 
 
-def _iv(x: Mapping[str, Any], digits: int = 3) -> str:
-    lo, hi = x["ci95"]
-    return f"{x['mean']:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+def _iv(x: Interval, digits: int = 3) -> str:
+    return f"{x.mean:.{digits}f} [{x.low:.{digits}f}, {x.high:.{digits}f}]"
 
 
-def headline(privacy: Mapping[str, Any]) -> str:
+def headline(privacy: PrivacyResult) -> str:
     """One line: how many minimalist designs sit in the corner against a task-matched baseline."""
-    corner = privacy["corner"]
-    inside = [n for n, c in corner.items() if c["in_corner_against"]]
+    corner = privacy.corner
+    inside = [n for n, c in corner.items() if c.in_corner_against]
     if not inside:
         return (
             f"no minimalist design is in the corner: none beats a task-matched baseline on both "
@@ -56,46 +61,48 @@ TRIVIAL_LABEL = "trivial (background: sees no one; most frequent person)"
 PRIOR_LABEL = "prior (background + where people usually are; read-out ignored)"
 
 
-def _kept(decoders: list[Mapping[str, Any]]) -> str:
+def _kept(decoders: Sequence[DecoderChoice]) -> str:
     """Which decoder each attacker seed kept, counted: ``"conv 2, mlp 1"``."""
-    kinds = [d["decoder"] for d in decoders]
+    kinds = [d.decoder.value for d in decoders]
     return ", ".join(f"{k} {kinds.count(k)}" for k in sorted(set(kinds)))
 
 
-def design_rows(privacy: Mapping[str, Any]) -> list[list[Any]]:
+def design_rows(privacy: PrivacyResult) -> list[list[object]]:
     """Table rows: every design, then the prior, then the trivial attacker and predictor.
 
     Columns: design, pixels, task error, then :data:`DESIGN_COLUMNS`.
     """
-    rows = []
-    for name, d in privacy["designs"].items():
-        conv = d["convergence"]
-        attackers = sum(c["decoder"]["converged"] and c["reid"]["converged"] for c in conv)
+    rows: list[list[object]] = []
+    for name, d in privacy.designs.items():
+        a, f = d.attack, d.attack.figures
+        conv = a.convergence
+        attackers = sum(bool(c.decoder["converged"] and c.reid["converged"]) for c in conv)
         rows.append([
-            name, d["pixels"], _iv(d["task_error"]), d["task_state"], _iv(d["fg_psnr_db"], 2),
-            _iv(d["fg_psnr_gain_db"], 2), _iv(d["fg_psnr_over_prior_db"], 2), _iv(d["fg_ssim"]),
-            _iv(d["psnr_db"], 2), _iv(d["ssim"]), _iv(d["reid_top1"]), _kept(d["decoders"]),
+            name, d.pixels, _iv(d.task_error), d.task_state, _iv(f.fg_psnr_db, 2),
+            _iv(a.fg_psnr_gain_db, 2), _iv(a.fg_psnr_over_prior_db, 2), _iv(f.fg_ssim),
+            _iv(f.psnr_db, 2), _iv(f.ssim), _iv(f.figure("reid_top1")), _kept(a.decoders),
             f"{attackers} of {len(conv)}",
         ])  # fmt: skip
-    t, p = privacy["trivial"], privacy["prior"]
+    t, p = privacy.trivial, privacy.prior
+    pf, tf = p.figures, t.figures
     rows.append([
-        PRIOR_LABEL, 0, "", "", _iv(p["fg_psnr_db"], 2), _iv(p["fg_psnr_gain_db"], 2), "0",
-        _iv(p["fg_ssim"]), _iv(p["psnr_db"], 2), _iv(p["ssim"]), "", "", "",
+        PRIOR_LABEL, 0, "", "", _iv(pf.fg_psnr_db, 2), _iv(p.fg_psnr_gain_db, 2), "0",
+        _iv(pf.fg_ssim), _iv(pf.psnr_db, 2), _iv(pf.ssim), "", "", "",
     ])  # fmt: skip
     rows.append([
-        TRIVIAL_LABEL, 0, _iv(t["task_error"]), "", _iv(t["fg_psnr_db"], 2), "0", "",
-        _iv(t["fg_ssim"]), _iv(t["psnr_db"], 2), _iv(t["ssim"]), _iv(t["reid_top1"]), "", "",
+        TRIVIAL_LABEL, 0, _iv(t.task_error), "", _iv(tf.fg_psnr_db, 2), "0", "",
+        _iv(tf.fg_ssim), _iv(tf.psnr_db, 2), _iv(tf.ssim), _iv(tf.figure("reid_top1")), "", "",
     ])  # fmt: skip
     return rows
 
 
-def decoder_rows(privacy: Mapping[str, Any]) -> tuple[list[str], list[list[Any]]]:
+def decoder_rows(privacy: PrivacyResult) -> tuple[list[str], list[list[object]]]:
     """``(header, rows)``: every decoder's people PSNR per design, whichever the attacker kept."""
-    designs = privacy["designs"]
-    kinds = list(next(iter(designs.values()))["by_decoder"]) if designs else []
-    header = ["design", *(f"{k}: people PSNR (dB)" for k in kinds)]
-    rows = [
-        [name, *(_iv(d["by_decoder"][k]["fg_psnr_db"], 2) for k in kinds)]
+    designs = privacy.designs
+    kinds = list(next(iter(designs.values())).attack.by_decoder) if designs else []
+    header = ["design", *(f"{k.value}: people PSNR (dB)" for k in kinds)]
+    rows: list[list[object]] = [
+        [name, *(_iv(d.attack.by_decoder[k].fg_psnr_db, 2) for k in kinds)]
         for name, d in designs.items()
     ]
     return header, rows
@@ -105,19 +112,19 @@ def decoder_rows(privacy: Mapping[str, Any]) -> tuple[list[str], list[list[Any]]
 PAIRED_HEADER = ["design", "task-matched baseline", "people PSNR (dB)", "re-id top-1"]
 
 
-def paired_rows(privacy: Mapping[str, Any]) -> list[list[Any]]:
+def paired_rows(privacy: PrivacyResult) -> list[list[object]]:
     """Per minimalist design and task-matched baseline: attack figures design − baseline, paired."""
     return [
         [name, base, _iv(diff["fg_psnr_db"], 2), _iv(diff["reid_top1"])]
-        for name, c in privacy["corner"].items()
-        for base, diff in c["paired"].items()
+        for name, c in privacy.corner.items()
+        for base, diff in c.paired.items()
     ]
 
 
-def _tables(page: Report, privacy: Mapping[str, Any]) -> None:
+def _tables(page: Report, privacy: PrivacyResult) -> None:
     page.heading("Every design")
     page.table(
-        ["design", "pixels", f"task {privacy['error_name']}", *DESIGN_COLUMNS],
+        ["design", "pixels", f"task {privacy.error_name}", *DESIGN_COLUMNS],
         design_rows(privacy),
         caption="Mean [95 % CI]. Task: over training seeds and test episodes; attacks: over "
         "attacker seeds and test episodes. People: PSNR and SSIM on the foreground (the pixels "
@@ -128,7 +135,7 @@ def _tables(page: Report, privacy: Mapping[str, Any]) -> None:
         "over the prior whose interval excludes 0 is what the read-out tells about the people.",
     )
     page.heading("Verdicts (only where intervals separate)")
-    page.bullets([c["verdict"] for c in privacy["corner"].values()])
+    page.bullets([c.verdict for c in privacy.corner.values()])
     page.table(
         PAIRED_HEADER,
         paired_rows(privacy),
@@ -144,12 +151,12 @@ def _tables(page: Report, privacy: Mapping[str, Any]) -> None:
     )
 
 
-def _method(page: Report, privacy: Mapping[str, Any]) -> None:
-    cfg = privacy["config"]
+def _method(page: Report, privacy: PrivacyResult) -> None:
+    cfg = privacy.config
     cmp, att = cfg["comparison"], cfg["attack"]
     page.heading("Method")
     page.bullets([
-        f"Scene: {privacy['task']} at {cmp['fps']:g} fps with a roster of {privacy['roster']} "
+        f"Scene: {privacy.task} at {cmp['fps']:g} fps with a roster of {privacy.roster} "
         f"people (fixed looks and gait; overrides {cmp['overrides']}); "
         f"{cmp['train_episodes']} training episodes of {cmp['train_frames']} frames, one "
         f"validation episode, {cmp['test_episodes']} test episodes of {cmp['test_frames']}.",
@@ -163,17 +170,25 @@ def _method(page: Report, privacy: Mapping[str, Any]) -> None:
         "the best validation state kept.",
         "Foreground: pixels whose display value differs from the background by more than "
         f"{FOREGROUND_THRESHOLD:g}, specks of at most {FOREGROUND_SPECK_PX} pixels dropped "
-        f"({100 * privacy['trivial']['fg_fraction']:.1f} % of the test "
+        f"({100 * privacy.trivial.fg_fraction:.1f} % of the test "
         "pixels). PSNR and SSIM: scikit-image, per frame, averaged (SSIM's map averaged over "
         "the foreground); re-id: the top-scored person is in the room, over frames with "
         "someone inside.",
     ])  # fmt: skip
 
 
-def write_privacy_report(
-    privacy: Mapping[str, Any], examples: Mapping[str, np.ndarray], out_dir: str | Path
+def write_report(
+    privacy: PrivacyResult,
+    out_dir: str | Path,
+    examples: Mapping[str, np.ndarray] | None = None,
 ) -> dict[str, str]:
     """Write ``privacy.json``, ``privacy.html`` and ``privacy.png`` (the curve) to ``out_dir``.
+
+    Args:
+        privacy: the audit's result (:func:`~.study.run`).
+        out_dir: created if needed.
+        examples: the reconstructions shown (``examples.npz``'s arrays); None
+            reads ``out_dir/examples.npz``, which :func:`~.study.run` wrote.
 
     Returns:
         ``{"json": path, "html": path, "png": path}``.
@@ -183,6 +198,9 @@ def write_privacy_report(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if examples is None:
+        with np.load(out / "examples.npz") as saved:
+            examples = dict(saved)
     page = Report("Privacy audit: what can an attacker recover from K measurements?")
     page.heading("Answer")
     page.paragraph(headline(privacy))
@@ -192,6 +210,6 @@ def write_privacy_report(
     page.figure(*foreground_figure(privacy, examples))
     _method(page, privacy)
     png = atomic_write_bytes(out / "privacy.png", figure_png(curve_figure(privacy)[0]))
-    json_path = atomic_write_bytes(out / "privacy.json", json_bytes(privacy))
+    json_path = atomic_write_bytes(out / "privacy.json", json_bytes(privacy.as_json()))
     html_path = page.write(out / "privacy.html")
     return {"json": str(json_path), "html": str(html_path), "png": str(png)}

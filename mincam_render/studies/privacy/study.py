@@ -1,4 +1,4 @@
-"""The privacy audit: task error against attack success, per design (:func:`analyze_privacy`).
+"""The privacy audit: task error against attack success, per design (:func:`run`).
 
 1. Render and train as the comparison does (:func:`run_comparison`): workspace
    episodes with a roster of people, each design trained for the task (people
@@ -28,12 +28,13 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mincam_render.analysis.statistics import (
     EpisodeErrors,
+    Interval,
     Pooling,
     bootstrap_interval,
     converged,
@@ -41,8 +42,8 @@ from mincam_render.analysis.statistics import (
 )
 from mincam_render.core import strict_json
 from mincam_render.core.seeds import stream_seed
-from mincam_render.studies.privacy.config import PrivacyConfig
-from mincam_render.studies.privacy.curve import corner_verdicts
+from mincam_render.studies.privacy.config import DecoderKind, PrivacyConfig
+from mincam_render.studies.privacy.curve import rederive_verdicts
 from mincam_render.studies.privacy.identities import episode_states, presence, roster_of
 from mincam_render.studies.privacy.metrics import (
     display,
@@ -52,14 +53,27 @@ from mincam_render.studies.privacy.metrics import (
     reid_top1,
     white_level,
 )
+from mincam_render.studies.privacy.result import (
+    FIGURES,
+    IMAGE_FIGURES,
+    AttackConvergence,
+    AttackerSeed,
+    AttackFigures,
+    DecoderChoice,
+    DesignAttack,
+    DesignAudit,
+    EpisodeScores,
+    PriorAudit,
+    PrivacyResult,
+    TrivialAudit,
+    interval_from_json,
+)
 
 if TYPE_CHECKING:
-    from mincam_render.studies.privacy.decoders import DecoderKind
+    from mincam_render.learn.training_data import TrainingData
+    from mincam_render.studies.privacy.decoders import Decoder
 
-#: The reconstruction figures (foreground, then the whole view), in ``privacy.json``'s order.
-IMAGE_FIGURES = ("fg_psnr_db", "fg_ssim", "psnr_db", "ssim")
-#: Every attack figure, in ``privacy.json``'s order.
-FIGURES = (*IMAGE_FIGURES, "reid_top1")
+__all__ = ["FIGURES", "IMAGE_FIGURES", "Episode", "attack_design", "run"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,40 +122,44 @@ def load_episodes(
     return out
 
 
-def score_reconstruction(episode: Episode, recon: np.ndarray) -> dict[str, float]:
+def score_reconstruction(episode: Episode, recon: np.ndarray) -> EpisodeScores:
     """:data:`IMAGE_FIGURES` of reconstructions ``[frame, row, col]`` of ``episode``'s views."""
-    quality = foreground_quality(episode.views, recon, episode.mask)
-    return {k: quality[k] for k in IMAGE_FIGURES}
+    q = foreground_quality(episode.views, recon, episode.mask)
+    return EpisodeScores(
+        fg_psnr_db=q["fg_psnr_db"], fg_ssim=q["fg_ssim"], psnr_db=q["psnr_db"], ssim=q["ssim"]
+    )
 
 
 def _errors(
-    per_seed: Sequence[Mapping[str, Mapping[str, float]]], figure: str, frames: Mapping[str, int]
+    per_seed: Sequence[Mapping[str, EpisodeScores]], figure: str, frames: Mapping[str, int]
 ) -> EpisodeErrors:
     """``figure`` of per-seed ``{episode: figures}`` as ``[seed, episode]`` (mean pooling)."""
     names = sorted(frames)
     return EpisodeErrors(
-        error=np.array([[s[e][figure] for e in names] for s in per_seed]),
+        error=np.array([[s[e].figure(figure) for e in names] for s in per_seed]),
         frames=np.array([frames[e] for e in names]),
         pooling=Pooling.MEAN,
     )
 
 
 def _intervals(
-    per_seed: Sequence[Mapping[str, Mapping[str, float]]],
+    per_seed: Sequence[Mapping[str, EpisodeScores]],
     frames: Mapping[str, int],
-    figures: Sequence[str],
     seed: int,
-) -> dict[str, Any]:
-    """``{figure: {"mean", "ci95"}}`` over seeds and test episodes."""
-    return {
-        f: bootstrap_interval(_errors(per_seed, f, frames), seed=seed).as_dict() for f in figures
-    }
+    *,
+    reid: bool,
+) -> AttackFigures:
+    """:data:`IMAGE_FIGURES` (and ``reid_top1`` if ``reid``) over seeds and test episodes."""
+    figures = FIGURES if reid else IMAGE_FIGURES
+    return AttackFigures(
+        **{f: bootstrap_interval(_errors(per_seed, f, frames), seed=seed) for f in figures}
+    )
 
 
 def _fit_decoders(
     x: Mapping[str, np.ndarray], episodes: Mapping[str, Episode], cfg: PrivacyConfig, seed: int
-) -> tuple[dict[DecoderKind, Any], dict[DecoderKind, float]]:
-    """Every decoder of :data:`~.decoders.DECODERS`, and each one's validation mean squared error.
+) -> tuple[dict[DecoderKind, Decoder], dict[DecoderKind, float]]:
+    """Every decoder of :data:`~.config.DECODERS`, and each one's validation mean squared error.
 
     The error is of the reconstructed validation views (all pixels), the loss
     every decoder was trained on.
@@ -165,15 +183,15 @@ def _fit_decoders(
 
 def _attack_once(
     run_dir: str,
-    data: Mapping[str, Any],
+    data: Mapping[str, TrainingData],
     episodes: Mapping[str, Episode],
     cfg: PrivacyConfig,
     seed: int,
-) -> dict[str, Any]:
-    """One attacker seed against one trained design: per test episode and decoder, its figures."""
+) -> tuple[AttackerSeed, dict[str, np.ndarray]]:
+    """One attacker seed against one trained design, and the kept decoder's test views."""
     from mincam_render.learn.train import TrainingData
     from mincam_render.studies.privacy.attacks import design_camera, measurements, train_reid
-    from mincam_render.studies.privacy.decoders import DecoderKind, reconstruct
+    from mincam_render.studies.privacy.decoders import RidgeDecoder, reconstruct
 
     train = TrainingData.concat([data[k] for k in sorted(data) if k.startswith("train-")])
     camera = design_camera(run_dir, train)
@@ -188,34 +206,36 @@ def _attack_once(
         cfg.attack,
         seed,
     )
-    out: dict[str, Any] = {
-        "episodes": {},
-        "by_decoder": {k: {} for k in fitted},
-        "examples": {},
-        "decoder": kind,
-        "decoder_val_mse": val_mse,
-        "ridge_penalty": fitted[DecoderKind.RIDGE].penalty,
-    }
+    by_decoder: dict[DecoderKind, dict[str, EpisodeScores]] = {k: {} for k in fitted}
+    scores, examples = {}, {}
     for name in sorted(k for k in data if k.startswith("test-")):
         ep = episodes[name]
         for k, d in fitted.items():
             recon = reconstruct(d, x[name], ep.background)
-            out["by_decoder"][k][name] = score_reconstruction(ep, recon)
+            by_decoder[k][name] = score_reconstruction(ep, recon)
             if k == kind:
-                out["examples"][name] = recon
+                examples[name] = recon
         top1 = reid_top1(reid.predict(x[name]), ep.present)
-        out["episodes"][name] = {**out["by_decoder"][kind][name], "reid_top1": top1}
+        scores[name] = dataclasses.replace(by_decoder[kind][name], reid_top1=top1)
     trained = {k: converged(d.history) for k, d in fitted.items() if d.history is not None}
     closed_form = {"converged": True, "improvement": 0.0, "steps": 0}  # ridge: solved exactly
-    out["convergence"] = {
-        "decoder": trained.get(kind, closed_form),
-        "reid": converged(reid.history),
-        "decoders": trained,
-    }
-    return out
+    ridge = fitted[DecoderKind.RIDGE]
+    if not isinstance(ridge, RidgeDecoder):
+        raise TypeError(f"the ridge decoder is a {type(ridge).__name__}")  # train_decoder's
+    penalty = ridge.penalty
+    return AttackerSeed(
+        episodes=scores,
+        by_decoder=by_decoder,
+        choice=DecoderChoice(decoder=kind, decoder_val_mse=val_mse, ridge_penalty=penalty),
+        convergence=AttackConvergence(
+            decoder=trained.get(kind, closed_form),
+            reid=converged(reid.history),
+            decoders=trained,
+        ),
+    ), examples
 
 
-def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]:
+def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, EpisodeScores]:
     """Per test episode: the background's figures (it sees no one), the prior's top-1 accuracy.
 
     Also each episode's foreground share of pixels and frames with a foreground.
@@ -228,12 +248,19 @@ def trivial_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float
             continue
         quality = foreground_quality(ep.views, ep.background, ep.mask)
         scores = prior_scores(present, len(ep.present))
-        keep = (*IMAGE_FIGURES, "fg_fraction", "fg_frames")
-        out[name] = {**{k: quality[k] for k in keep}, "reid_top1": reid_top1(scores, ep.present)}
+        out[name] = EpisodeScores(
+            fg_psnr_db=quality["fg_psnr_db"],
+            fg_ssim=quality["fg_ssim"],
+            psnr_db=quality["psnr_db"],
+            ssim=quality["ssim"],
+            fg_fraction=quality["fg_fraction"],
+            fg_frames=int(quality["fg_frames"]),
+            reid_top1=reid_top1(scores, ep.present),
+        )
     return out
 
 
-def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]:
+def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, EpisodeScores]:
     """Per test episode: the figures of each frame's background plus the mean training difference.
 
     The attacker that knows where people usually are in this room (the mean of
@@ -250,53 +277,62 @@ def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]
 
 
 def attack_design(
-    design: Mapping[str, Any],
-    data: Mapping[str, Any],
+    runs: Sequence[str],
+    data: Mapping[str, TrainingData],
     episodes: Mapping[str, Episode],
     cfg: PrivacyConfig,
     name: str,
-    references: Mapping[str, Mapping[str, Mapping[str, float]]],
-) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    *,
+    trivial: Mapping[str, EpisodeScores],
+    prior: Mapping[str, EpisodeScores],
+) -> tuple[DesignAttack, dict[str, np.ndarray]]:
     """Every attacker seed against one design: figures with intervals, the first seed's examples.
 
-    ``references``: the ``"trivial"`` and ``"prior"`` attackers' figures per test
-    episode, for the paired people PSNR gains over them (``fg_psnr_gain_db``,
-    ``fg_psnr_over_prior_db``).
+    Args:
+        runs: the design's training runs (directories); attacker seed ``i``
+            attacks run ``i`` modulo their number.
+        data: every episode's training data (read-outs are measured from it).
+        episodes: every episode as the attacker sees it.
+        cfg: the audit.
+        name: the design's name (the attacker seeds' stream).
+        trivial: the trivial attacker's figures per test episode, for the
+            paired people PSNR gain over it (``fg_psnr_gain_db``).
+        prior: the prior attacker's, likewise (``fg_psnr_over_prior_db``).
     """
-    runs = design["runs"]
-    results = []
+    results: list[AttackerSeed] = []
+    examples: dict[str, np.ndarray] = {}
     for i in range(cfg.attack.seeds):
         seed = stream_seed(cfg.comparison.seed, f"attack/{name}", i)
-        results.append(_attack_once(runs[i % len(runs)], data, episodes, cfg, seed))
-    per_seed = [r["episodes"] for r in results]
+        result, ex = _attack_once(runs[i % len(runs)], data, episodes, cfg, seed)
+        results.append(result)
+        examples = examples or ex
+    per_seed = tuple(r.episodes for r in results)
     frames = {k: len(episodes[k].views) for k in per_seed[0]}
     seed = cfg.comparison.seed
     by_decoder = {
-        k: _intervals([r["by_decoder"][k] for r in results], frames, IMAGE_FIGURES, seed)
-        for k in results[0]["by_decoder"]
+        k: _intervals([r.by_decoder[k] for r in results], frames, seed, reid=False)
+        for k in results[0].by_decoder
     }
-    return {
-        **_intervals(per_seed, frames, FIGURES, seed),
-        "fg_psnr_gain_db": _gain(per_seed, references["trivial"], frames, seed),
-        "fg_psnr_over_prior_db": _gain(per_seed, references["prior"], frames, seed),
-        "by_decoder": by_decoder,
-        "per_seed": per_seed,
-        "convergence": [r["convergence"] for r in results],
-        "decoders": [
-            {k: r[k] for k in ("decoder", "decoder_val_mse", "ridge_penalty")} for r in results
-        ],
-    }, results[0]["examples"]
+    return DesignAttack(
+        figures=_intervals(per_seed, frames, seed, reid=True),
+        fg_psnr_gain_db=_gain(per_seed, trivial, frames, seed),
+        fg_psnr_over_prior_db=_gain(per_seed, prior, frames, seed),
+        by_decoder=by_decoder,
+        per_seed=per_seed,
+        convergence=tuple(r.convergence for r in results),
+        decoders=tuple(r.choice for r in results),
+    ), examples
 
 
 def _gain(
-    per_seed: Sequence[Mapping[str, Mapping[str, float]]],
-    reference: Mapping[str, Mapping[str, float]],
+    per_seed: Sequence[Mapping[str, EpisodeScores]],
+    reference: Mapping[str, EpisodeScores],
     frames: Mapping[str, int],
     seed: int,
-) -> dict[str, Any]:
-    """People PSNR minus a reference attacker's, paired on the test episodes (mean, ci95)."""
+) -> Interval:
+    """People PSNR minus a reference attacker's, paired on the test episodes (dB)."""
     a, b = _errors(per_seed, "fg_psnr_db", frames), _errors([reference], "fg_psnr_db", frames)
-    return paired_difference(a, b, seed=seed).as_dict()
+    return paired_difference(a, b, seed=seed)
 
 
 def _write_examples(
@@ -317,56 +353,57 @@ def _write_examples(
     )
 
 
-def _trivial_record(
-    trivial: Mapping[str, Mapping[str, float]], frames: Mapping[str, int], task: Any, seed: int
-) -> dict[str, Any]:
+def _trivial_audit(
+    trivial: Mapping[str, EpisodeScores], frames: Mapping[str, int], task: Interval, seed: int
+) -> TrivialAudit:
     """``privacy.json``'s ``trivial``: task error, attack figures with intervals, per episode."""
-    return {
-        "task_error": task,
-        **_intervals([trivial], frames, FIGURES, seed),
-        "fg_fraction": float(np.mean([t["fg_fraction"] for t in trivial.values()])),
-        "episodes": dict(trivial),
-    }
+    return TrivialAudit(
+        task_error=task,
+        figures=_intervals([trivial], frames, seed, reid=True),
+        fg_fraction=float(np.mean([t.fg_fraction for t in trivial.values()])),
+        episodes=dict(trivial),
+    )
 
 
-def _prior_record(
-    prior: Mapping[str, Mapping[str, float]],
-    trivial: Mapping[str, Mapping[str, float]],
+def _prior_audit(
+    prior: Mapping[str, EpisodeScores],
+    trivial: Mapping[str, EpisodeScores],
     frames: Mapping[str, int],
     seed: int,
-) -> dict[str, Any]:
+) -> PriorAudit:
     """``privacy.json``'s ``prior``: image figures with intervals, the paired gain over trivial."""
-    return {
-        **_intervals([prior], frames, IMAGE_FIGURES, seed),
-        "fg_psnr_gain_db": _gain([prior], trivial, frames, seed),
-        "episodes": dict(prior),
-    }
+    return PriorAudit(
+        figures=_intervals([prior], frames, seed, reid=False),
+        fg_psnr_gain_db=_gain([prior], trivial, frames, seed),
+        episodes=dict(prior),
+    )
 
 
-def analyze_privacy(
-    cfg: PrivacyConfig,
-    out_dir: str | os.PathLike,
+def run(
+    config: PrivacyConfig,
+    out: str | os.PathLike,
     *,
     workers: int = 2,
     train_workers: int = 1,
     ray_address: str | None = None,
     progress: bool = False,
-) -> dict[str, Any]:
-    """Run the audit (module docstring) into ``out_dir``; ``privacy.json``'s contents.
+) -> PrivacyResult:
+    """Run the audit (module docstring) into ``out``.
 
     ``workers``, ``train_workers`` and ``ray_address``: where episodes render and
     the task's runs train (:func:`~mincam_render.studies.comparison.study.run_comparison`);
     the attacks train in this process.
 
-    Writes ``out_dir/privacy.json`` and ``out_dir/examples.npz`` (true test views,
-    their backgrounds and foreground masks, and each design's reconstructions of
-    a few test frames, for the report).
+    Writes ``out/privacy.json`` (the result's :meth:`~.result.PrivacyResult.as_json`)
+    and ``out/examples.npz`` (true test views, their backgrounds and foreground
+    masks, and each design's reconstructions of a few test frames, for the report).
     """
     from tqdm import tqdm
 
     from mincam_render.studies.comparison.study import render_episodes, run_comparison
 
-    out = Path(out_dir)
+    out = Path(out)
+    cfg = config
     result = run_comparison(
         cfg.comparison,
         out,
@@ -383,29 +420,30 @@ def analyze_privacy(
     block = result.headline
     todo = tqdm(block.designs.items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
-        references = {"trivial": trivial, "prior": prior}
-        attack, ex = attack_design(d, data, episodes, cfg, name, references)
-        designs[name] = {
-            "pixels": d["model"]["pixels"],
-            "task_error": d["error"],
-            "task_state": d["state"],
-            "task_seeds": len(d["runs"]),
-            **attack,
-        }
+        attack, ex = attack_design(d["runs"], data, episodes, cfg, name, trivial=trivial,
+                                   prior=prior)  # fmt: skip
+        designs[name] = DesignAudit(
+            pixels=d["model"]["pixels"],
+            task_error=interval_from_json(d["error"]),
+            task_state=d["state"],
+            task_seeds=len(d["runs"]),
+            attack=attack,
+        )
         examples[name] = ex["test-0"]
     frames = {k: len(episodes[k].views) for k in trivial}
-    privacy = {
-        "task": result.family,
-        "error_name": block.error_name,
-        "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
-        "roster": int(episodes["test-0"].present.shape[1]),
-        "episodes": result.episodes,
-        "designs": designs,
-        "trivial": _trivial_record(trivial, frames, block.trivial["error"], cfg.comparison.seed),
-        "prior": _prior_record(prior, trivial, frames, cfg.comparison.seed),
-        "comparison": str(out / "metrics.json"),
-    }
-    privacy["corner"] = corner_verdicts(privacy)
+    seed = cfg.comparison.seed
+    privacy = rederive_verdicts(PrivacyResult(
+        task=result.family,
+        error_name=block.error_name,
+        config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
+        roster=int(episodes["test-0"].present.shape[1]),
+        episodes=result.episodes,
+        designs=designs,
+        trivial=_trivial_audit(trivial, frames, interval_from_json(block.trivial["error"]), seed),
+        prior=_prior_audit(prior, trivial, frames, seed),
+        comparison=str(out / "metrics.json"),
+        corner={},
+    ))  # fmt: skip
     _write_examples(out / "examples.npz", episodes["test-0"], examples, cfg.attack.examples)
-    (out / "privacy.json").write_text(strict_json.dumps(privacy) + "\n")
+    (out / "privacy.json").write_text(strict_json.dumps(privacy.as_json()) + "\n")
     return privacy

@@ -1,6 +1,6 @@
 """The robustness report: designs' error under each perturbation, tolerances, fabrication specs.
 
-:func:`write_report` takes design records of
+:func:`write_report` takes the :class:`~.result.DesignCurves` of
 :mod:`mincam_render.studies.robustness.study` (one per run, or pooled over training
 seeds) and writes ``robustness.json``, ``robustness.png`` (error increase
 against magnitude, one panel per term and one for the mix) and
@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from mincam_render.analysis.report import Report, figure_png
 from mincam_render.core import strict_json
 from mincam_render.studies.robustness.config import CURVES, MIX
+from mincam_render.studies.robustness.result import Curve, DesignCurves
 
 #: Panel titles of the curves.
 TITLES = {
@@ -35,31 +35,31 @@ TITLES = {
 }
 
 
-def _default_text(curve: Mapping[str, Any]) -> str:
+def _default_text(curve: Curve) -> str:
     units = {"mm": " mm", "deg": " deg", "percent": " %", "_v": " V", "_cm": " cm", "_m": " m"}
     parts = []
-    for name, value in curve["default"].items():
+    for name, value in curve.default.items():
         unit = next((u for k, u in units.items() if name.endswith(k)), "")
         parts.append(f"{name} {value:g}{unit}")
     return ", ".join(parts)
 
 
-def robustness_figure(designs: Sequence[Mapping[str, Any]]) -> bytes:
+def robustness_figure(designs: Sequence[DesignCurves]) -> bytes:
     """PNG: mean error increase (%) with its 95 % interval against the magnitude, per curve."""
     from mincam_render.analysis.plots import plt
 
     cols = math.ceil(len(CURVES) / 2)
     fig, axes = plt.subplots(2, cols, figsize=(3.75 * cols, 7), sharex=True)
-    allowed = 100 * designs[0]["config"]["allowed_increase"]
+    allowed = 100 * designs[0].config.allowed_increase
     for ax, curve in zip(axes.ravel(), CURVES, strict=True):
         for d in designs:
-            lv = d["curves"][curve]["levels"]
-            x = [v["level"] for v in lv]
-            y = [100 * v["mean_increase"] for v in lv]
-            lo = [100 * v["ci95_increase"][0] for v in lv]
-            hi = [100 * v["ci95_increase"][1] for v in lv]
-            style = "-" if d["robust"] else "--"
-            (line,) = ax.plot(x, y, style, marker="o", ms=3, label=d["name"])
+            lv = d.curves[curve].levels
+            x = [v.level for v in lv]
+            y = [100 * v.mean_increase for v in lv]
+            lo = [100 * v.ci95_increase[0] for v in lv]
+            hi = [100 * v.ci95_increase[1] for v in lv]
+            style = "-" if d.robust else "--"
+            (line,) = ax.plot(x, y, style, marker="o", ms=3, label=d.name)
             ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
         ax.axhline(allowed, color="k", lw=0.8, ls=":")
         ax.set_title(TITLES[curve], fontsize=10)
@@ -74,9 +74,9 @@ def robustness_figure(designs: Sequence[Mapping[str, Any]]) -> bytes:
     return figure_png(fig)
 
 
-def _tables(page: Report, designs: Sequence[Mapping[str, Any]]) -> None:
+def _tables(page: Report, designs: Sequence[DesignCurves]) -> None:
     """Increase at the default ranges, and tolerances, one row per design."""
-    levels = list(designs[0]["config"]["levels"])
+    levels = list(designs[0].config.levels)
     level_one = levels.index(1.0) if 1.0 in levels else None
     head = ["design", "training", "runs", "nominal error"] + [TITLES[c] for c in CURVES]
     if level_one is not None:
@@ -84,41 +84,42 @@ def _tables(page: Report, designs: Sequence[Mapping[str, Any]]) -> None:
         for d in designs:
             cells = []
             for c in CURVES:
-                v = d["curves"][c]["levels"][level_one]
-                lo, hi = (100 * x for x in v["ci95_increase"])
-                cells.append(f"{100 * v['mean_increase']:+.1f} % [{lo:+.1f}, {hi:+.1f}]")
+                v = d.curves[c].levels[level_one]
+                lo, hi = (100 * x for x in v.ci95_increase)
+                cells.append(f"{100 * v.mean_increase:+.1f} % [{lo:+.1f}, {hi:+.1f}]")
             rows.append(_lead(d) + cells)
         page.table(head, rows, caption="Error increase at the default ranges (95 % interval)")
-        if all("mean_error" in d["curves"][MIX]["levels"][level_one] for d in designs):
+        if all(d.curves[MIX].levels[level_one].mean_error is not None for d in designs):
             rows = [_lead(d) + _errors_at(d, level_one) for d in designs]
             page.table(head, rows, caption="Error at the default ranges (95 % interval)")
     rows = []
     for d in designs:
         cells = []
         for c in CURVES:
-            tol = d["curves"][c]["tolerance"]
-            cells.append(f"{'>= ' if not tol['bounded'] else ''}{tol['factor']:.2g}x")
+            tol = d.curves[c].tolerance
+            cells.append(f"{'>= ' if not tol.bounded else ''}{tol.factor:.2g}x")
         rows.append(_lead(d) + cells)
-    allowed = 100 * designs[0]["config"]["allowed_increase"]
+    allowed = 100 * designs[0].config.allowed_increase
     page.table(head, rows, caption=f"Tolerance: magnitude (x default) within +{allowed:g} % error")
 
 
-def _errors_at(d: Mapping[str, Any], level: int) -> list[str]:
+def _errors_at(d: DesignCurves, level: int) -> list[str]:
     """The error itself under each curve at level index ``level``, with its interval."""
     cells = []
     for c in CURVES:
-        v = d["curves"][c]["levels"][level]
-        cells.append(f"{v['mean_error']:.4g} [{v['ci95_error'][0]:.4g}, {v['ci95_error'][1]:.4g}]")
+        v = d.curves[c].levels[level]
+        lo, hi = v.ci95_error or (float("nan"), float("nan"))
+        cells.append(f"{v.mean_error:.4g} [{lo:.4g}, {hi:.4g}]")
     return cells
 
 
-def _lead(d: Mapping[str, Any]) -> list[Any]:
-    kind = "robust" if d["robust"] else "nominal"
-    return [d["name"], kind, d["runs"], f"{d['nominal_error']:.4g}"]
+def _lead(d: DesignCurves) -> list[object]:
+    kind = "robust" if d.robust else "nominal"
+    return [d.name, kind, d.runs, f"{d.nominal_error:.4g}"]
 
 
 def write_report(
-    designs: Sequence[Mapping[str, Any]],
+    designs: Sequence[DesignCurves],
     out_dir: str | os.PathLike,
     *,
     notes: Sequence[str] = (),
@@ -126,7 +127,7 @@ def write_report(
     """Write ``robustness.json``, ``robustness.png`` and ``robustness.html`` into ``out_dir``.
 
     Args:
-        designs: design records (:func:`~mincam_render.studies.robustness.study.robustness_curves`
+        designs: designs' curves (:func:`~mincam_render.studies.robustness.study.robustness_curves`
             or :func:`~mincam_render.studies.robustness.study.pool_curves`), same configuration.
         out_dir: created if needed.
         notes: sentences shown under the title (data sizes, provenance).
@@ -142,14 +143,15 @@ def write_report(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"json": out / "robustness.json", "png": out / "robustness.png"}
-    atomic_write_bytes(paths["json"], (strict_json.dumps(list(designs), indent=1) + "\n").encode())
+    records = [d.as_json() for d in designs]
+    atomic_write_bytes(paths["json"], (strict_json.dumps(records, indent=1) + "\n").encode())
     png = robustness_figure(designs)
     atomic_write_bytes(paths["png"], png)
     page = Report("Designs that survive the workshop: robustness to tolerances")
-    cfg = designs[0]["config"]
+    cfg = designs[0].config
     page.paragraph(
-        f"Each perturbation alone, and all at once, at {', '.join(f'{v:g}' for v in cfg['levels'])}"
-        f" x its default range; {cfg['draws']} built cameras drawn per level (the same draws "
+        f"Each perturbation alone, and all at once, at {', '.join(f'{v:g}' for v in cfg.levels)}"
+        f" x its default range; {cfg.draws} built cameras drawn per level (the same draws "
         "for every design), task error pooled over the test episodes; intervals resample "
         "runs and draws. Camera pose error is approximated in the mask plane "
         "(mincam_render.optics.pose: exact for orientation, for position at the "
@@ -158,7 +160,7 @@ def write_report(
     for note in notes:
         page.paragraph(note)
     page.heading("Default ranges")
-    page.bullets([f"{TITLES[c]}: {_default_text(designs[0]['curves'][c])}" for c in CURVES[:-1]])
+    page.bullets([f"{TITLES[c]}: {_default_text(designs[0].curves[c])}" for c in CURVES[:-1]])
     page.figure_png(
         png,
         "Mean error increase against magnitude, 95 % bootstrap intervals; "
@@ -167,7 +169,7 @@ def write_report(
     _tables(page, designs)
     page.heading("Fabrication specs (each term alone keeps the error within the limit)")
     for d in designs:
-        page.heading(d["name"], level=3)
-        page.bullets([d["curves"][c]["spec"] for c in CURVES])
+        page.heading(d.name, level=3)
+        page.bullets([d.curves[c].spec for c in CURVES])
     paths["html"] = page.write(out / "robustness.html")
     return paths

@@ -27,13 +27,17 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, Pooling, bootstrap_interval
+from mincam_render.analysis.statistics import (
+    EpisodeErrors,
+    Interval,
+    Pooling,
+    bootstrap_interval,
+)
 from mincam_render.core.seeds import stream_seed
 from mincam_render.optics.perturbation import (
     TERM_FIELDS,
@@ -42,6 +46,12 @@ from mincam_render.optics.perturbation import (
     record_name,
 )
 from mincam_render.studies.robustness.config import CURVES, MIX, RobustnessConfig
+from mincam_render.studies.robustness.result import (
+    Curve,
+    CurveLevel,
+    DesignCurves,
+    Tolerance,
+)
 
 if TYPE_CHECKING:
     from mincam_render.learn.models import MincamCamera
@@ -56,7 +66,9 @@ def curve_model(base: PerturbationModel, curve: str) -> PerturbationModel:
     return base if curve == MIX else base.only(PerturbationTerm(curve))
 
 
-def pooled_error(model: MincamCamera, tests: Mapping[str, TrainingData], draw: Any) -> float:
+def pooled_error(
+    model: MincamCamera, tests: Mapping[str, TrainingData], draw: PerturbationDraw | None
+) -> float:
     """The task error over every test episode (RMSE pooled over frames, rates averaged)."""
     from mincam_render.learn.evaluation import evaluate
 
@@ -94,7 +106,7 @@ def robustness_curves(
     *,
     name: str = "design",
     robust: bool = False,
-) -> dict[str, Any]:
+) -> DesignCurves:
     """Error increase of one trained design under every perturbation term and the mix.
 
     Args:
@@ -105,7 +117,7 @@ def robustness_curves(
         robust: whether it was trained under perturbations (for reports).
 
     Returns:
-        A design record (see :func:`design_record`) of one run.
+        The design's curves (see :func:`design_record`) from one run.
 
     """
     nominal = pooled_error(model, tests, None)
@@ -131,8 +143,8 @@ def design_record(
     nominal_errors: Sequence[float],
     increases: Mapping[str, Sequence[Sequence[Sequence[float]]]],
     config: RobustnessConfig,
-) -> dict[str, Any]:
-    """The record of a design from its runs: curves with intervals, tolerances, spec.
+) -> DesignCurves:
+    """The curves of a design from its runs: intervals, tolerances, specs.
 
     Args:
         name: the design's label.
@@ -143,48 +155,55 @@ def design_record(
 
     """
     nominal = np.asarray(nominal_errors, np.float64)
-    curves = {}
-    for curve in CURVES:
-        levels = []
-        for i, level in enumerate(config.levels):
-            per_run = np.array([run[i] for run in increases[curve]], np.float64)
-            ci = _draw_interval(per_run, config.seed)
-            absolute = _draw_interval(nominal[:, None] * (1.0 + per_run), config.seed)
-            levels.append(
-                {
-                    "level": level,
-                    "draws": int(per_run.shape[1]),
-                    "mean_increase": ci.mean,
-                    "ci95_increase": [ci.low, ci.high],
-                    "mean_error": absolute.mean,
-                    "ci95_error": [absolute.low, absolute.high],
-                    "increases": per_run.tolist(),
-                }
+    return DesignCurves(
+        name=name,
+        robust=bool(robust),
+        runs=len(nominal_errors),
+        nominal_error=float(np.mean(nominal_errors)),
+        nominal_errors=tuple(float(e) for e in nominal_errors),
+        config=config,
+        curves={c: _curve(c, nominal, increases[c], config) for c in CURVES},
+    )
+
+
+def _curve(
+    curve: str,
+    nominal: np.ndarray,
+    increases: Sequence[Sequence[Sequence[float]]],
+    config: RobustnessConfig,
+) -> Curve:
+    """One curve from ``[run][level][draw]`` increases and ``[run]`` nominal errors."""
+    levels = []
+    for i, level in enumerate(config.levels):
+        per_run = np.array([run[i] for run in increases], np.float64)
+        ci = _draw_interval(per_run, config.seed)
+        absolute = _draw_interval(nominal[:, None] * (1.0 + per_run), config.seed)
+        levels.append(
+            CurveLevel(
+                level=level,
+                draws=int(per_run.shape[1]),
+                mean_increase=ci.mean,
+                ci95_increase=(ci.low, ci.high),
+                mean_error=absolute.mean,
+                ci95_error=(absolute.low, absolute.high),
+                increases=tuple(tuple(run) for run in per_run.tolist()),
             )
-        tol = tolerance(
-            config.levels, [v["mean_increase"] for v in levels], config.allowed_increase
         )
-        base = curve_model(config.perturbation, curve).to_record()  # in mm, deg, %, cm
-        fields_ = _curve_fields(curve)
-        tol["values"] = {f: base[f] * tol["factor"] for f in fields_}
-        curves[curve] = {
-            "default": {f: base[f] for f in fields_},
-            "levels": levels,
-            "tolerance": tol,
-            "spec": fabrication_spec(curve, tol),
-        }
-    return {
-        "name": name,
-        "robust": bool(robust),
-        "runs": len(nominal_errors),
-        "nominal_error": float(np.mean(nominal_errors)),
-        "nominal_errors": [float(e) for e in nominal_errors],
-        "config": {**asdict(config), "perturbation": config.perturbation.to_record()},
-        "curves": curves,
-    }
+    factor, bounded = tolerance(
+        config.levels, [v.mean_increase for v in levels], config.allowed_increase
+    )
+    base = curve_model(config.perturbation, curve).to_record()  # in mm, deg, %, cm
+    fields_ = _curve_fields(curve)
+    tol = Tolerance(factor=factor, bounded=bounded, values={f: base[f] * factor for f in fields_})
+    return Curve(
+        default={f: base[f] for f in fields_},
+        levels=tuple(levels),
+        tolerance=tol,
+        spec=fabrication_spec(curve, tol),
+    )
 
 
-def _draw_interval(per_run: np.ndarray, seed: int) -> Any:
+def _draw_interval(per_run: np.ndarray, seed: int) -> Interval:
     """Mean and bootstrap interval of ``[run][draw]`` figures (runs and draws resampled)."""
     return bootstrap_interval(
         EpisodeErrors(error=per_run, frames=np.ones(per_run.shape[1]), pooling=Pooling.MEAN),
@@ -192,29 +211,38 @@ def _draw_interval(per_run: np.ndarray, seed: int) -> Any:
     )
 
 
-def pool_curves(records: Sequence[Mapping[str, Any]], name: str) -> dict[str, Any]:
-    """One design record from several runs' records (training seeds) of one design.
+def pool_curves(records: Sequence[DesignCurves], name: str) -> DesignCurves:
+    """One design's curves from several runs' curves (training seeds) of one design.
 
     Intervals then resample runs and draws. The runs must share their configuration.
+
+    Raises:
+        ValueError: no records, or records measured with different configurations.
     """
     if not records:
         raise ValueError("pool_curves needs at least one record")
-    configs = {repr(r["config"]) for r in records}
+    configs = {repr(r.config) for r in records}
     if len(configs) != 1:
         raise ValueError(f"{name}: the records were measured with different configurations")
-    c = dict(records[0]["config"])
-    c["perturbation"] = PerturbationModel.from_record(c["perturbation"])
-    c["levels"] = tuple(c["levels"])
-    config = RobustnessConfig(**c)
     increases = {curve: [run for r in records for run in _runs_of(r, curve)] for curve in CURVES}
-    nominal = [e for r in records for e in r["nominal_errors"]]
-    return design_record(name, all(r["robust"] for r in records), nominal, increases, config)
+    nominal = [e for r in records for e in r.nominal_errors]
+    return design_record(
+        name, all(r.robust for r in records), nominal, increases, records[0].config
+    )
 
 
-def _runs_of(record: Mapping[str, Any], curve: str) -> list[list[list[float]]]:
-    """``[run][level][draw]`` increases of a record."""
-    levels = record["curves"][curve]["levels"]
-    return [[lv["increases"][r] for lv in levels] for r in range(record["runs"])]
+def _runs_of(record: DesignCurves, curve: str) -> list[list[tuple[float, ...]]]:
+    """``[run][level][draw]`` increases of a record.
+
+    Raises:
+        ValueError: a summary's record (without its per-draw increases).
+    """
+    levels = record.curves[curve].levels
+    if any(lv.increases is None for lv in levels):
+        raise ValueError(f"{record.name}: a summary without per-draw increases cannot be pooled")
+    return [
+        [lv.increases[r] for lv in levels if lv.increases is not None] for r in range(record.runs)
+    ]
 
 
 def _curve_fields(curve: str) -> tuple[str, ...]:
@@ -226,8 +254,8 @@ def _curve_fields(curve: str) -> tuple[str, ...]:
 
 def tolerance(
     levels: Sequence[float], mean_increase: Sequence[float], allowed_increase: float
-) -> dict[str, Any]:
-    """The largest level whose mean increase stays within ``allowed_increase``.
+) -> tuple[float, bool]:
+    """``(factor, bounded)``: the largest level whose mean increase stays within the limit.
 
     Linear interpolation between the last level within and the first beyond;
     ``bounded`` is False when every level stays within (the tolerance is then
@@ -236,16 +264,15 @@ def tolerance(
     for i, (level, inc) in enumerate(zip(levels, mean_increase, strict=True)):
         if inc > allowed_increase:
             if i == 0:
-                return {"factor": 0.0, "bounded": True}
+                return 0.0, True
             l0, i0 = levels[i - 1], mean_increase[i - 1]
-            factor = l0 + (level - l0) * (allowed_increase - i0) / (inc - i0)
-            return {"factor": float(factor), "bounded": True}
-    return {"factor": float(levels[-1]), "bounded": False}
+            return float(l0 + (level - l0) * (allowed_increase - i0) / (inc - i0)), True
+    return float(levels[-1]), False
 
 
-def fabrication_spec(curve: str, tol: Mapping[str, Any]) -> str:
+def fabrication_spec(curve: str, tol: Tolerance) -> str:
     """A tolerance as a workshop instruction, e.g. ``"align each mask to +-0.3 mm"``."""
-    v = tol["values"]
+    v = tol.values
     texts = {
         "mask_shift": lambda: f"align each mask to ±{v['mask_shift_mm']:.2g} mm",
         "mask_rotation": lambda: f"square each mask to ±{v['mask_rotation_deg']:.2g}°",
@@ -266,10 +293,10 @@ def fabrication_spec(curve: str, tol: Mapping[str, Any]) -> str:
         "pose_position": lambda: (
             f"place the camera to ±{v['pose_position_cm']:.2g} cm along each axis"
         ),
-        MIX: lambda: f"all at once: {tol['factor']:.2g}x the default ranges",
+        MIX: lambda: f"all at once: {tol.factor:.2g}x the default ranges",
     }
     text = texts[curve]()
-    if not tol["bounded"]:
+    if not tol.bounded:
         text += " (or looser: within the measured range the error never rose by the limit)"
     return text
 
@@ -280,8 +307,8 @@ def run(
     config: RobustnessConfig,
     *,
     allow_unfinished: bool = False,
-) -> list[dict[str, Any]]:
-    """Every trained minimalist run under the perturbations: one record per run.
+) -> list[DesignCurves]:
+    """Every trained minimalist run under the perturbations: one design's curves per run.
 
     Args:
         runs: run directories (``mincam-render train``, nominal or robust).

@@ -20,11 +20,13 @@ from typing import Any
 
 from mincam_render.core import strict_json
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.learn import train as tr
 from mincam_render.optics.perturbation import PerturbationModel
 from mincam_render.studies.comparison.config import ComparisonConfig
 from mincam_render.studies.comparison.study import episode_record, keep_run_masks, trivial_metrics
 from mincam_render.studies.robustness.config import MIX, RobustnessConfig
+from mincam_render.studies.robustness.result import CurveLevel, DesignCurves
 from mincam_render.studies.robustness.study import (
     pool_curves,
     pool_episode_metrics,
@@ -87,70 +89,69 @@ def train_kinds(
     return runs
 
 
-def run_curves(run_dir: Path, tests: dict, config: RobustnessConfig, kind: str) -> dict:
-    """The run's robustness record, measured or read back from ``run_dir/robustness.json``."""
+def run_curves(run_dir: Path, tests: dict, config: RobustnessConfig, kind: str) -> DesignCurves:
+    """The run's curves, measured or read back from ``run_dir/robustness.json``."""
     path = run_dir / "robustness.json"
     if path.is_file():
         record = json.loads(path.read_text())
         if record["config"] == config_json(config):
-            return record
+            return DesignCurves.from_json(record)
     model = tr.restore_mincam(tr.open_run(run_dir), next(iter(tests.values())), "robustness")
-    record = robustness_curves(model, tests, config, name=run_dir.name, robust=kind == "robust")
-    path.write_text(strict_json.dumps(record, indent=None) + "\n")
-    return record
+    curves = robustness_curves(model, tests, config, name=run_dir.name, robust=kind == "robust")
+    path.write_text(strict_json.dumps(curves.as_json(), indent=None) + "\n")
+    return curves
 
 
-def summary(design: dict[str, Any]) -> dict[str, Any]:
-    """A design's figures without the raw per-draw increases."""
-    curves = {}
-    for name, c in design["curves"].items():
-        curves[name] = {
-            "default": c["default"],
-            "levels": [{k: v for k, v in lv.items() if k != "increases"} for lv in c["levels"]],
-            "tolerance": c["tolerance"],
-            "spec": c["spec"],
-        }
-    return {k: v for k, v in design.items() if k != "curves"} | {"curves": curves}
+def summary(design: DesignCurves) -> JsonObject:
+    """A design's record without the raw per-draw increases."""
+    return design.as_json(increases=False)
 
 
-def verdict(designs: dict[str, dict], allowed: float, trivial: float) -> str:
+def verdict(designs: Mapping[str, DesignCurves], allowed: float, trivial: float) -> str:
     """The issue's done-when, then which built camera is better, beside the trivial predictor.
 
     Done-when: robust designs within ``allowed`` under the default mix where nominal
     ones lose more. A relative figure alone favours a design that learned little.
     """
-    one = designs["nominal"]["config"]["levels"].index(1.0)
-    mix = {kind: d["curves"][MIX]["levels"][one] for kind, d in designs.items()}
+    mix = {kind: d.curves[MIX].level_at(1.0) for kind, d in designs.items()}
     r, n = mix["robust"], mix["nominal"]
     text = (
-        f"under the default mix, nominal designs lose {_pct(n, 'increase')}, robust designs "
-        f"{_pct(r, 'increase')} (limit {100 * allowed:g} %)"
+        f"under the default mix, nominal designs lose {_pct(n)}, robust designs "
+        f"{_pct(r)} (limit {100 * allowed:g} %)"
     )
     text += (
         "; done-when met"
-        if r["mean_increase"] <= allowed < n["mean_increase"]
+        if r.mean_increase <= allowed < n.mean_increase
         else ("; done-when NOT met as stated (see note)")
     )
-    errors = {k: designs[k]["nominal_error"] for k in KINDS}
+    errors = {k: designs[k].nominal_error for k in KINDS}
     text += (
         f". Error as designed: nominal {errors['nominal']:.4g}, robust {errors['robust']:.4g}; "
         f"under the mix: nominal {_abs(n)}, robust {_abs(r)}; trivial predictor {trivial:.4g}"
     )
-    if r["ci95_error"][0] > n["ci95_error"][1]:
+    r_error, n_error = _error_interval(r), _error_interval(n)
+    if r_error[0] > n_error[1]:
         text += " (the nominal design is better under the mix: intervals separate)"
-    elif n["ci95_error"][0] > r["ci95_error"][1]:
+    elif n_error[0] > r_error[1]:
         text += " (the robust design is better under the mix: intervals separate)"
     return text
 
 
-def _pct(level: dict, key: str) -> str:
-    lo, hi = level[f"ci95_{key}"]
-    return f"{100 * level[f'mean_{key}']:+.1f} % [{100 * lo:+.1f}, {100 * hi:+.1f}]"
+def _error_interval(level: CurveLevel) -> tuple[float, float]:
+    """The level's error interval (NaN for a record measured before it was kept)."""
+    return level.ci95_error or (float("nan"), float("nan"))
 
 
-def _abs(level: dict) -> str:
-    lo, hi = level["ci95_error"]
-    return f"{level['mean_error']:.4g} [{lo:.4g}, {hi:.4g}]"
+def _pct(level: CurveLevel) -> str:
+    """The mean increase and its interval, in percent."""
+    lo, hi = level.ci95_increase
+    return f"{100 * level.mean_increase:+.1f} % [{100 * lo:+.1f}, {100 * hi:+.1f}]"
+
+
+def _abs(level: CurveLevel) -> str:
+    """The error itself and its interval."""
+    lo, hi = _error_interval(level)
+    return f"{level.mean_error:.4g} [{lo:.4g}, {hi:.4g}]"
 
 
 def trivial_error(episodes: dict) -> float:
@@ -205,8 +206,8 @@ class KindsResult:
     """
 
     runs: Mapping[str, list[Path]]
-    records: Mapping[str, list[dict[str, Any]]]
-    designs: Mapping[str, dict[str, Any]]
+    records: Mapping[str, list[DesignCurves]]
+    designs: Mapping[str, DesignCurves]
     trivial: float
     verdict: str
 
