@@ -156,18 +156,13 @@ def report_energy_cmd(
       mincam-render report energy --studies benchmarks/results --out runs/energy
     """
     from mincam_render.core.config import ConfigError
-    from mincam_render.studies.energy import (
-        analyze_energy,
-        headline,
-        load_energy_config,
-        write_energy_report,
-    )
+    from mincam_render.studies.energy import headline, load_energy_config, run, write_report
 
     try:
         overrides = {"render": {"spp": spp}} if spp is not None else None
         config = load_energy_config(config_path, overrides)
-        result = analyze_energy(families, config, studies_dir=studies_dir)
-        paths = write_energy_report(result, out)
+        result = run(config, out, families=families, studies_dir=studies_dir)
+        paths = write_report(result, out)
     except (ValueError, ConfigError, OSError) as err:
         raise user_error(err) from None
     click.echo(headline(result))
