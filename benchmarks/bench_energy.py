@@ -4,12 +4,13 @@ Usage:
     PYTHONPATH=. python benchmarks/bench_energy.py [--family workspace --family lighting]
         [--config scenes/energy.toml] [--out benchmarks/results/energy.json]
 
-1. **Depth check.** The panel sees lit walls, so its irradiance needs
+1. **Depth check** (:func:`mincam_render.studies.energy.panel.depth_check`).
+   The panel sees lit walls, so its irradiance needs
    interreflections: one component of the first family (its first ceiling light
    alone, and the noon daylight if it has a window) is rendered at path depths
    3, 6, 12 and 24 with the description's samples, and the depth used is held to
    within 1 % of depth 24.
-2. **The day.** :func:`analyze_energy` with the shipped description (daylight
+2. **The day.** :func:`mincam_render.studies.energy.run` with the shipped description (daylight
    every 15 min, office lights 08:00-18:00) and the study tables of
    ``benchmarks/results`` for the matched module. Reported per family: lux over
    the day, sustainable fps for 1..24 pixels, hours at 30 fps, the largest
@@ -24,7 +25,6 @@ Writes ``--out`` (JSON: machine, git revision, git_dirty, the full result) and
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -37,52 +37,13 @@ REPO = Path(__file__).resolve().parents[1]
 DEPTHS = (3, 6, 12, 24)
 
 
-def depth_check(family: str, config) -> dict:
-    """Irradiance of one light alone (and noon daylight) at several depths, vs the deepest."""
-    from mincam_render.render.irradiance import measure_irradiance
-    from mincam_render.render.mitsuba_scene import irradiance_meter
-    from mincam_render.studies.energy.panel import day_family, panel_pose
-
-    rows = []
-    for depth in DEPTHS:
-        cfg = dataclasses.replace(
-            config, render=dataclasses.replace(config.render, max_depth=depth)
-        )
-        fam = day_family(family, cfg)
-        cam = fam.camera()
-        pose = panel_pose(cam.position, cam.frame, cfg.panel)
-        side = cfg.panel.area_m2**0.5
-        meter = irradiance_meter(pose.center_m, pose.normal, pose.tangent, (side, side))
-        scene = fam.build_scene()
-        keys = [f"light={fam.rig.lights[0].key}"]
-        if fam.rig.window is not None:
-            keys.append("daylight_s=43200")
-        for key in keys:
-            fam.set_background_component(scene, key)
-            r = cfg.render
-            est = measure_irradiance(scene, meter, spp=r.spp, batches=r.batches, seed=r.seed)
-            rows.append(
-                {
-                    "depth": depth,
-                    "component": key,
-                    "irradiance_w_m2": est.mean_w_m2,
-                    "stderr_w_m2": est.stderr_w_m2,
-                }
-            )
-    for row in rows:
-        ref = next(
-            r for r in rows if r["depth"] == DEPTHS[-1] and r["component"] == row["component"]
-        )
-        row["relative_to_deepest"] = row["irradiance_w_m2"] / ref["irradiance_w_m2"] - 1.0
-    return {"family": family, "rows": rows}
-
-
 def main() -> None:
     import logging
 
     from mincam_render.analysis.report import figure_png
-    from mincam_render.studies.energy import analyze_energy, headline, load_energy_config
+    from mincam_render.studies.energy import headline, load_energy_config, run
     from mincam_render.studies.energy.figures import summary_figure
+    from mincam_render.studies.energy.panel import depth_check
 
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -94,19 +55,19 @@ def main() -> None:
     config = load_energy_config(args.config)
     info = machine()
 
+    out = Path(args.out)
     start = time.perf_counter()
-    depth = depth_check(families[0], config)
+    depth = depth_check(families[0], config, DEPTHS)
     depth_s = time.perf_counter() - start
-    for row in depth["rows"]:
+    for row in depth.rows:
         print(
-            f"depth {row['depth']:2d} {row['component']:18s} {row['irradiance_w_m2']:.4f} W/m^2 "
-            f"({100 * row['relative_to_deepest']:+.2f} % vs depth {DEPTHS[-1]})"
+            f"depth {row.depth:2d} {row.component:18s} {row.irradiance_w_m2:.4f} W/m^2 "
+            f"({100 * row.relative_to_deepest:+.2f} % vs depth {DEPTHS[-1]})"
         )
 
     start = time.perf_counter()
-    result = analyze_energy(families, config, studies_dir=REPO / "benchmarks/results")
+    result = run(config, out.parent, families=families, studies_dir=REPO / "benchmarks/results")
     seconds = time.perf_counter() - start
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     (out.parent / "energy.png").write_bytes(figure_png(summary_figure(result)))
 
@@ -145,7 +106,7 @@ def main() -> None:
         "command": "PYTHONPATH=. python benchmarks/bench_energy.py",
         "seconds": {"depth_check": depth_s, "analysis": seconds},
         "summary": summary,
-        "depth_check": depth,
+        "depth_check": depth.as_json(),
         "result": result.as_json(),
     }
     out.write_text(strict_json.dumps(payload, indent=1) + "\n")

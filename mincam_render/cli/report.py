@@ -38,6 +38,7 @@ def report_group() -> None:
 )
 @click.option(
     "--frames",
+    "surrogate_frames",
     type=click.IntRange(20, 100000),
     default=300,
     show_default=True,
@@ -58,16 +59,13 @@ def report_group() -> None:
     show_default=True,
     help="Training steps of each inference head.",
 )
-@click.option("--seed", type=click.IntRange(0, 2**63 - 1), default=0, show_default=True)
-def report_sim2real_cmd(
-    measurements: Path | None,
-    surrogate_family: str | None,
-    frames: int,
-    out: Path,
-    spp: int,
-    steps: int,
-    seed: int,
-) -> None:
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=0,
+    show_default=True,
+)
+def report_sim2real_cmd(measurements: Path | None, out: Path, **config: object) -> None:
     """Compare simulated with measured (or SURROGATE) freeform-pixel recordings.
 
     Give a recording directory (format: docs/sim2real_format.md), or --surrogate FAMILY.
@@ -78,28 +76,17 @@ def report_sim2real_cmd(
       mincam-render report sim2real runs/s2r/surrogate_input --out runs/s2r-again
     """
     from mincam_render.core.config import ConfigError
-    from mincam_render.studies.sim2real import (
-        Sim2RealError,
-        analyze_sim2real,
-        make_surrogate,
-        write_sim2real_report,
-    )
 
-    if (measurements is None) == (surrogate_family is None):
+    # the defaults above are Sim2RealConfig's (tests/cli/test_cli_io.py): importing it here,
+    # not at the top, keeps scipy out of the command line's start-up
+    from mincam_render.studies.sim2real import Sim2RealConfig, Sim2RealError, run, write_report
+
+    if (measurements is None) == (config["surrogate_family"] is None):
         raise InputError("give a MEASUREMENTS directory or --surrogate FAMILY (one)")
     try:
-        if surrogate_family is not None:
-            measurements = make_surrogate(
-                surrogate_family,
-                out / "surrogate_input",
-                num_frames=frames,
-                spp=spp,
-                seed=seed,
-                progress=True,
-            )
-        assert measurements is not None  # for mypy: exactly one of the two was given
-        result = analyze_sim2real(measurements, spp=spp, steps=steps, seed=seed, progress=True)
-        paths = write_sim2real_report(result, out)
+        cfg = Sim2RealConfig(recording=measurements, **config)  # type: ignore[arg-type]
+        result = run(cfg, out, progress=True)
+        paths = write_report(result, out)
     except (ValueError, ConfigError, Sim2RealError, OSError) as err:
         raise user_error(err) from None
     click.echo(result.verdict.summary)
@@ -156,18 +143,13 @@ def report_energy_cmd(
       mincam-render report energy --studies benchmarks/results --out runs/energy
     """
     from mincam_render.core.config import ConfigError
-    from mincam_render.studies.energy import (
-        analyze_energy,
-        headline,
-        load_energy_config,
-        write_energy_report,
-    )
+    from mincam_render.studies.energy import headline, load_energy_config, run, write_report
 
     try:
         overrides = {"render": {"spp": spp}} if spp is not None else None
         config = load_energy_config(config_path, overrides)
-        result = analyze_energy(families, config, studies_dir=studies_dir)
-        paths = write_energy_report(result, out)
+        result = run(config, out, families=families, studies_dir=studies_dir)
+        paths = write_report(result, out)
     except (ValueError, ConfigError, OSError) as err:
         raise user_error(err) from None
     click.echo(headline(result))

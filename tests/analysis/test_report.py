@@ -132,11 +132,7 @@ def test_fidelity_rows_tiny(variant, tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def energy_page(tmp_path_factory, variant):
-    from mincam_render.studies.energy import (
-        analyze_energy,
-        load_energy_config,
-        write_energy_report,
-    )
+    from mincam_render.studies.energy import load_energy_config, run, write_report
 
     config = load_energy_config(
         None,
@@ -146,8 +142,8 @@ def energy_page(tmp_path_factory, variant):
             "render": {"spp": 16, "batches": 2, "max_depth": 2},
         },
     )
-    result = analyze_energy(["workspace"], config)
-    return Path(write_energy_report(result, tmp_path_factory.mktemp("energy"))["html"])
+    out = tmp_path_factory.mktemp("energy")
+    return Path(write_report(run(config, out, families=["workspace"]), out)["html"])
 
 
 @needs_chromium

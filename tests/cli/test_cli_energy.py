@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from support import REPO
 
 from mincam_render.cli.main import main
 
@@ -96,3 +98,38 @@ def test_bad_description_exits_2_naming_the_field(tmp_path, text, field):
     assert res.exit_code == 2, res.output
     assert field in res.output and len(res.output.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def _shape(obj):
+    """A JSON document's keys and kinds: pixel-count keys and list items folded into one."""
+    if isinstance(obj, dict):
+        keys = sorted(obj, key=lambda k: (not k.isdigit(), k))
+        if keys and all(k.isdigit() for k in keys):
+            return {"<pixels>": _shape(obj[keys[0]])}
+        return {k: _shape(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        kinds = [_shape(v) for v in obj if v is not None]
+        return [kinds[0]] if kinds else []
+    return "number" if isinstance(obj, int | float) and not isinstance(obj, bool) else type(obj)
+
+
+def test_energy_json_reads_back_and_keeps_the_kept_schema(variant, small_run, tmp_path):
+    """``energy.json`` is the whole result (read back, it writes the same file), and has the
+    schema of the kept ``benchmarks/results/energy.json``, written before the study's shape."""
+    from mincam_render.studies.energy import EnergyResult, write_report
+
+    _, out = small_run
+    written = json.loads((out / "energy.json").read_text())
+    result = EnergyResult.from_json(written)
+    assert EnergyResult.from_json(result.as_json()) == result
+    paths = write_report(result, tmp_path)
+    assert json.loads(Path(paths["json"]).read_text()) == written
+    assert {Path(p).name for p in paths.values()} == {p.name for p in out.iterdir()}
+    kept = json.loads((REPO / "benchmarks/results/energy.json").read_text())["result"]
+    assert EnergyResult.from_json(kept).as_json() == kept
+    assert _shape(written["config"]) == _shape(kept["config"])
+    assert _shape(written["threshold"]) == _shape(kept["threshold"])
+    assert _shape(written["families"]["workspace"]) == _shape(kept["families"]["workspace"])
+    # a match from the paper's table (no study table given here; lighting's in the kept run)
+    assert kept["comparisons"]["lighting"]["match"]["source"].startswith("paper")
+    assert _shape(written["comparisons"]["workspace"]) == _shape(kept["comparisons"]["lighting"])

@@ -293,3 +293,15 @@ def test_options_named_like_a_dataclass_fields_default_to_the_fields_defaults(
         if name in required or value == {}:  # --set: nothing to override
             continue
         assert config(**required, **{name: value}) == config(**required), name
+
+
+def test_sim2real_options_are_the_config_fields_with_their_defaults():
+    """`report sim2real`'s literal defaults (importing the study loads scipy) are the config's."""
+    from mincam_render.studies.sim2real import Sim2RealConfig
+
+    command = main.commands["report"].commands["sim2real"]
+    params = command.make_context("sim2real", ["--surrogate", "patches"]).params
+    fields = {f.name for f in dataclasses.fields(Sim2RealConfig)}
+    filled = {name: value for name, value in params.items() if name in fields}
+    assert sorted(filled) == ["seed", "spp", "steps", "surrogate_family", "surrogate_frames"]
+    assert Sim2RealConfig(**filled) == Sim2RealConfig(surrogate_family="patches")

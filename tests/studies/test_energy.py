@@ -361,3 +361,43 @@ def test_a_schedule_naming_an_unknown_light_is_rejected():
     with pytest.raises(ValueError, match=r"schedule.lights\[0\].name = 'lamp_wset'.*lamp_west"):
         check_light_names(schedule, ["overhead_south", "lamp_west"])
     check_light_names(schedule, ["lamp_wset"])  # a known name passes
+
+
+@pytest.mark.parametrize("families", [[], ()])
+def test_run_without_a_family_is_refused_naming_the_argument(tmp_path, families):
+    from mincam_render.studies.energy import run
+
+    with pytest.raises(ValueError, match="families is empty"):
+        run(EnergyConfig(), tmp_path / "out", families=families)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_read_back_description_is_refused_naming_the_field():
+    """``EnergyResult.from_json`` checks the description it reads as a file's."""
+    from mincam_render.studies.energy import EnergyResult
+
+    record = {"config": {"panel": {"area_m2": -1.0}}, "families": {}, "comparisons": {}}
+    with pytest.raises(ConfigError, match="panel.area_m2"):
+        EnergyResult.from_json(record | {"threshold": {}})
+
+
+def test_depth_check_holds_each_component_against_the_deepest(variant):
+    """The benchmark's depth check: per depth and component, the irradiance against the deepest."""
+    from mincam_render.studies.energy.panel import depth_check
+
+    cfg = load_energy_config(None, {"render": {"spp": 16, "batches": 2}})
+    check = depth_check("workspace", cfg, (2, 3))
+    assert check.family == "workspace"
+    assert [r.depth for r in check.rows] == [2, 2, 3, 3]  # a light alone, noon daylight
+    assert check.rows[0].component.startswith("light=")
+    assert check.rows[1].component == "daylight_s=43200"
+    for row, deepest in zip(check.rows[:2], check.rows[2:], strict=True):
+        assert row.relative_to_deepest == row.irradiance_w_m2 / deepest.irradiance_w_m2 - 1.0
+        assert deepest.relative_to_deepest == 0.0 and row.stderr_w_m2 > 0
+    assert list(check.as_json()["rows"][0]) == [
+        "depth",
+        "component",
+        "irradiance_w_m2",
+        "stderr_w_m2",
+        "relative_to_deepest",
+    ]

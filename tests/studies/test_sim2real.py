@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from support import REPO
 
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.optics.camera import MM, DetectorLayout, FreeformCamera
@@ -21,13 +22,14 @@ from mincam_render.studies.robustness.config import RobustnessConfig
 from mincam_render.studies.sim2real import (
     THRESHOLDS,
     GainOffsetFit,
+    Sim2RealConfig,
     Sim2RealError,
     SurrogatePerturbations,
-    analyze_sim2real,
     fit_gain_offset,
     load_recording,
     make_surrogate,
-    write_sim2real_report,
+    run,
+    write_report,
 )
 from mincam_render.studies.sim2real.surrogate import (
     SURROGATE_PERTURBATION,
@@ -59,7 +61,7 @@ def electronics_only(tmp_path_factory, variant):
         perturbations=ELECTRONICS_ONLY,
         mask_resolution=8,
     )
-    return rec, analyze_sim2real(rec, spp=4, steps=40, seed=3)
+    return rec, run(Sim2RealConfig(recording=rec, spp=4, steps=40, seed=3), root / "out")
 
 
 def test_fit_recovers_injected_gain_and_offset(electronics_only):
@@ -88,7 +90,7 @@ def test_fit_recovers_injected_gain_and_offset(electronics_only):
 def test_report_table_separates_injected_and_expected_offsets(electronics_only, tmp_path):
     """Stray light and dark current move the expected offset away from the injected one."""
     _, result = electronics_only
-    html = Path(write_sim2real_report(result, tmp_path)["html"]).read_text()
+    html = Path(write_report(result, tmp_path)["html"]).read_text()
     for header in ("injected offset (mV)", "expected offset (mV)", "offset − expected (se)"):
         assert f"<th>{header}</th>" in html
     gaps = [abs(p.injected.expected_offset_v - p.injected.injected_offset_v) for p in result.pixels]
@@ -169,7 +171,7 @@ def test_surrogate_is_labelled(electronics_only):
 
 def test_json_schema(electronics_only, tmp_path):
     _, result = electronics_only
-    paths = write_sim2real_report(result, tmp_path)
+    paths = write_report(result, tmp_path)
     data = json.loads(open(paths["json"]).read())
     required = {
         "surrogate": bool,
@@ -325,3 +327,65 @@ def test_the_injected_values_are_the_draw_of_the_shared_model(electronics_only):
     assert np.all(np.abs(injected["per_pixel"]["offset_v"]) <= 0.035)
     assert injected["per_pixel"]["mask_shift_m"] == [[0.0, 0.0]] * len(gain)
     assert injected["board"]["position_error_m"] == [0.0, 0.0, 0.0]
+
+
+# -- the study's shape: a frozen config -> run -> a frozen result -> write_report
+
+
+def test_the_result_reads_back_from_its_json(electronics_only, tmp_path):
+    """``sim2real.json`` is the whole result: read back, it is the result, and writes itself."""
+    from mincam_render.studies.sim2real import Sim2RealResult
+
+    _, result = electronics_only
+    assert Sim2RealResult.from_json(result.as_json()) == result
+    on_disk = json.loads(Path(write_report(result, tmp_path)["json"]).read_text())
+    again = Sim2RealResult.from_json(on_disk)
+    assert again == result
+    assert json.loads(Path(write_report(again, tmp_path / "again")["json"]).read_text()) == on_disk
+
+
+def test_the_kept_benchmark_records_read_back_unchanged():
+    """The pixels, thresholds and verdicts of ``sim2real_surrogate.json`` (written before
+    the result was typed) are the records :class:`PixelComparison` writes."""
+    from mincam_render.studies.sim2real.result import PixelComparison, Thresholds, Verdict
+
+    kept = json.loads((REPO / "benchmarks/results/sim2real_surrogate.json").read_text())
+    families = [v for v in kept.values() if "pixels" in v]  # not "machine", "not_run"
+    assert families
+    for fam in families:
+        assert Thresholds.from_json(fam["thresholds"]).as_json() == fam["thresholds"]
+        assert dataclasses.asdict(Verdict(**fam["verdict"])) == fam["verdict"]
+        for p in fam["pixels"]:
+            assert PixelComparison.from_json(p).as_json() == p
+
+
+def test_run_makes_the_surrogate_it_is_asked_for(tmp_path, variant):
+    """``surrogate_family``: the recording is made into ``out/surrogate_input``, then compared."""
+    cfg = Sim2RealConfig(surrogate_family="patches", surrogate_frames=20, spp=1, tasks=False)
+    result = run(cfg, tmp_path)
+    assert Path(result.recording) == (tmp_path / "surrogate_input").resolve()
+    assert result.surrogate and result.tasks is None and result.num_samples == 20
+    assert set(write_report(result, tmp_path)) == {"json", "html"}
+    assert {p.name for p in tmp_path.iterdir()} == {
+        "surrogate_input",
+        "sim2real.json",
+        "sim2real.html",
+    }
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({}, "Sim2RealConfig.recording"),
+        ({"recording": "r", "surrogate_family": "patches"}, "Sim2RealConfig.surrogate_family"),
+        ({"recording": "r", "spp": 0}, "Sim2RealConfig.spp"),
+        ({"recording": "r", "steps": 0}, "Sim2RealConfig.steps"),
+        ({"recording": "r", "seed": -1}, "Sim2RealConfig.seed"),
+        ({"surrogate_family": "patches", "surrogate_frames": 5}, "Sim2RealConfig.surrogate_frames"),
+        ({"recording": "r", "spp": 2.0}, "Sim2RealConfig.spp"),
+        ({"recording": "r", "tasks": "no"}, "Sim2RealConfig.tasks"),
+    ],
+)
+def test_bad_config_fields_are_refused_naming_the_field(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        Sim2RealConfig(**kwargs)

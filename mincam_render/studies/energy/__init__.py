@@ -5,8 +5,11 @@ description: panel, storage, electronics, camera module, schedule, render),
 ``consumption`` (frame budgets in joules), ``storage`` (the supercapacitor
 stepped through time), ``matching`` (the conventional grid of equal task error
 from a study table), ``panel`` (the panel's light rendered in a scene over a
-day), ``study`` (:func:`analyze_energy`), ``figures`` and ``report``. Importing
-this package loads numpy, not torch or Mitsuba.
+day), ``result`` (:class:`EnergyResult`), ``study`` (:func:`run`), ``figures`` and
+``report`` (:func:`write_report`). The study's shape is every study's: a frozen
+:class:`EnergyConfig`, ``run(config, out, families=...)``, a frozen
+:class:`EnergyResult`, ``write_report(result, out)``. Importing this package loads
+numpy, not torch or Mitsuba.
 """
 
 from mincam_render.studies.energy.config import (
@@ -16,10 +19,10 @@ from mincam_render.studies.energy.config import (
     load_energy_config,
 )
 from mincam_render.studies.energy.consumption import FrameBudget, head_flops
-from mincam_render.studies.energy.report import headline, write_energy_report
+from mincam_render.studies.energy.report import headline, write_report
 from mincam_render.studies.energy.result import EnergyResult
 from mincam_render.studies.energy.storage import StorageTrace, simulate_storage
-from mincam_render.studies.energy.study import analyze_energy, threshold_lux
+from mincam_render.studies.energy.study import run, threshold_lux
 
 __all__ = [
     "EnergyConfig",
@@ -28,11 +31,11 @@ __all__ = [
     "PanelConfig",
     "StorageConfig",
     "StorageTrace",
-    "analyze_energy",
     "head_flops",
     "headline",
     "load_energy_config",
+    "run",
     "simulate_storage",
     "threshold_lux",
-    "write_energy_report",
+    "write_report",
 ]

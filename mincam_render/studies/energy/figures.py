@@ -1,7 +1,7 @@
 """Figures of an energy result (matplotlib): the day's light and storage, frame rates, margins.
 
 Each function takes the result of
-:func:`~mincam_render.studies.energy.study.analyze_energy` and returns
+:func:`~mincam_render.studies.energy.study.run` and returns
 ``(figure, caption)``. :func:`summary_figure` is the one-image summary saved as
 ``energy.png``.
 """

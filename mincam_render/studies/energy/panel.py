@@ -10,10 +10,12 @@ lights off) once per sample of the day; any schedule of the lights is then a sum
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
@@ -21,12 +23,14 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 
 from mincam_render.core.config import ConfigError
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.studies.energy.config import EnergyConfig, PanelConfig, ScheduleConfig
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from mincam_render.render.irradiance import IrradianceEstimate
+    from mincam_render.render.mitsuba_scene import MitsubaDict
     from mincam_render.scenes.indoor import IndoorFamily
 
 log = logging.getLogger(__name__)
@@ -146,13 +150,9 @@ def render_panel_light(fam: IndoorFamily, config: EnergyConfig) -> tuple[PanelPo
         at each sample of the day (``config.schedule.step_min``).
     """
     from mincam_render.render.irradiance import measure_irradiance
-    from mincam_render.render.mitsuba_scene import irradiance_meter
 
     rig = fam.rig
-    cam = fam.camera()
-    pose = panel_pose(np.asarray(cam.position), cam.frame, config.panel)
-    side = math.sqrt(config.panel.area_m2)
-    meter = irradiance_meter(pose.center_m, pose.normal, pose.tangent, (side, side))
+    pose, meter = _panel_meter(fam, config)
     r = config.render
     start = time.perf_counter()
     scene = fam.build_scene()
@@ -180,6 +180,82 @@ def render_panel_light(fam: IndoorFamily, config: EnergyConfig) -> tuple[PanelPo
         100 * light.max_relative_error(),
     )
     return pose, light
+
+
+def _panel_meter(fam: IndoorFamily, config: EnergyConfig) -> tuple[PanelPose, MitsubaDict]:
+    """The panel's pose beside the family's camera, and its irradiance meter (a Mitsuba dict)."""
+    from mincam_render.render.mitsuba_scene import irradiance_meter
+
+    cam = fam.camera()
+    pose = panel_pose(np.asarray(cam.position), cam.frame, config.panel)
+    side = math.sqrt(config.panel.area_m2)
+    return pose, irradiance_meter(pose.center_m, pose.normal, pose.tangent, (side, side))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DepthRow:
+    """One component's panel irradiance at one path depth (W/m^2), against the deepest."""
+
+    depth: int
+    component: str
+    irradiance_w_m2: float
+    stderr_w_m2: float
+    relative_to_deepest: float
+
+    def as_json(self) -> JsonObject:
+        """The row's fields in order."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DepthCheck:
+    """Is the description's path depth deep enough? Rows per depth and component."""
+
+    family: str
+    rows: tuple[DepthRow, ...]
+
+    def as_json(self) -> JsonObject:
+        """``{"family", "rows"}``."""
+        return {"family": self.family, "rows": [r.as_json() for r in self.rows]}
+
+
+def depth_check(family: str, config: EnergyConfig, depths: Sequence[int]) -> DepthCheck:
+    """The panel's irradiance of one light alone (and noon daylight) at ``depths``.
+
+    The panel sees lit walls, so its irradiance needs interreflections: each
+    component is rendered with the description's samples at every depth and
+    compared with the deepest (``depths[-1]``). The components are the family's
+    first light alone and, if it has a window, the daylight at noon.
+    """
+    from mincam_render.render.irradiance import measure_irradiance
+
+    measured: list[tuple[int, str, IrradianceEstimate]] = []
+    for depth in depths:
+        render = dataclasses.replace(config.render, max_depth=depth)
+        cfg = dataclasses.replace(config, render=render)
+        fam = day_family(family, cfg)
+        _, meter = _panel_meter(fam, cfg)
+        scene = fam.build_scene()
+        keys = [f"light={fam.rig.lights[0].key}"]
+        if fam.rig.window is not None:
+            keys.append("daylight_s=43200")
+        for key in keys:
+            fam.set_background_component(scene, key)
+            r = cfg.render
+            est = measure_irradiance(scene, meter, spp=r.spp, batches=r.batches, seed=r.seed)
+            measured.append((depth, key, est))
+    deepest = {key: est.mean_w_m2 for depth, key, est in measured if depth == depths[-1]}
+    rows = tuple(
+        DepthRow(
+            depth=depth,
+            component=key,
+            irradiance_w_m2=est.mean_w_m2,
+            stderr_w_m2=est.stderr_w_m2,
+            relative_to_deepest=est.mean_w_m2 / deepest[key] - 1.0,
+        )
+        for depth, key, est in measured
+    )
+    return DepthCheck(family=family, rows=rows)
 
 
 def _sun_elevation_deg(daylight_config: object, hour: float) -> float:

@@ -16,8 +16,10 @@ if TYPE_CHECKING:
 _TABLE_PIXELS = (1, 2, 4, 8, 16, 24)
 
 
-def write_energy_report(result: EnergyResult, out_dir: str | Path) -> dict[str, str]:
+def write_report(result: EnergyResult, out_dir: str | Path) -> dict[str, str]:
     """Write ``energy.json``, ``energy.html`` and ``energy.png`` to ``out_dir`` (created).
+
+    ``energy.json`` is :meth:`EnergyResult.as_json`; :meth:`EnergyResult.from_json` reads it back.
 
     Returns:
         ``{"json": path, "html": path, "png": path}``.

@@ -1,17 +1,19 @@
 """The energy study's result: frozen records of budgets, days and comparisons.
 
-:func:`~mincam_render.studies.energy.study.analyze_energy` returns an
+:func:`~mincam_render.studies.energy.study.run` returns an
 :class:`EnergyResult`; the report, its figures and the benchmark read its
-attributes, and :meth:`EnergyResult.as_json` is ``energy.json``. Powers in W,
+attributes, :meth:`EnergyResult.as_json` is ``energy.json`` and
+:meth:`EnergyResult.from_json` reads it back. Powers in W,
 energies in J, illuminance in lx, hours of local solar time.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from mincam_render.core.config import to_dict
+from mincam_render.core.config import parse, to_dict
 from mincam_render.core.strict_json import JsonObject
 from mincam_render.studies.energy.config import EnergyConfig
 from mincam_render.studies.energy.matching import Match
@@ -65,6 +67,11 @@ class BudgetRecord:
             "threshold_lux": self.threshold_lux,
         }
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> BudgetRecord:
+        """The record :meth:`as_json` wrote (other keys beside it are ignored)."""
+        return cls(**{f.name: record[f.name] for f in dataclasses.fields(cls)})
+
 
 @dataclass(frozen=True, kw_only=True)
 class Threshold:
@@ -77,6 +84,15 @@ class Threshold:
     def as_json(self) -> JsonObject:
         """The budget's fields with ``family`` and ``paper_lux``."""
         return self.budget.as_json() | {"family": self.family, "paper_lux": self.paper_lux}
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> Threshold:
+        """The record :meth:`as_json` wrote."""
+        return cls(
+            budget=BudgetRecord.from_json(record),
+            family=record["family"],
+            paper_lux=record["paper_lux"],
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,6 +122,16 @@ class ComparedBudget:
             out["hours_at_fps"] = self.hours_at_fps
         return out
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> ComparedBudget:
+        """The record :meth:`as_json` wrote (a key it left out is None)."""
+        return cls(
+            budget=BudgetRecord.from_json(record),
+            name=record.get("name"),
+            power_ratio=record.get("power_ratio"),
+            hours_at_fps=record.get("hours_at_fps"),
+        )
+
 
 @dataclass(frozen=True, kw_only=True)
 class Comparison:
@@ -134,6 +160,34 @@ class Comparison:
     def as_json(self) -> JsonObject:
         """``{"match", "mincam", "module", "module_outputs_only"}``."""
         return {"match": to_dict(self.match)} | {k: c.as_json() for k, c in self.cameras()}
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> Comparison:
+        """The record :meth:`as_json` wrote."""
+        return cls(
+            match=_match(record["match"]),
+            mincam=ComparedBudget.from_json(record["mincam"]),
+            module=ComparedBudget.from_json(record["module"]),
+            module_outputs_only=ComparedBudget.from_json(record["module_outputs_only"]),
+        )
+
+
+def _match(record: JsonObject) -> Match:
+    """A :class:`Match` from its ``to_dict`` record (lists back to tuples)."""
+
+    def interval(v: list[float] | None) -> tuple[float, float, float] | None:
+        return None if v is None else (v[0], v[1], v[2])
+
+    return Match(
+        family=record["family"],
+        pixels=record["pixels"],
+        grid=(record["grid"][0], record["grid"][1]),
+        source=record["source"],
+        mincam_error=interval(record["mincam_error"]),
+        baseline_error=interval(record["baseline_error"]),
+        error_name=record["error_name"],
+        matched=record["matched"],
+    )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -170,6 +224,20 @@ class StorageDay:
             "spilled_j": self.spilled_j,
         }
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> StorageDay:
+        """The record :meth:`as_json` wrote (lists back to tuples)."""
+        return cls(
+            hours=tuple(record["hours"]),
+            voltage_v=tuple(record["voltage_v"]),
+            stored_j=tuple(record["stored_j"]),
+            balance_j=record["balance_j"],
+            harvested_j=record["harvested_j"],
+            consumed_j=record["consumed_j"],
+            leaked_j=record["leaked_j"],
+            spilled_j=record["spilled_j"],
+        )
+
 
 @dataclass(frozen=True, kw_only=True)
 class Estimate:
@@ -177,6 +245,11 @@ class Estimate:
 
     mean_w_m2: float
     stderr_w_m2: float
+
+    @classmethod
+    def from_pair(cls, pair: list[float]) -> Estimate:
+        """``[mean, stderr]``, as ``energy.json`` writes a component."""
+        return cls(mean_w_m2=pair[0], stderr_w_m2=pair[1])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -260,10 +333,37 @@ class FamilyBudget:
             "budgets": [b.as_json() for b in self.budgets],
         }
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> FamilyBudget:
+        """The record :meth:`as_json` wrote (string pixel counts back to ints)."""
+        comp = record["components"]
+        panel = dict(record["panel"])
+        area = panel.pop("area_m2")
+        return cls(
+            hours=tuple(record["hours"]),
+            irradiance_w_m2=tuple(record["irradiance_w_m2"]),
+            lux=tuple(record["lux"]),
+            harvest_w=tuple(record["harvest_w"]),
+            sustainable_fps={int(k): tuple(v) for k, v in record["sustainable_fps"].items()},
+            hours_at_fps={int(k): v for k, v in record["hours_at_fps"].items()},
+            day_mean_sustainable_fps={
+                int(k): v for k, v in record["day_mean_sustainable_fps"].items()
+            },
+            storage_trace=StorageDay.from_json(record["storage_trace"]),
+            lights_w_m2={n: Estimate.from_pair(e) for n, e in comp["lights_w_m2"].items()},
+            daylight_w_m2=tuple(
+                None if d is None else Estimate.from_pair(d) for d in comp["daylight_w_m2"]
+            ),
+            render=RenderStats(**record["render"]),
+            panel=PanelPose(**{k: tuple(v) for k, v in panel.items()}),
+            panel_area_m2=area,
+            budgets=tuple(BudgetRecord.from_json(b) for b in record["budgets"]),
+        )
+
 
 @dataclass(frozen=True, kw_only=True)
 class EnergyResult:
-    """The self-powered budget of some families (:func:`analyze_energy`).
+    """The self-powered budget of some families (:func:`~.study.run`).
 
     Attributes:
         config: the description analysed.
@@ -285,3 +385,18 @@ class EnergyResult:
             "comparisons": {n: c.as_json() for n, c in self.comparisons.items()},
             "threshold": self.threshold.as_json(),
         }
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> EnergyResult:
+        """The result of an ``energy.json`` (:meth:`as_json`).
+
+        Raises:
+            ConfigError: its ``config`` is not a valid description.
+            KeyError: a record lacks a key :meth:`as_json` writes.
+        """
+        return cls(
+            config=parse(EnergyConfig, record["config"], source="energy.json config"),
+            families={n: FamilyBudget.from_json(f) for n, f in record["families"].items()},
+            comparisons={n: Comparison.from_json(c) for n, c in record["comparisons"].items()},
+            threshold=Threshold.from_json(record["threshold"]),
+        )

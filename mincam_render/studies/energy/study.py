@@ -1,6 +1,6 @@
 """The self-powered budget of a scene: panel light over a day, frame rates, hours of operation.
 
-:func:`analyze_energy` renders the panel's light in each family's scene
+:func:`run` renders the panel's light in each family's scene
 (:mod:`.panel`), turns it into power at the capacitor, and for ``K = 1 ..
 max_pixels`` freeform pixels reports the sustainable frame rate through the day,
 the hours the camera runs at the configured frame rate (a two-day storage
@@ -227,18 +227,28 @@ def _comparison(
     )
 
 
-def analyze_energy(
-    families: Sequence[str],
+def run(
     config: EnergyConfig,
+    out: str | Path,
     *,
+    families: Sequence[str],
     studies_dir: str | Path | None = None,
 ) -> EnergyResult:
-    """The self-powered budget of ``families``.
+    """The self-powered budget of ``families`` (the study's entry; :func:`.report.write_report`).
+
+    ``families`` and ``studies_dir`` are arguments, not fields of ``config``:
+    the description is everything the budget needs besides the scenes (it is
+    ``energy.json``'s ``config``, and ``scenes/energy.toml`` holds it), while
+    the scenes and the study tables are the inputs it is applied to, as the
+    robustness study takes its runs.
 
     Args:
+        config: panel, storage, electronics, schedule and render settings.
+        out: the study's directory, where :func:`.report.write_report` writes;
+            the analysis itself writes nothing (the panel's light is rendered in
+            memory), so a refused input leaves no directory behind.
         families: indoor scene families (names or TOML paths) to render the day in
             (at least one).
-        config: panel, storage, electronics, schedule and render settings.
         studies_dir: directory of ``study_<family>.json`` tables for the matched
             baseline (the paper's matches where a table is missing); the other
             families with a table there are compared too, without a day. None:
@@ -256,7 +266,6 @@ def analyze_energy(
         ValueError: no family, an unknown or non-indoor family, or a malformed
             study table.
     """
-    from mincam_render.scenes.registry import FAMILY_NAMES, load_family
     from mincam_render.studies.energy.panel import day_family
 
     if not families:
@@ -271,13 +280,27 @@ def analyze_energy(
         study = Path(studies_dir) / f"study_{fam.name}.json" if studies_dir else None
         match = load_match(fam.name, study)
         comparisons[fam.name] = _comparison(match, fam.labels, config, light)
-    for path in sorted(Path(studies_dir).glob("study_*.json")) if studies_dir else []:
-        other = path.stem.removeprefix("study_")
-        if other in FAMILY_NAMES and other not in comparisons:
-            labels = load_family(other, seed=0, num_frames=1).labels
-            comparisons[other] = _comparison(load_match(other, path), labels, config, None)
+    comparisons |= _tabled_comparisons(studies_dir, set(comparisons), config)
     first = next(iter(days))
     threshold = Threshold(
         budget=days[first].budgets[-1], family=first, paper_lux=config.paper_threshold_lux
     )
     return EnergyResult(config=config, families=days, comparisons=comparisons, threshold=threshold)
+
+
+def _tabled_comparisons(
+    studies_dir: str | Path | None, done: set[str], config: EnergyConfig
+) -> dict[str, Comparison]:
+    """Comparisons of the shipped families with a study table in ``studies_dir``, not in ``done``.
+
+    Their day is not rendered (no hours at the frame rate).
+    """
+    from mincam_render.scenes.registry import FAMILY_NAMES, load_family
+
+    out: dict[str, Comparison] = {}
+    for path in sorted(Path(studies_dir).glob("study_*.json")) if studies_dir else []:
+        other = path.stem.removeprefix("study_")
+        if other in FAMILY_NAMES and other not in done:
+            labels = load_family(other, seed=0, num_frames=1).labels
+            out[other] = _comparison(load_match(other, path), labels, config, None)
+    return out

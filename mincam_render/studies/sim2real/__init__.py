@@ -14,40 +14,47 @@
   fit) and the verdict against :data:`THRESHOLDS`;
 - :mod:`.tasks` -- task metrics (trained on simulation / tested on real;
   sim-trained head retrained on real, as the paper did; trained and tested on real);
+- :mod:`.config` -- :class:`Sim2RealConfig`, the comparison as data (a recording
+  or a family to make a SURROGATE of, samples, steps, seed);
 - :mod:`.result` -- the typed result (:class:`Sim2RealResult`) and its records;
-- :mod:`.study` -- :func:`analyze_sim2real`, all of the above for one recording;
-- :mod:`.figures` and :mod:`.report` -- :func:`write_sim2real_report` writes
+- :mod:`.study` -- :func:`run`, all of the above for one recording;
+- :mod:`.figures` and :mod:`.report` -- :func:`write_report` writes
   ``sim2real.html`` and ``sim2real.json``.
+
+The study's shape is every study's: ``run(config, out)`` -> a frozen
+:class:`Sim2RealResult` -> ``write_report(result, out)``.
 
 Arrays are numpy (float64 for analysis) unless a docstring says torch; voltages
 in volts, powers in watts. Importing this package imports numpy and scipy, not
 torch or Mitsuba.
 """
 
+from mincam_render.studies.sim2real.config import Sim2RealConfig
 from mincam_render.studies.sim2real.fit import THRESHOLDS, fit_gain_offset, injected_comparison
 from mincam_render.studies.sim2real.recording import Sim2RealError, load_recording
-from mincam_render.studies.sim2real.report import write_sim2real_report
+from mincam_render.studies.sim2real.report import write_report
 from mincam_render.studies.sim2real.result import (
     GainOffsetFit,
     PixelVerdict,
     Sim2RealResult,
     Thresholds,
 )
-from mincam_render.studies.sim2real.study import analyze_sim2real
+from mincam_render.studies.sim2real.study import run
 from mincam_render.studies.sim2real.surrogate import SurrogatePerturbations, make_surrogate
 
 __all__ = [
     "THRESHOLDS",
     "GainOffsetFit",
     "PixelVerdict",
+    "Sim2RealConfig",
     "Sim2RealError",
     "Sim2RealResult",
     "SurrogatePerturbations",
     "Thresholds",
-    "analyze_sim2real",
     "fit_gain_offset",
     "injected_comparison",
     "load_recording",
     "make_surrogate",
-    "write_sim2real_report",
+    "run",
+    "write_report",
 ]

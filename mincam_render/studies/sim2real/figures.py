@@ -1,7 +1,7 @@
 """Figures of a sim2real result (matplotlib): fits, time series, residuals, calibration, tasks.
 
 Each function takes the result of
-:func:`~mincam_render.studies.sim2real.study.analyze_sim2real` and returns
+:func:`~mincam_render.studies.sim2real.study.run` and returns
 ``(figure, caption)``; voltages are plotted in millivolts.
 """
 

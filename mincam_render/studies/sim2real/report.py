@@ -37,8 +37,15 @@ _TASK_ROWS = (
 )
 
 
-def write_sim2real_report(result: Sim2RealResult, out_dir: str | Path) -> dict[str, str]:
-    """Write ``sim2real.json`` (all numbers) and ``sim2real.html`` to ``out_dir``."""
+def write_report(result: Sim2RealResult, out_dir: str | Path) -> dict[str, str]:
+    """Write ``sim2real.json`` (all numbers) and ``sim2real.html`` to ``out_dir`` (created).
+
+    ``sim2real.json`` is :meth:`Sim2RealResult.as_json`; :meth:`Sim2RealResult.from_json`
+    reads it back.
+
+    Returns:
+        ``{"json": path, "html": path}``.
+    """
     from mincam_render.analysis.report import Report
     from mincam_render.data.dataset import atomic_write_bytes, json_bytes
 

@@ -1,6 +1,6 @@
 """The sim2real study's result: frozen records of fits, pixels, tasks and the verdict.
 
-:func:`~mincam_render.studies.sim2real.study.analyze_sim2real` returns a
+:func:`~mincam_render.studies.sim2real.study.run` returns a
 :class:`Sim2RealResult`; the report, its figures and the command line read its
 attributes, and :meth:`Sim2RealResult.as_json` is ``sim2real.json``. Arrays are
 numpy float64; voltages in volts, time in seconds.
@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -51,6 +52,11 @@ class Thresholds:
     def as_json(self) -> dict[str, float]:
         """``{name: value}`` in field order."""
         return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, record: Mapping[str, float]) -> Thresholds:
+        """The thresholds :meth:`as_json` wrote."""
+        return cls(**record)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -133,6 +139,42 @@ class PixelComparison:
             out |= dataclasses.asdict(self.injected)
         return out
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> PixelComparison:
+        """The record :meth:`as_json` wrote (a null number, strict JSON's NaN, is NaN again)."""
+        injected = None
+        if "injected_gain" in record:
+            injected = InjectedComparison(**_fields(InjectedComparison, record))
+        return cls(
+            pixel=record["pixel"],
+            detector=record["detector"],
+            fit=GainOffsetFit(**_fields(GainOffsetFit, record)),
+            mean_sim_v=_number(record["mean_sim_v"]),
+            mean_real_v=_number(record["mean_real_v"]),
+            residual_percentiles_v={
+                int(q): _number(v) for q, v in record["residual_percentiles_v"].items()
+            },
+            ks_raw=_number(record["ks_raw"]),
+            ks_calibrated=_number(record["ks_calibrated"]),
+            wasserstein_raw_v=_number(record["wasserstein_raw_v"]),
+            wasserstein_calibrated_v=_number(record["wasserstein_calibrated_v"]),
+            verdict=PixelVerdict(record["verdict"]),
+            injected=injected,
+        )
+
+
+def _number(value: float | None) -> float:
+    """A number read back from strict JSON, which writes NaN and infinities as null."""
+    return math.nan if value is None else value
+
+
+def _fields(cls: type, record: JsonObject) -> JsonObject:
+    """The values of ``cls``'s fields in a flattened ``record``; null (a NaN's) as NaN.
+
+    Every field of the records read this way that may be null is a number.
+    """
+    return {f.name: _number(record[f.name]) for f in dataclasses.fields(cls)}
+
 
 @dataclass(frozen=True, kw_only=True)
 class DistributionGap:
@@ -170,6 +212,18 @@ class TaskMetrics:
             "video_simulation": None,
         }
 
+    @classmethod
+    def from_json(cls, record: JsonObject) -> TaskMetrics:
+        """The metrics :meth:`as_json` wrote."""
+        from mincam_render.learn.evaluation import Evaluation
+
+        return cls(
+            sim_on_sim=Evaluation.from_json(record["sim_on_sim"]),
+            sim_on_real=Evaluation.from_json(record["sim_on_real"]),
+            sim_head_retrained_on_real=Evaluation.from_json(record["sim_head_retrained_on_real"]),
+            real_on_real=Evaluation.from_json(record["real_on_real"]),
+        )
+
 
 @dataclass(frozen=True, kw_only=True)
 class Verdict:
@@ -181,18 +235,31 @@ class Verdict:
     summary: str
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(frozen=True, kw_only=True, eq=False)
 class Series:
-    """The compared time series: ``time_s[N]`` (s), ``sim_v[N, P]`` and ``real_v[N, P]`` (V)."""
+    """The compared time series: ``time_s[N]`` (s), ``sim_v[N, P]`` and ``real_v[N, P]`` (V).
+
+    Equal to another when every array is (:func:`numpy.array_equal`).
+    """
 
     time_s: np.ndarray
     sim_v: np.ndarray
     real_v: np.ndarray
 
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Series):
+            return NotImplemented
+        return all(
+            np.array_equal(getattr(self, name), getattr(other, name))
+            for name in ("time_s", "sim_v", "real_v")
+        )
+
+    __hash__ = None  # type: ignore[assignment]  # arrays: not hashable
+
 
 @dataclass(frozen=True, kw_only=True)
 class Sim2RealResult:
-    """A recording against its simulation (:func:`analyze_sim2real`).
+    """A recording against its simulation (:func:`~.study.run`).
 
     Attributes:
         surrogate: the recording is SURROGATE data (generated, not measured).
@@ -260,3 +327,32 @@ class Sim2RealResult:
             "video_simulation_note": self.video_simulation_note,
             "verdict": dataclasses.asdict(self.verdict),
         }
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> Sim2RealResult:
+        """The result of a ``sim2real.json`` (:meth:`as_json`); arrays float64.
+
+        Raises:
+            KeyError: a record lacks a key :meth:`as_json` writes.
+        """
+        series, tasks, gap = record["series"], record["tasks"], record["distribution_gap"]
+        return cls(
+            surrogate=record["surrogate"],
+            banner=record["banner"],
+            recording=record["recording"],
+            recording_sha256=record["recording_sha256"],
+            family=record["family"],
+            num_samples=record["num_samples"],
+            fps=record["fps"],
+            units_in_file=record["units_in_file"],
+            spp=record["spp"],
+            seed=record["seed"],
+            thresholds=Thresholds.from_json(record["thresholds"]),
+            pixels=tuple(PixelComparison.from_json(p) for p in record["pixels"]),
+            distribution_gap=DistributionGap(**_fields(DistributionGap, gap)),
+            injected=record["injected"],
+            series=Series(**{k: np.asarray(v, np.float64) for k, v in series.items()}),
+            tasks=None if tasks is None else TaskMetrics.from_json(tasks),
+            video_simulation_note=record["video_simulation_note"],
+            verdict=Verdict(**record["verdict"]),
+        )

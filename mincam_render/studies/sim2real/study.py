@@ -1,8 +1,9 @@
 """The sim2real study: a recording against its simulation, per pixel and per task, with verdicts.
 
-:func:`analyze_sim2real` renders the recording's scene twin with the designed
-camera and printed masks, compares every pixel (:mod:`.fit`), evaluates the task
-heads (:mod:`.tasks`) and states a verdict. Arrays are numpy float64; voltages in volts.
+:func:`run` renders the recording's scene twin (a SURROGATE recording is made
+first if the config asks for one) with the designed camera and printed masks,
+compares every pixel (:mod:`.fit`), evaluates the task heads (:mod:`.tasks`) and
+states a verdict. Arrays are numpy float64; voltages in volts.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mincam_render.render.capabilities import history_frames
+from mincam_render.studies.sim2real.config import Sim2RealConfig
 from mincam_render.studies.sim2real.fit import THRESHOLDS, compare_pixels, distribution_gap
 from mincam_render.studies.sim2real.recording import (
     SURROGATE_BANNER,
@@ -32,32 +34,40 @@ from mincam_render.studies.sim2real.simulation import simulate_volts
 from mincam_render.studies.sim2real.tasks import task_metrics
 
 
-def analyze_sim2real(
-    path: str | Path,
-    *,
-    spp: int = 4,
-    steps: int = 1500,
-    seed: int = 0,
-    tasks: bool = True,
-    progress: bool = False,
-) -> Sim2RealResult:
+def run(config: Sim2RealConfig, out: str | Path, *, progress: bool = False) -> Sim2RealResult:
     """Compare a recording with its simulation (see the module doc).
 
     Args:
-        path: recording directory (``docs/sim2real_format.md``).
-        spp: samples per texel of the simulation renders.
-        steps: training steps of each head.
-        seed: render and training seed.
-        tasks: also train and evaluate the task heads.
-        progress: show a progress bar over the simulated frames.
+        config: the recording (or the family of a SURROGATE recording to make)
+            and the renders' samples, training steps and seed.
+        out: the study's directory: a SURROGATE recording is written to
+            ``out/surrogate_input``; :func:`.report.write_report` writes the report.
+        progress: show progress bars (the surrogate's render, the simulated
+            frames); the result does not depend on it.
 
     Raises:
         Sim2RealError: invalid recording.
+        ValueError: a surrogate of an unknown family.
     """
+    path = config.recording
+    if path is None:
+        from mincam_render.studies.sim2real.surrogate import make_surrogate
+
+        assert config.surrogate_family is not None  # the config holds exactly one
+        path = make_surrogate(
+            config.surrogate_family,
+            Path(out) / "surrogate_input",
+            num_frames=config.surrogate_frames,
+            spp=config.spp,
+            seed=config.seed,
+            progress=progress,
+        )
     rec = load_recording(path)
-    sim_volts = _simulate_recording(rec, spp=spp, seed=seed, progress=progress)
+    sim_volts = _simulate_recording(rec, spp=config.spp, seed=config.seed, progress=progress)
     pixels = tuple(compare_pixels(sim_volts, rec.volts, rec.pixels, rec.injected))
-    metrics = task_metrics(rec, sim_volts, steps=steps, seed=seed) if tasks else None
+    metrics = (
+        task_metrics(rec, sim_volts, steps=config.steps, seed=config.seed) if config.tasks else None
+    )
     root = Path(path)
     return Sim2RealResult(
         surrogate=rec.surrogate,
@@ -68,8 +78,8 @@ def analyze_sim2real(
         num_samples=int(len(rec.time_s)),
         fps=float(rec.meta["fps"]),
         units_in_file=rec.meta["units"],
-        spp=spp,
-        seed=seed,
+        spp=config.spp,
+        seed=config.seed,
         thresholds=THRESHOLDS,
         pixels=pixels,
         distribution_gap=distribution_gap(list(pixels)),
