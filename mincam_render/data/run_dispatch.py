@@ -26,7 +26,7 @@ import json
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from mincam_render.core.checks import check_int
 
@@ -61,26 +61,29 @@ class RunJob(Protocol):
         ...
 
 
+#: A run's figures, whatever type the study gives them (picklable).
+R = TypeVar("R")
 #: Trains one run: ``(job, splits, runs_dir, *, on_progress=None) -> its figures``;
-#: a module-level function (a worker receives it pickled by reference).
-TrainRun = Callable[..., dict[str, Any]]
+#: a module-level function (a worker receives it pickled by reference). The
+#: splits are the study's, passed through (picklable).
+TrainRun = Callable[..., R]
 #: A run's figures with its paths moved out of a Ray task's temporary directory:
 #: ``(figures, move) -> figures``, ``move`` maps a path below it to one below ``runs_dir``.
-Relocate = Callable[[dict[str, Any], Callable[[str], str]], dict[str, Any]]
+Relocate = Callable[[R, Callable[[str], str]], R]
 #: Called in this process with each finished run and its figures.
-Done = Callable[[Any, dict[str, Any]], None]
+Done = Callable[[Any, R], None]
 
 
 def dispatch_runs(
-    train: TrainRun,
+    train: TrainRun[R],
     jobs: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    splits: object,
     runs_dir: Path,
-    done: Done,
+    done: Done[R],
     *,
     train_workers: int,
     ray_address: str | None,
-    relocate: Relocate,
+    relocate: Relocate[R],
 ) -> None:
     """Train ``jobs`` as Ray tasks (``ray_address``) or in ``train_workers`` local workers.
 
@@ -97,22 +100,22 @@ def dispatch_runs(
 # ---- local worker processes ------------------------------------------------------------------
 
 #: A pool worker's splits, received once when it starts (:func:`_pool_init`).
-_WORKER_SPLITS: dict[str, Any] = {}
+_WORKER_SPLITS: list[object] = []
 
 
-def _pool_init(threads: int, splits: Mapping[str, Any]) -> None:
+def _pool_init(threads: int, splits: object) -> None:
     import torch
 
     torch.set_num_threads(threads)
-    _WORKER_SPLITS.update(splits)
+    _WORKER_SPLITS[:] = [splits]
 
 
 def _pool_train(
-    train: TrainRun, task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
-) -> dict:
+    train: TrainRun[R], task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
+) -> R:
     """A pool worker's task: one run; its error names the run (a ValueError stays one)."""
     try:
-        return train(task, _WORKER_SPLITS, Path(runs_dir), on_progress=on_progress)
+        return train(task, _WORKER_SPLITS[0], Path(runs_dir), on_progress=on_progress)
     except ValueError as err:
         raise ValueError(f"training run {task.name}: {err}") from None
     except Exception as err:
@@ -123,11 +126,11 @@ def _pool_train(
 
 def _on_pool(
     workers: int,
-    train: TrainRun,
+    train: TrainRun[R],
     tasks: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    splits: object,
     runs_dir: Path,
-    done: Done,
+    done: Done[R],
 ) -> None:
     from mincam_render.data.worker_pool import PoolError, run_tasks, threads_per_worker
 
@@ -142,7 +145,7 @@ def _on_pool(
             workers=workers,
             tasks_per_worker=len(tasks),  # the splits are sent once per worker
             initializer=_pool_init,
-            initargs=(threads_per_worker(workers), dict(splits)),
+            initargs=(threads_per_worker(workers), splits),
         )
     except PoolError as err:
         raise TrainingError(
@@ -156,25 +159,25 @@ def _on_pool(
 
 def _on_ray(
     address: str,
-    train: TrainRun,
+    train: TrainRun[R],
     tasks: Sequence[RunJob],
-    splits: Mapping[str, Any],
+    splits: object,
     runs_dir: Path,
-    done: Done,
-    relocate: Relocate,
+    done: Done[R],
+    relocate: Relocate[R],
 ) -> None:
     from mincam_render.data.ray_cluster import RayError, collect, ray_session
 
     by_name = {t.name: t for t in tasks}
 
-    def write(name: Any, returned: tuple[dict[str, Any], dict[str, bytes], str]) -> None:
+    def write(name: Any, returned: tuple[R, dict[str, bytes], str]) -> None:
         task = by_name[name]
         done(task, _write_run(runs_dir, task, *returned, relocate=relocate))
 
     try:
         with ray_session(address) as ray:
             remote = ray.remote(num_cpus=1)(_ray_train)  # a run trains on one thread
-            splits_ref = ray.put(dict(splits))
+            splits_ref = ray.put(splits)
             run_of = {
                 remote.remote(train, splits_ref, t, run_files(runs_dir / t.name)): t.name
                 for t in tasks
@@ -185,8 +188,8 @@ def _on_ray(
 
 
 def _ray_train(
-    train: TrainRun, splits: Mapping[str, Any], task: RunJob, files: Mapping[str, bytes]
-) -> tuple[dict[str, Any], dict[str, bytes], str]:
+    train: TrainRun[R], splits: object, task: RunJob, files: Mapping[str, bytes]
+) -> tuple[R, dict[str, bytes], str]:
     """A Ray task: the run resumed from ``files`` in a temporary directory.
 
     Returns:
@@ -232,12 +235,12 @@ def _write_files(run_dir: Path, files: Mapping[str, bytes]) -> None:
 def _write_run(
     runs_dir: Path,
     task: RunJob,
-    result: dict[str, Any],
+    result: R,
     files: dict[str, bytes],
     worker_runs: str,
     *,
-    relocate: Relocate,
-) -> dict[str, Any]:
+    relocate: Relocate[R],
+) -> R:
     """Write a Ray run's files into ``runs_dir/<run>``; its metrics with the paths moved there.
 
     The run's JSON files (``run.json``'s ``frozen_masks_from`` in the ablation)

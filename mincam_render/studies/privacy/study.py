@@ -1,6 +1,6 @@
 """The privacy audit: task error against attack success, per design (:func:`analyze_privacy`).
 
-1. Render and train as the comparison does (:func:`run_comparison`): workspace
+1. Render and train as the comparison does (its ``run``): workspace
    episodes with a roster of people, each design trained for the task (people
    count) with several seeds; the test episodes give the task error.
 2. Render the full view of every frame of every episode and its background
@@ -54,6 +54,7 @@ from mincam_render.studies.privacy.metrics import (
 )
 
 if TYPE_CHECKING:
+    from mincam_render.studies.comparison.records import DesignRecord
     from mincam_render.studies.privacy.decoders import DecoderKind
 
 #: The reconstruction figures (foreground, then the whole view), in ``privacy.json``'s order.
@@ -250,7 +251,7 @@ def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]
 
 
 def attack_design(
-    design: Mapping[str, Any],
+    design: DesignRecord,
     data: Mapping[str, Any],
     episodes: Mapping[str, Episode],
     cfg: PrivacyConfig,
@@ -263,7 +264,7 @@ def attack_design(
     episode, for the paired people PSNR gains over them (``fg_psnr_gain_db``,
     ``fg_psnr_over_prior_db``).
     """
-    runs = design["runs"]
+    runs = design.runs
     results = []
     for i in range(cfg.attack.seeds):
         seed = stream_seed(cfg.comparison.seed, f"attack/{name}", i)
@@ -355,7 +356,7 @@ def analyze_privacy(
     """Run the audit (module docstring) into ``out_dir``; ``privacy.json``'s contents.
 
     ``workers``, ``train_workers`` and ``ray_address``: where episodes render and
-    the task's runs train (:func:`~mincam_render.studies.comparison.study.run_comparison`);
+    the task's runs train (:func:`mincam_render.studies.comparison.study.run`);
     the attacks train in this process.
 
     Writes ``out_dir/privacy.json`` and ``out_dir/examples.npz`` (true test views,
@@ -364,10 +365,10 @@ def analyze_privacy(
     """
     from tqdm import tqdm
 
-    from mincam_render.studies.comparison.study import render_episodes, run_comparison
+    from mincam_render.studies.comparison import study as comparison
 
     out = Path(out_dir)
-    result = run_comparison(
+    result = comparison.run(
         cfg.comparison,
         out,
         workers=workers,
@@ -375,8 +376,10 @@ def analyze_privacy(
         ray_address=ray_address,
         progress=progress,
     )
-    data = render_episodes(cfg.comparison, out / "episodes", workers=workers, progress=False)
-    paths = {k: v["dataset"] for k, v in result.episodes.items()}
+    data = comparison.render_episodes(
+        cfg.comparison, out / "episodes", workers=workers, progress=False
+    )
+    paths = {k: v.dataset for k, v in result.episodes.items()}
     episodes = load_episodes(paths, out / "views", cfg, progress)
     trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     designs, examples = {}, {}
@@ -386,10 +389,10 @@ def analyze_privacy(
         references = {"trivial": trivial, "prior": prior}
         attack, ex = attack_design(d, data, episodes, cfg, name, references)
         designs[name] = {
-            "pixels": d["model"]["pixels"],
-            "task_error": d["error"],
-            "task_state": d["state"],
-            "task_seeds": len(d["runs"]),
+            "pixels": d.pixels,
+            "task_error": d.error.as_dict(),
+            "task_state": d.state,
+            "task_seeds": len(d.runs),
             **attack,
         }
         examples[name] = ex["test-0"]
@@ -399,9 +402,11 @@ def analyze_privacy(
         "error_name": block.error_name,
         "config": json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         "roster": int(episodes["test-0"].present.shape[1]),
-        "episodes": result.episodes,
+        "episodes": {k: e.as_json() for k, e in result.episodes.items()},
         "designs": designs,
-        "trivial": _trivial_record(trivial, frames, block.trivial["error"], cfg.comparison.seed),
+        "trivial": _trivial_record(
+            trivial, frames, block.trivial.error.as_dict(), cfg.comparison.seed
+        ),
         "prior": _prior_record(prior, trivial, frames, cfg.comparison.seed),
         "comparison": str(out / "metrics.json"),
     }
