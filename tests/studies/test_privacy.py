@@ -365,7 +365,7 @@ def test_every_attacker_seed_scores_every_decoder_and_the_gains_are_paired(varia
                           view_width=8)  # fmt: skip
     trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     result, examples = attack_design(
-        {"runs": [str(tmp_path)]}, data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
+        [str(tmp_path)], data, episodes, PrivacyConfig(attack=attack), "mincam-2px",
         {"trivial": trivial, "prior": prior},
     )  # fmt: skip
     for f in FIGURES:

@@ -54,7 +54,6 @@ from mincam_render.studies.privacy.metrics import (
 )
 
 if TYPE_CHECKING:
-    from mincam_render.studies.comparison.records import DesignRecord
     from mincam_render.studies.privacy.decoders import DecoderKind
 
 #: The reconstruction figures (foreground, then the whole view), in ``privacy.json``'s order.
@@ -251,7 +250,7 @@ def prior_attack(episodes: Mapping[str, Episode]) -> dict[str, dict[str, float]]
 
 
 def attack_design(
-    design: DesignRecord,
+    runs: Sequence[str],
     data: Mapping[str, Any],
     episodes: Mapping[str, Episode],
     cfg: PrivacyConfig,
@@ -260,11 +259,11 @@ def attack_design(
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Every attacker seed against one design: figures with intervals, the first seed's examples.
 
-    ``references``: the ``"trivial"`` and ``"prior"`` attackers' figures per test
-    episode, for the paired people PSNR gains over them (``fg_psnr_gain_db``,
-    ``fg_psnr_over_prior_db``).
+    ``runs``: the design's run directories (attacker seed ``i`` attacks run ``i``
+    modulo their number). ``references``: the ``"trivial"`` and ``"prior"``
+    attackers' figures per test episode, for the paired people PSNR gains over
+    them (``fg_psnr_gain_db``, ``fg_psnr_over_prior_db``).
     """
-    runs = design.runs
     results = []
     for i in range(cfg.attack.seeds):
         seed = stream_seed(cfg.comparison.seed, f"attack/{name}", i)
@@ -387,7 +386,7 @@ def analyze_privacy(
     todo = tqdm(block.designs.items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
         references = {"trivial": trivial, "prior": prior}
-        attack, ex = attack_design(d, data, episodes, cfg, name, references)
+        attack, ex = attack_design(d.runs, data, episodes, cfg, name, references)
         designs[name] = {
             "pixels": d.pixels,
             "task_error": d.error.as_dict(),
