@@ -29,7 +29,7 @@ from bench_patches_paper import machine
 
 from mincam_render.analysis.statistics import EpisodeErrors, Pooling
 from mincam_render.core import strict_json
-from mincam_render.studies.comparison.result import TaskComparison
+from mincam_render.studies.comparison.records import DesignRecord
 from mincam_render.studies.comparison.study import paired_differences, reference_verdicts
 
 
@@ -58,13 +58,14 @@ def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:
     errors["trivial"] = episode_errors([result["trivial"]["episodes"]])
     result["trivial"]["episode_errors"] = errors["trivial"].as_dict()
     seed = int(result["config"].get("seed", 0))
-    block = TaskComparison.from_json(result)  # a kept study: the headline's block at the top
+    # a kept study: the headline's designs at the top level
+    designs = {n: DesignRecord.from_json(d) for n, d in result["designs"].items()}
     result["reference_verdicts"] = reference_verdicts(
-        block, result["reduction_factor"]["reference"], seed
+        designs, result["reduction_factor"]["reference"], seed
     )
     paired = paired_differences(errors, [], seed)
     result["paired"] = {key: p.as_json() for key, p in paired.items()}
-    result["paired_also"] = {name: reference_verdicts(block, name, seed) for name in also}
+    result["paired_also"] = {name: reference_verdicts(designs, name, seed) for name in also}
     extra = [line for lines in result["paired_also"].values() for line in lines]
     return [
         line for line in [*result["reference_verdicts"], *extra] if line.startswith("paired")

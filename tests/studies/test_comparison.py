@@ -252,11 +252,11 @@ def test_baselines_are_told_by_their_model_kind_not_their_name():
     block = _block()
     block = _block({f"design-{i}": d for i, d in enumerate(block.designs.values())})
     assert reduction_factor(block, "design-0").baseline == "4x4"
-    assert len(reference_verdicts(block, "design-0")) == 3
+    assert len(reference_verdicts(block.designs, "design-0")) == 3
 
 
 def test_reference_verdicts_and_training_states():
-    v = reference_verdicts(_block(), "mincam-4px")
+    v = reference_verdicts(_block().designs, "mincam-4px")
     assert v[0].startswith("mincam-4px beats baseline-2x2")
     assert v[1].startswith("no verdict") and v[2].startswith("baseline-8x8 beats mincam-4px")
 

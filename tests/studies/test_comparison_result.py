@@ -126,3 +126,14 @@ def test_the_kept_runs_give_the_kept_figures(kept, monkeypatch, tmp_path):
     )
     result = study.summarise_study(result, "mincam-2px")
     assert strict_json.dumps(result.as_json()) + "\n" == kept
+
+
+@pytest.mark.parametrize(
+    "kept_study", sorted(p.name for p in (REPO / "benchmarks" / "results").glob("study_*.json"))
+)
+def test_kept_studies_read_back_to_their_reference_verdicts(kept_study):
+    """Every kept study's designs read back (older ones lack later fields) to its verdicts."""
+    data = json.loads((REPO / "benchmarks" / "results" / kept_study).read_text())
+    designs = {n: DesignRecord.from_json(d) for n, d in data["designs"].items()}
+    reference, seed = data["reduction_factor"]["reference"], int(data["config"].get("seed", 0))
+    assert study.reference_verdicts(designs, reference, seed) == data["reference_verdicts"]

@@ -666,7 +666,9 @@ def _headline_unit(block: TaskComparison, labels: Mapping[str, LabelFigures]) ->
     return units.pop() if len(units) == 1 else ""
 
 
-def reference_verdicts(block: TaskComparison, reference: str, seed: int = 0) -> list[str]:
+def reference_verdicts(
+    designs: Mapping[str, DesignRecord], reference: str, seed: int = 0
+) -> list[str]:
     """The reference design against every baseline: a verdict only where intervals separate.
 
     Each verdict is followed by the paired difference on the same test episodes
@@ -674,9 +676,9 @@ def reference_verdicts(block: TaskComparison, reference: str, seed: int = 0) -> 
     ``seed``) where the records keep per-episode errors (studies from before
     it do not).
     """
-    ref = block.designs[reference]
+    ref = designs[reference]
     lines = []
-    for name, d in block.designs.items():
+    for name, d in designs.items():
         if not d.is_baseline:
             continue
         lines.append(verdict(reference, ref.error, name, d.error))
@@ -692,7 +694,7 @@ def summarise_study(result: ComparisonResult, reference: str) -> ComparisonResul
     study = StudySummary(
         reduction_factor=reduction_factor(block, reference),
         configurations=study_summary(block, result.labels),
-        reference_verdicts=tuple(reference_verdicts(block, reference, result.seed)),
+        reference_verdicts=tuple(reference_verdicts(block.designs, reference, result.seed)),
     )
     return dataclasses.replace(result, study=study)
 
