@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mincam_render.analysis.coverage import coverage_table
+from mincam_render.analysis.statistics import Interval
 from mincam_render.studies.comparison.records import LabelFigures
 from mincam_render.studies.comparison.result import ComparisonResult, TaskComparison
 
@@ -74,7 +75,7 @@ def label_table(
         element_names: ``{label: names}`` for the element columns (lighting's lights);
             missing: element indices.
     """
-    columns: list[tuple[str, Mapping[str, Any]]] = []
+    columns: list[tuple[str, Mapping[str, Interval]]] = []
     for label, lab in labels.items():
         unit = f" ({lab.unit})" if lab.unit else ""
         what = "RMSE" + unit if lab.metric == "rmse" else "accuracy"
