@@ -9,7 +9,7 @@ multiplies every emitter's radiance by a factor (transport is linear in it,
 :meth:`TrainingData.with_light_scaled`), so the levels differ only in how much
 light reaches the detectors against their fixed noise, gain and full scale.
 
-At each level a study (:func:`mincam_render.studies.comparison.study.run_comparison`)
+At each level a study (:func:`mincam_render.studies.comparison.study.run`)
 trains ``mincam-4px`` (with the model) and ``mincam-4px-nosensor`` (masks
 without it, head retrained with it) with ``--seeds`` training seeds, tests both
 with the model on independent test episodes, and reports the mean and the 95 %
@@ -56,8 +56,10 @@ from mincam_render.core.photometry import (
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.train_config import GAIN_AUGMENTATION_20, TrainConfig
 from mincam_render.scenes import load_family
+from mincam_render.studies.comparison import study as comparison
 from mincam_render.studies.comparison.config import ComparisonConfig
-from mincam_render.studies.comparison.study import Design, run_comparison
+from mincam_render.studies.comparison.records import DesignRecord
+from mincam_render.studies.comparison.study import Design
 
 #: The paper's single point (supplement A), count RMSE of 4 freeform pixels.
 PAPER = {"with_sensor_model": 0.93, "without_sensor_model": 2.28, "light_level": "not stated"}
@@ -83,23 +85,23 @@ def illuminance_at_unit_scale(cfg: ComparisonConfig, frames: int) -> dict:
     }
 
 
-def _design_record(d: dict) -> dict:
+def _design_record(d: DesignRecord) -> dict:
     return {
-        "rmse_mean": d["error"]["mean"],
-        "rmse_ci95": d["error"]["ci95"],
-        "per_seed": d["error_per_seed"],
-        "seeds": len(d["error_per_seed"]),
-        "converged": d["converged"],
-        "state": d["state"],
-        "steps": d["steps"],
-        "train_wall_time_s": d["train_wall_time_s"],
+        "rmse_mean": d.error.mean,
+        "rmse_ci95": [d.error.low, d.error.high],
+        "per_seed": list(d.error_per_seed),
+        "seeds": len(d.error_per_seed),
+        "converged": d.converged,
+        "state": d.state,
+        "steps": list(d.steps),
+        "train_wall_time_s": list(d.train_wall_time_s),
     }
 
 
 def run_level(cfg: ComparisonConfig, work: Path, lux: float, workers: int) -> dict:
     """One light level: both designs trained and tested; their records and the verdict."""
     t0 = time.perf_counter()
-    res = run_comparison(
+    res = comparison.run(
         cfg,
         work / f"lux-{lux:g}",
         workers=workers,
@@ -113,7 +115,7 @@ def run_level(cfg: ComparisonConfig, work: Path, lux: float, workers: int) -> di
         "light_scale": cfg.light_scale,
         "with_sensor_model": _design_record(with_),
         "without_sensor_model": _design_record(without),
-        "trivial": block.trivial["error"],
+        "trivial": block.trivial.error.as_dict(),
         "verdict": block.verdict,
         "seconds": time.perf_counter() - t0,
     }

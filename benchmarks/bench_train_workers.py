@@ -22,12 +22,11 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 from provenance import cpu_times, machine, write_result
 
 from mincam_render.learn.train_config import TrainConfig
-from mincam_render.studies.comparison.runs import train_runs
+from mincam_render.studies.comparison.runs import ComparisonRun, RunsByTask, Splits, train_runs
 from mincam_render.studies.comparison.study import (
     ComparisonConfig,
     Design,
@@ -56,13 +55,19 @@ def _config(seeds: int, steps: int) -> ComparisonConfig:
     )
 
 
-def _figures(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dict[str, list[dict[str, Any]]]:
+def _same(run: ComparisonRun) -> dict:
+    """What must not depend on where ``run`` trained (:data:`SAME`), as JSON."""
+    record = run.as_json()
+    return {k: record[k] for k in SAME}
+
+
+def _figures(runs: RunsByTask) -> dict[str, list[dict]]:
     """Each design's figures per seed (patches has one task)."""
     (by_design,) = runs.values()
-    return {n: [{k: r[k] for k in SAME} for r in rs] for n, rs in by_design.items()}
+    return {n: [_same(r) for r in rs] for n, rs in by_design.items()}
 
 
-def _time(cfg: ComparisonConfig, splits: dict, out: Path, workers: int) -> tuple[float, dict]:
+def _time(cfg: ComparisonConfig, splits: Splits, out: Path, workers: int) -> tuple[float, dict]:
     """Wall time of training every run into ``out`` on ``workers``; load and steal over it."""
     load0, (steal0, total0) = os.getloadavg()[0], cpu_times()
     t0 = time.perf_counter()

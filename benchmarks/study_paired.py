@@ -20,17 +20,28 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from bench_patches_paper import machine
 
+from mincam_render.analysis.statistics import EpisodeErrors, Pooling
 from mincam_render.core import strict_json
-from mincam_render.studies.comparison.study import (
-    episode_errors,
-    paired_differences,
-    reference_verdicts,
-)
+from mincam_render.studies.comparison.records import DesignRecord
+from mincam_render.studies.comparison.study import paired_differences, reference_verdicts
+
+
+def episode_errors(per_seed: Sequence[Mapping[str, Any]]) -> EpisodeErrors:
+    """Per-seed, per-episode errors of kept runs' ``episodes`` records (as their files hold them)."""
+    names = sorted(per_seed[0])
+    first = per_seed[0][names[0]]
+    return EpisodeErrors(
+        error=np.array([[m[e]["error"] for e in names] for m in per_seed]),
+        frames=np.array([per_seed[0][e]["samples"] for e in names]),
+        pooling=Pooling.RMS if first["error_name"].endswith("RMSE") else Pooling.MEAN,
+    )
 
 
 def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:
@@ -47,11 +58,14 @@ def add_paired(result: dict[str, Any], also: list[str]) -> list[str]:
     errors["trivial"] = episode_errors([result["trivial"]["episodes"]])
     result["trivial"]["episode_errors"] = errors["trivial"].as_dict()
     seed = int(result["config"].get("seed", 0))
+    # a kept study: the headline's designs at the top level
+    designs = {n: DesignRecord.from_json(d) for n, d in result["designs"].items()}
     result["reference_verdicts"] = reference_verdicts(
-        result, result["reduction_factor"]["reference"]
+        designs, result["reduction_factor"]["reference"], seed
     )
-    result["paired"] = paired_differences(errors, [], seed)
-    result["paired_also"] = {name: reference_verdicts(result, name) for name in also}
+    paired = paired_differences(errors, [], seed)
+    result["paired"] = {key: p.as_json() for key, p in paired.items()}
+    result["paired_also"] = {name: reference_verdicts(designs, name, seed) for name in also}
     extra = [line for lines in result["paired_also"].values() for line in lines]
     return [
         line for line in [*result["reference_verdicts"], *extra] if line.startswith("paired")

@@ -96,6 +96,25 @@ def linear_task(
     )
 
 
+#: A binary label beside the linear task's count (:func:`two_task_episode`).
+BRIGHT_LEFT = LabelSpec(name="bright_left", kind=LabelKind.BINARY, median_filter_s=0.0)
+
+
+def two_task_episode(n: int, seed: int) -> tr.TrainingData:
+    """The linear count task plus a binary label of the left half's brightness (two tasks)."""
+    data = linear_task(n, k=2, res=4, seed=seed)
+    left = np.asarray(data.transport[:, 0, :, :2].mean(axis=(1, 2)))
+    side = (left > np.median(left)).astype(np.float32)[:, None]
+    return tr.TrainingData(
+        transport=data.transport,
+        labels={**data.labels, "bright_left": side},
+        label_specs=(*data.label_specs, BRIGHT_LEFT),
+        camera=data.camera,
+        fps=data.fps,
+        source={"family": "synthetic", "seed": seed},
+    )
+
+
 def cli_process(args: list[str], env: dict | None = None, **kw) -> subprocess.Popen:
     """``mincam-render ARGS`` in a subprocess of this interpreter (text pipes)."""
     return subprocess.Popen(

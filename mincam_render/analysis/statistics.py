@@ -25,7 +25,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
@@ -42,6 +42,14 @@ class Pooling(enum.StrEnum):
 
     RMS = "rms"  # root mean square over frames: RMSE
     MEAN = "mean"  # mean over frames: error rates, accuracies, attack figures
+
+
+class EpisodeErrorsJson(TypedDict):
+    """:class:`EpisodeErrors` as JSON holds it (read back by :meth:`EpisodeErrors.from_dict`)."""
+
+    error: list[list[float]]
+    frames: list[float]
+    pooling: str
 
 
 @dataclass(frozen=True)
@@ -88,7 +96,7 @@ class EpisodeErrors:
         per_seed = np.sqrt((e**2) @ w) if self.pooling is Pooling.RMS else e @ w
         return float(per_seed.mean())
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self) -> EpisodeErrorsJson:
         """JSON form: ``{"error": [[seed x episode]], "frames": [...], "pooling": ...}``."""
         return {
             "error": self.error.tolist(),
@@ -118,6 +126,11 @@ class Interval:
     def as_dict(self) -> dict[str, float | list[float]]:
         """``{"mean": m, "ci95": [lo, hi]}`` for JSON."""
         return {"mean": self.mean, "ci95": [self.low, self.high]}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> Interval:
+        """Inverse of :meth:`as_dict`."""
+        return cls(float(d["mean"]), float(d["ci95"][0]), float(d["ci95"][1]))
 
     def __str__(self) -> str:
         return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.learn.train_config import HeadKind
 from mincam_render.studies.comparison.config import ComparisonConfig as C
 from mincam_render.studies.comparison.config import Protocol
@@ -132,17 +133,21 @@ def _head_list(value: str) -> list[HeadKind]:
     return heads
 
 
-def _family_detectors(episode: dict[str, Any]) -> int:
-    """Detectors of the episodes' camera (the default pixel count), overrides applied."""
+def _family_detectors(family: str, overrides: JsonObject, detectors: int | None) -> int:
+    """Detectors of the episodes' camera (the default pixel count), overrides applied.
+
+    Args:
+        family: the ``--family`` option.
+        overrides: the ``--set`` scene overrides (a TOML table).
+        detectors: the ``--detectors`` shorthand, or None.
+    """
     from mincam_render.core.config import ConfigError
     from mincam_render.scenes.registry import load_family
 
-    overrides = with_detectors(episode["overrides"], episode["detectors"])
+    overrides = with_detectors(overrides, detectors)
     try:
         return (
-            load_family(episode["family"], seed=0, num_frames=30, overrides=overrides)
-            .camera()
-            .num_detectors
+            load_family(family, seed=0, num_frames=30, overrides=overrides).camera().num_detectors
         )
     except ConfigError as err:
         raise user_error(err) from None
@@ -157,23 +162,26 @@ def _compare(
     workers: int,
     train_workers: int,
     ray_address: str | None,
-    overrides: dict[str, Any],
+    overrides: JsonObject,
     detectors: int | None,
     episodes_dir: Path | None,
     **episode: Any,
 ) -> ComparisonResult:
-    """Run :func:`run_comparison` for the episode options and ``designs``; print the figures."""
+    """Run the comparison (:func:`~mincam_render.studies.comparison.study.run`) of ``designs``.
+
+    The episode options fill its config; prints its figures.
+    """
     from mincam_render.core.config import ConfigError
     from mincam_render.data.ray_cluster import RayError
     from mincam_render.data.render_job import RenderError
     from mincam_render.data.run_dispatch import TrainingError
     from mincam_render.learn.train_config import TrainConfig
     from mincam_render.render.mitsuba_scene import SceneError
-    from mincam_render.studies.comparison.study import run_comparison
+    from mincam_render.studies.comparison import study
 
     t0 = time.perf_counter()
     # a bad description fails here, on one line, before anything is printed or written
-    _family_detectors({"family": episode["family"], "overrides": overrides, "detectors": detectors})
+    _family_detectors(episode["family"], overrides, detectors)
     quick = {"spp": spp, "max_depth": 0, "shared_render": False, "differential": False}
     try:
         cfg = C(
@@ -189,7 +197,7 @@ def _compare(
             f"test {cfg.test_episodes} x {cfg.test_frames} frames; {len(designs)} designs x "
             f"{cfg.seeds} seeds"
         )
-        result = run_comparison(
+        result = study.run(
             cfg,
             out,
             workers=workers,
@@ -221,7 +229,7 @@ def _echo_comparison(result: ComparisonResult, seeds: int) -> None:
     if len(tasks) > 1:
         for name, c in result.combined.items():
             click.echo(f"  {name} for every task: {c.pixels} pixels")
-    if n := len(result.coverage["warnings"]):
+    if n := len(result.coverage.warnings):
         # each was logged before training; the summary only points at them
         click.echo(f"  label coverage: {n} warning(s), logged above and in metrics.json")
 
@@ -285,7 +293,9 @@ def pipeline_cmd(
     """
     from mincam_render.studies.comparison.study import Design
 
-    pixels = pixels or _family_detectors(episode)
+    pixels = pixels or _family_detectors(
+        episode["family"], episode["overrides"], episode["detectors"]
+    )
     _compare(out, (Design(pixels=pixels), Design(grid=baseline_grid)), **episode)
 
 
@@ -351,9 +361,11 @@ def study_cmd(
           --baseline-grids 2x4,4x7,8x14 --heads mlp,tcn --out runs/study-traffic
     """
     from mincam_render.learn.train import default_pixel_counts
-    from mincam_render.studies.comparison.study import Design, study_table, summarise_study
+    from mincam_render.studies.comparison.report import study_table, write_report
+    from mincam_render.studies.comparison.study import Design, summarise_study
 
-    pixels = pixels or default_pixel_counts(_family_detectors(episode))
+    detectors = _family_detectors(episode["family"], episode["overrides"], episode["detectors"])
+    pixels = pixels or default_pixel_counts(detectors)
     if reference_pixels not in pixels:
         raise click.BadParameter(
             f"{reference_pixels} is not among --pixels {pixels}", param_hint="--reference-pixels"
@@ -366,7 +378,5 @@ def study_cmd(
         designs += [Design(grid=g, head=head) for g in baseline_grids]
     reference = Design(pixels=reference_pixels, head=heads[0]).name
     result = summarise_study(_compare(out, tuple(designs), **episode), reference)
-    result.write(out / "metrics.json")
-    table = study_table(result.as_json())
-    (out / "study.md").write_text(table + "\n")
-    click.echo(table)
+    write_report(result, out)
+    click.echo(study_table(result))

@@ -24,10 +24,9 @@ from __future__ import annotations
 
 import json
 import tempfile
-from collections.abc import Callable, Hashable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Generic, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from mincam_render.core.checks import check_int
 
@@ -62,51 +61,29 @@ class RunJob(Protocol):
         ...
 
 
-#: A run's figures: whatever the study's train function returns (this module
-#: only carries them back and hands them to ``done``).
-Figures = TypeVar("Figures")
-#: A study's run (its job type).
-Job = TypeVar("Job", bound=RunJob)
-#: The splits a run trains on, ``{split or episode: its data}`` (the study's type;
-#: sent once to each worker, or put once into Ray's object store).
-Splits = Mapping[str, object]
-
+#: A run's figures, whatever type the study gives them (picklable).
+R = TypeVar("R")
 #: Trains one run: ``(job, splits, runs_dir, *, on_progress=None) -> its figures``;
-#: a module-level function (a worker receives it pickled by reference).
-TrainRun = Callable[..., Figures]
+#: a module-level function (a worker receives it pickled by reference). The
+#: splits are the study's, passed through (picklable).
+TrainRun = Callable[..., R]
 #: A run's figures with its paths moved out of a Ray task's temporary directory:
 #: ``(figures, move) -> figures``, ``move`` maps a path below it to one below ``runs_dir``.
-Relocate = Callable[[Figures, Callable[[str], str]], Figures]
+Relocate = Callable[[R, Callable[[str], str]], R]
 #: Called in this process with each finished run and its figures.
-Done = Callable[[Job, Figures], None]
-
-
-@dataclass(frozen=True)
-class RayRun(Generic[Figures]):
-    """What a Ray task sends back: the run's figures and its directory's files.
-
-    Attributes:
-        figures: what the train function returned.
-        files: ``{relative path: bytes}`` of the run's directory.
-        worker_runs: the task's temporary runs directory, which the figures'
-            and files' paths point into.
-    """
-
-    figures: Figures
-    files: dict[str, bytes]
-    worker_runs: str
+Done = Callable[[Any, R], None]
 
 
 def dispatch_runs(
-    train: TrainRun[Figures],
-    jobs: Sequence[Job],
-    splits: Splits,
+    train: TrainRun[R],
+    jobs: Sequence[RunJob],
+    splits: object,
     runs_dir: Path,
-    done: Done[Job, Figures],
+    done: Done[R],
     *,
     train_workers: int,
     ray_address: str | None,
-    relocate: Relocate[Figures],
+    relocate: Relocate[R],
 ) -> None:
     """Train ``jobs`` as Ray tasks (``ray_address``) or in ``train_workers`` local workers.
 
@@ -123,22 +100,22 @@ def dispatch_runs(
 # ---- local worker processes ------------------------------------------------------------------
 
 #: A pool worker's splits, received once when it starts (:func:`_pool_init`).
-_WORKER_SPLITS: dict[str, object] = {}
+_WORKER_SPLITS: list[object] = []
 
 
-def _pool_init(threads: int, splits: Splits) -> None:
+def _pool_init(threads: int, splits: object) -> None:
     import torch
 
     torch.set_num_threads(threads)
-    _WORKER_SPLITS.update(splits)
+    _WORKER_SPLITS[:] = [splits]
 
 
 def _pool_train(
-    train: TrainRun[Figures], task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
-) -> Figures:
+    train: TrainRun[R], task: RunJob, runs_dir: str, on_progress: Callable[[int], None]
+) -> R:
     """A pool worker's task: one run; its error names the run (a ValueError stays one)."""
     try:
-        return train(task, _WORKER_SPLITS, Path(runs_dir), on_progress=on_progress)
+        return train(task, _WORKER_SPLITS[0], Path(runs_dir), on_progress=on_progress)
     except ValueError as err:
         raise ValueError(f"training run {task.name}: {err}") from None
     except Exception as err:
@@ -149,11 +126,11 @@ def _pool_train(
 
 def _on_pool(
     workers: int,
-    train: TrainRun[Figures],
-    tasks: Sequence[Job],
-    splits: Splits,
+    train: TrainRun[R],
+    tasks: Sequence[RunJob],
+    splits: object,
     runs_dir: Path,
-    done: Done[Job, Figures],
+    done: Done[R],
 ) -> None:
     from mincam_render.data.worker_pool import PoolError, run_tasks, threads_per_worker
 
@@ -168,7 +145,7 @@ def _on_pool(
             workers=workers,
             tasks_per_worker=len(tasks),  # the splits are sent once per worker
             initializer=_pool_init,
-            initargs=(threads_per_worker(workers), dict(splits)),
+            initargs=(threads_per_worker(workers), splits),
         )
     except PoolError as err:
         raise TrainingError(
@@ -182,25 +159,25 @@ def _on_pool(
 
 def _on_ray(
     address: str,
-    train: TrainRun[Figures],
-    tasks: Sequence[Job],
-    splits: Splits,
+    train: TrainRun[R],
+    tasks: Sequence[RunJob],
+    splits: object,
     runs_dir: Path,
-    done: Done[Job, Figures],
-    relocate: Relocate[Figures],
+    done: Done[R],
+    relocate: Relocate[R],
 ) -> None:
     from mincam_render.data.ray_cluster import RayError, collect, ray_session
 
     by_name = {t.name: t for t in tasks}
 
-    def write(name: Hashable, returned: RayRun[Figures]) -> None:
-        task = by_name[str(name)]
-        done(task, _write_run(runs_dir, task, returned, relocate=relocate))
+    def write(name: Any, returned: tuple[R, dict[str, bytes], str]) -> None:
+        task = by_name[name]
+        done(task, _write_run(runs_dir, task, *returned, relocate=relocate))
 
     try:
         with ray_session(address) as ray:
             remote = ray.remote(num_cpus=1)(_ray_train)  # a run trains on one thread
-            splits_ref = ray.put(dict(splits))
+            splits_ref = ray.put(splits)
             run_of = {
                 remote.remote(train, splits_ref, t, run_files(runs_dir / t.name)): t.name
                 for t in tasks
@@ -211,13 +188,13 @@ def _on_ray(
 
 
 def _ray_train(
-    train: TrainRun[Figures], splits: Splits, task: RunJob, files: Mapping[str, bytes]
-) -> RayRun[Figures]:
+    train: TrainRun[R], splits: object, task: RunJob, files: Mapping[str, bytes]
+) -> tuple[R, dict[str, bytes], str]:
     """A Ray task: the run resumed from ``files`` in a temporary directory.
 
     Returns:
-        The run's figures, its directory's files and the temporary runs
-        directory their paths point into.
+        ``(run metrics, {relative path: bytes} of the run directory, the
+        temporary runs directory the metrics' and files' paths point into)``.
     """
     import torch
 
@@ -226,7 +203,7 @@ def _ray_train(
         runs = Path(tmp)
         _write_files(runs / task.name, files)
         result = train(task, splits, runs)
-        return RayRun(figures=result, files=run_files(runs / task.name), worker_runs=str(runs))
+        return result, run_files(runs / task.name), str(runs)
 
 
 def run_files(run_dir: Path) -> dict[str, bytes]:
@@ -258,10 +235,12 @@ def _write_files(run_dir: Path, files: Mapping[str, bytes]) -> None:
 def _write_run(
     runs_dir: Path,
     task: RunJob,
-    returned: RayRun[Figures],
+    result: R,
+    files: dict[str, bytes],
+    worker_runs: str,
     *,
-    relocate: Relocate[Figures],
-) -> Figures:
+    relocate: Relocate[R],
+) -> R:
     """Write a Ray run's files into ``runs_dir/<run>``; its metrics with the paths moved there.
 
     The run's JSON files (``run.json``'s ``frozen_masks_from`` in the ablation)
@@ -269,11 +248,11 @@ def _write_run(
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
-    new, worker_runs = str(runs_dir), returned.worker_runs
+    new = str(runs_dir)
     old_json, new_json = json.dumps(worker_runs)[1:-1].encode(), json.dumps(new)[1:-1].encode()
     moved = {
         rel: data.replace(old_json, new_json) if rel.endswith((".json", ".jsonl")) else data
-        for rel, data in returned.files.items()
+        for rel, data in files.items()
     }
     with exclusive_writer(runs_dir / task.name, "training") as run_dir:
         _write_files(run_dir, moved)
@@ -281,4 +260,4 @@ def _write_run(
     def move(path: str) -> str:
         return new + path[len(worker_runs) :] if path.startswith(worker_runs) else path
 
-    return relocate(returned.figures, move)
+    return relocate(result, move)

@@ -8,78 +8,99 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mincam_render.analysis.plots import plot_comparison
+from mincam_render.analysis.coverage import StudyCoverage
+from mincam_render.analysis.statistics import Interval
 from mincam_render.cli.main import main
 from mincam_render.learn import train as tr
+from mincam_render.learn.evaluation import Evaluation, Headline, LabelMetrics
 from mincam_render.learn.train import run_masks
 from mincam_render.learn.train_config import HeadKind
+from mincam_render.studies.comparison.config import Protocol
+from mincam_render.studies.comparison.records import (
+    Convergence,
+    DesignRecord,
+    LabelFigures,
+    TrivialFigures,
+    training_state,
+)
+from mincam_render.studies.comparison.report import label_table, plot_comparison, study_table
+from mincam_render.studies.comparison.result import ComparisonResult, StudySummary, TaskComparison
 from mincam_render.studies.comparison.study import (
     ComparisonConfig,
     Design,
     episode_requests,
     keep_run_masks,
     label_intervals,
-    label_table,
     reduction_factor,
     reference_verdicts,
     study_summary,
-    study_table,
-    training_state,
 )
 
 
 def _design(pixels, mean, lo, hi, grid=None):
     kind = "baseline" if grid else "mincam"  # the kind is read from here, never from the name
     model = {"kind": kind, "pixels": pixels, **({"grid": list(grid)} if grid else {})}
-    return {
-        "model": model,
-        "error": {"mean": mean, "ci95": [lo, hi]},
-        "error_per_seed": [mean],
-        "converged": True,
-        "state": "converged",
-        "steps": [100],
-        "train_wall_time_s": [1.0],
-    }
+    done = Convergence(converged=True, improvement=0.0, steps=100, stopped_early=True)
+    return DesignRecord(
+        model=model, error=Interval(mean, lo, hi), episode_errors=None, error_per_seed=(mean,),
+        val_error_per_seed=None, validation=None, convergence=(done,),
+        train_wall_time_s=(1.0,), steps=(100,), runs=("run",), structure=None,
+    )  # fmt: skip
 
 
-def _result():
-    return {
-        "task": "toy",
-        "error_name": "count RMSE",
-        "verdict": "x",
-        "trivial": {"error": {"mean": 3.0, "ci95": [2.9, 3.1]}},
-        "designs": {
-            "mincam-4px": _design(4, 1.0, 0.9, 1.1),
-            "baseline-2x2": _design(4, 2.0, 1.8, 2.2, (2, 2)),
-            "baseline-4x4": _design(16, 1.3, 1.05, 1.5, (4, 4)),  # overlaps 4 px
-            "baseline-8x8": _design(64, 0.8, 0.7, 0.85, (8, 8)),
-        },
+def _block(designs=None, *, error_name="count RMSE", trivial=None, labels=None):
+    designs = designs or {
+        "mincam-4px": _design(4, 1.0, 0.9, 1.1),
+        "baseline-2x2": _design(4, 2.0, 1.8, 2.2, (2, 2)),
+        "baseline-4x4": _design(16, 1.3, 1.05, 1.5, (4, 4)),  # overlaps 4 px
+        "baseline-8x8": _design(64, 0.8, 0.7, 0.85, (8, 8)),
     }
+    trivial = trivial or TrivialFigures(
+        error=Interval(3.0, 2.9, 3.1), episode_errors=None, episodes={}
+    )
+    return TaskComparison(error_name=error_name, designs=designs, trivial=trivial, verdict="x",
+                          versus_trivial={}, paired={}, labels=labels or {})  # fmt: skip
+
+
+def _result(block=None, *, study=None, element_names=None):
+    """A comparison of one task (``block``) named ``toy``."""
+    block = block or _block()
+    return ComparisonResult(
+        family="toy", protocol=Protocol.PER_TASK, config={"seed": 0}, episodes={},
+        labels=block.labels, tasks={"toy": block}, combined={},
+        element_names=element_names or {}, coverage=StudyCoverage(splits={}, warnings=()),
+        figure="comparison.png", versions={}, study=study,
+    )  # fmt: skip
+
+
+def _study(rf):
+    return StudySummary(reduction_factor=rf, configurations={}, reference_verdicts=())
 
 
 def test_reduction_factor_is_the_smallest_baseline_whose_interval_reaches_the_reference():
-    rf = reduction_factor(_result(), "mincam-4px")
-    assert rf["baseline"] == "4x4" and rf["factor"] == 16 / 4
-    assert rf["largest_tried_factor"] == 64 / 4
+    rf = reduction_factor(_block(), "mincam-4px")
+    assert rf.baseline == "4x4" and rf.factor == 16 / 4
+    assert rf.largest_tried_factor == 64 / 4
 
 
 def test_reduction_factor_without_a_match_says_it_exceeds_the_largest_tried():
-    res = _result()
-    res["designs"]["mincam-4px"]["error"] = {"mean": 0.3, "ci95": [0.2, 0.4]}
-    rf = reduction_factor(res, "mincam-4px")
-    assert rf["factor"] is None and rf["largest_tried_factor"] == 16
-    res["reduction_factor"] = rf
-    assert "above 16x" in study_table(res)
+    block = _block()
+    designs = dict(block.designs, **{"mincam-4px": _design(4, 0.3, 0.2, 0.4)})
+    block = dataclasses.replace(block, designs=designs)
+    rf = reduction_factor(block, "mincam-4px")
+    assert rf.factor is None and rf.largest_tried_factor == 16
+    assert "above 16x" in study_table(_result(block, study=_study(rf)))
     with pytest.raises(ValueError, match="not in the study"):
-        reduction_factor(res, "mincam-3px")
+        reduction_factor(block, "mincam-3px")
 
 
 def test_reduction_factor_compares_with_baselines_of_the_references_head():
-    res = _result()
+    block = _block()
     tcn = _design(4, 1.0, 0.9, 1.1, (2, 2))
-    tcn["model"]["head"] = "tcn"
-    res["designs"]["baseline-2x2-tcn"] = tcn  # would match at 1x, but is another head
-    assert reduction_factor(res, "mincam-4px")["baseline"] == "4x4"
+    tcn = dataclasses.replace(tcn, model={**tcn.model, "head": "tcn"})
+    # would match at 1x, but is another head
+    block = dataclasses.replace(block, designs={**block.designs, "baseline-2x2-tcn": tcn})
+    assert reduction_factor(block, "mincam-4px").baseline == "4x4"
 
 
 @pytest.mark.parametrize("heads", ["lstm", "mlp,mlp", ","])
@@ -91,10 +112,9 @@ def test_cli_study_refuses_unknown_or_repeated_heads(tmp_path, heads):
 
 
 def test_study_table_lists_every_design_and_the_trivial_predictor():
-    res = _result()
-    res["reduction_factor"] = reduction_factor(res, "mincam-4px")
-    table = study_table(res)
-    for name in res["designs"]:
+    block = _block()
+    table = study_table(_result(block, study=_study(reduction_factor(block, "mincam-4px"))))
+    for name in block.designs:
         assert f"| {name} |" in table
     assert "| trivial predictor | 0 | 3.000 [2.900, 3.100]" in table
     assert "4x (matches baseline 4x4)" in table
@@ -215,8 +235,8 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(tmp_path):
     tr.train_run(train, val, None, tmp_path / "run", pixels=2, config=cfg)
     figures = {"chosen_by": "the only run", "test_error_over_seeds": {"mean": 1.5}}
     files = keep_run_masks(tmp_path / "run", tmp_path / "kept", "linear", figures)
-    assert files["png"] == [str(tmp_path / "kept" / f"mask_0{k}.png") for k in range(2)]
-    side = json.loads(Path(files["json"]).read_text())
+    assert files.png == tuple(tmp_path / "kept" / f"mask_0{k}.png" for k in range(2))
+    side = json.loads(Path(files.json).read_text())
     prov = side["provenance"]
     assert prov["chosen_by"] == "the only run" and prov["test_error_over_seeds"]["mean"] == 1.5
     assert prov["run"] == str(tmp_path / "run") and prov["versions"]["torch"]
@@ -229,20 +249,22 @@ def test_kept_run_masks_equal_the_runs_and_carry_their_figures(tmp_path):
 
 
 def test_baselines_are_told_by_their_model_kind_not_their_name():
-    res = _result()
-    res["designs"] = {f"design-{i}": d for i, d in enumerate(res["designs"].values())}
-    assert reduction_factor(res, "design-0")["baseline"] == "4x4"
-    assert len(reference_verdicts(res, "design-0")) == 3
+    block = _block()
+    block = _block({f"design-{i}": d for i, d in enumerate(block.designs.values())})
+    assert reduction_factor(block, "design-0").baseline == "4x4"
+    assert len(reference_verdicts(block.designs, "design-0")) == 3
 
 
 def test_reference_verdicts_and_training_states():
-    res = _result()
-    v = reference_verdicts(res, "mincam-4px")
+    v = reference_verdicts(_block().designs, "mincam-4px")
     assert v[0].startswith("mincam-4px beats baseline-2x2")
     assert v[1].startswith("no verdict") and v[2].startswith("baseline-8x8 beats mincam-4px")
-    done = {"converged": True, "stopped_early": True}
-    early = {"converged": False, "stopped_early": True}
-    spent = {"converged": False, "stopped_early": False}
+
+    def state(converged, stopped_early):
+        return Convergence(converged=converged, improvement=0.1, steps=10,
+                           stopped_early=stopped_early)  # fmt: skip
+
+    done, early, spent = state(True, True), state(False, True), state(False, False)
     assert training_state([done, done]) == "converged"
     assert training_state([done, early]) == "early-stopped, not converged"
     assert training_state([early, spent]) == "budget-limited"
@@ -256,14 +278,19 @@ def test_cli_study_refuses_a_reference_outside_the_pixel_counts(tmp_path):
     assert "Traceback" not in res.output and not (tmp_path / "s").exists()
 
 
+def _evaluation(labels, error, error_name, headline_labels, samples):
+    headline = Headline(error=error, error_name=error_name, name=headline_labels[0],
+                        labels=tuple(headline_labels), pooling="mean")  # fmt: skip
+    return Evaluation(loss=0.0, samples=samples, labels=labels, headline=headline)
+
+
 def _episode(count_rmse, door_acc, samples):
-    return {
-        "samples": samples,
-        "labels": {
-            "count": {"rmse": count_rmse, "unit": "people"},
-            "door": {"accuracy": door_acc, "unit": ""},
-        },
-    }
+    labels = {
+        "count": LabelMetrics(unit="people", median_filter_frames=1, rmse=count_rmse),
+        "door": LabelMetrics(unit="", median_filter_frames=1, accuracy=door_acc,
+                             accuracy_per_element=(door_acc,)),
+    }  # fmt: skip
+    return _evaluation(labels, count_rmse, "count RMSE", ["count"], samples)
 
 
 def test_label_intervals_pool_each_label_over_frames():
@@ -276,29 +303,30 @@ def test_label_intervals_pool_each_label_over_frames():
     out = label_intervals({"mincam-2px": runs, "trivial": trivial}, seed=0)
     rms = [(0.25 * 1.0 + 0.75 * 4.0) ** 0.5, (0.25 * 9.0 + 0.75 * 1.0) ** 0.5]
     count = out["count"]
-    assert count["metric"] == "rmse" and count["unit"] == "people"
-    assert count["configs"]["mincam-2px"]["mean"] == pytest.approx(sum(rms) / 2, rel=1e-12)
-    assert count["configs"]["trivial"] == {"mean": 2.0, "ci95": [2.0, 2.0]}
-    door = out["door"]["configs"]["mincam-2px"]
-    assert out["door"]["metric"] == "accuracy"
-    assert door["mean"] == pytest.approx((0.25 * 0.8 + 0.75 * 0.6 + 0.25 * 1.0 + 0.75 * 0.4) / 2)
-    assert door["ci95"][0] <= door["mean"] <= door["ci95"][1]
+    assert count.metric == "rmse" and count.unit == "people"
+    assert count.configs["mincam-2px"].mean == pytest.approx(sum(rms) / 2, rel=1e-12)
+    assert count.configs["trivial"] == Interval(2.0, 2.0, 2.0)
+    assert count.as_json()["configs"]["trivial"] == {"mean": 2.0, "ci95": [2.0, 2.0]}
+    door = out["door"].configs["mincam-2px"]
+    assert out["door"].metric == "accuracy" and out["door"].elements is None
+    assert door.mean == pytest.approx((0.25 * 0.8 + 0.75 * 0.6 + 0.25 * 1.0 + 0.75 * 0.4) / 2)
+    assert door.low <= door.mean <= door.high
 
 
 def test_comparison_figure_has_a_panel_per_label_on_axes_from_zero(tmp_path, monkeypatch):
     import matplotlib.figure
 
-    result = _result()
-    result["labels"] = label_intervals(
+    labels = label_intervals(
         {
             "mincam-4px": [{"a": _episode(1.97, 0.9, 10)}],
             "trivial": [{"a": _episode(2.03, 0.5, 10)}],
         },
         seed=0,
     )
+    block = _block(labels=labels)
     seen = []
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: seen.append(fig))
-    plot_comparison(result, tmp_path / "c.png")
+    plot_comparison(block, _result(block), tmp_path / "c.png")
     (fig,) = seen
     axes = {ax.get_title(): ax for ax in fig.axes}
     assert axes["count"].get_ylim()[0] == 0.0 and axes["count"].get_ylim()[1] >= 2.03
@@ -309,50 +337,51 @@ def test_comparison_figure_has_a_panel_per_label_on_axes_from_zero(tmp_path, mon
 
 def _lighting_episode(per_light, samples):
     acc = sum(per_light) / len(per_light)
-    return {
-        "samples": samples,
-        "labels": {"lights": {"accuracy": acc, "accuracy_per_element": per_light, "unit": ""}},
-        "error": 1.0 - acc,
-        "error_name": "lights error rate",
-        "headline": {"name": "lights", "labels": ["lights"], "pooling": "mean"},
-    }
+    lights = LabelMetrics(unit="", median_filter_frames=1, accuracy=acc,
+                          accuracy_per_element=tuple(per_light))  # fmt: skip
+    return _evaluation({"lights": lights}, 1.0 - acc, "lights error rate", ["lights"], samples)
 
 
 def _lighting_result():
     runs = [{"a": _lighting_episode([1.0, 0.5], 100), "b": _lighting_episode([0.8, 0.7], 300)}]
     trivial = {"a": _lighting_episode([0.5, 0.5], 100), "b": _lighting_episode([0.5, 0.5], 300)}
-    res = {
-        "task": "lighting",
-        "error_name": "lights error rate",
-        "verdict": None,
-        "designs": {"mincam-2px": _design(2, 0.2, 0.15, 0.25)},
-        "trivial": {"error": {"mean": 0.5, "ci95": [0.5, 0.5]}, "episodes": trivial},
-        "element_names": {"lights": ["lamp", "bank"]},
-    }
-    res["labels"] = label_intervals({"mincam-2px": runs, "trivial": [trivial]}, seed=0)
-    return res
+    labels = label_intervals({"mincam-2px": runs, "trivial": [trivial]}, seed=0)
+    block = _block(
+        {"mincam-2px": _design(2, 0.2, 0.15, 0.25)},
+        error_name="lights error rate",
+        trivial=TrivialFigures(
+            error=Interval(0.5, 0.5, 0.5), episode_errors=None, episodes=trivial
+        ),  # fmt: skip
+        labels=labels,
+    )
+    block = dataclasses.replace(block, verdict=None)
+    return _result(block, element_names={"lights": ("lamp", "bank")})
 
 
 def test_per_light_accuracy_is_pooled_per_element_and_tabled_with_light_names():
     res = _lighting_result()
-    elements = res["labels"]["lights"]["elements"]
-    assert elements["0"]["configs"]["mincam-2px"]["mean"] == pytest.approx(0.25 * 1.0 + 0.75 * 0.8)
-    assert elements["1"]["configs"]["mincam-2px"]["mean"] == pytest.approx(0.25 * 0.5 + 0.75 * 0.7)
-    table = label_table(res, res["element_names"])
+    elements = res.labels["lights"].elements
+    assert elements is not None
+    assert elements["0"]["mincam-2px"].mean == pytest.approx(0.25 * 1.0 + 0.75 * 0.8)
+    assert elements["1"]["mincam-2px"].mean == pytest.approx(0.25 * 0.5 + 0.75 * 0.7)
+    table = label_table(res.headline, res.labels, res.element_names)
     assert "| design | lights accuracy | lights: lamp | lights: bank |" in table
     assert "| trivial | 0.500 [0.500, 0.500] | 0.500 [0.500, 0.500] |" in table
 
 
 def test_study_summary_gives_accuracy_for_error_rates_and_rmse_in_the_headline_unit():
-    acc = study_summary(_lighting_result())["mincam-2px"]
+    res = _lighting_result()
+    acc = study_summary(res.headline, res.labels)["mincam-2px"].as_json()
     assert acc["accuracy_mean"] == pytest.approx(0.8)
     assert acc["accuracy_ci95"] == pytest.approx([0.75, 0.85])
-    res = _result()
-    res["error_name"] = "mean speed RMSE"
-    res["labels"] = {"speed_left_mph": {"unit": "mph"}, "speed_right_mph": {"unit": "mph"}}
     both = ["speed_left_mph", "speed_right_mph"]
-    res["trivial"]["episodes"] = {"t": {"headline": {"labels": both}}}
-    row = study_summary(res)["mincam-4px"]
+    speed = LabelMetrics(unit="mph", median_filter_frames=1, rmse=1.0)
+    episode = _evaluation({n: speed for n in both}, 1.0, "mean speed RMSE", both, 10)
+    trivial = TrivialFigures(error=Interval(3.0, 2.9, 3.1), episode_errors=None,
+                             episodes={"t": episode})  # fmt: skip
+    block = _block(error_name="mean speed RMSE", trivial=trivial)
+    labels = {n: LabelFigures(metric="rmse", unit="mph", configs={}) for n in both}
+    row = study_summary(block, labels)["mincam-4px"].as_json()
     assert row["rmse_mph_mean"] == row["rmse_mean"] == 1.0 and row["rmse_mph_ci95"] == [0.9, 1.1]
 
 
@@ -361,7 +390,8 @@ def test_lighting_figure_shows_accuracy_against_pixels_and_a_panel_per_light(tmp
 
     seen = []
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", lambda fig, *a, **k: seen.append(fig))
-    plot_comparison(_lighting_result(), tmp_path / "c.png")
+    res = _lighting_result()
+    plot_comparison(res.headline, res, tmp_path / "c.png")
     (fig,) = seen
     top = fig.axes[0]
     assert top.get_ylabel() == "test lights accuracy"

@@ -80,7 +80,7 @@ def test_every_section_reports_the_designs_it_ran(study):
     assert labels == ["count"]
     (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
     assert restarts.design == "mincam-2px" and restarts.restarts == 2
-    picks = restarts.chosen["runs"]
+    picks = restarts.chosen.runs
     assert picks[0] in (0, 1) and picks[1] in (2, 3)
     assert len(restarts.plain.per_seed) == 2 and restarts.train_s_per_camera[1] > 0
 

@@ -2,35 +2,22 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
-from support import linear_task
+from support import two_task_episode
 
 from mincam_render.analysis.mask_structure import view_and_label_map
-from mincam_render.core.labels import LabelKind, LabelSpec, label_tasks
+from mincam_render.core.labels import label_tasks
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn import train as tr
 from mincam_render.scenes.registry import load_family
 from mincam_render.studies.comparison.config import ComparisonConfig, Design, Protocol
-from mincam_render.studies.comparison.runs import comparison_tasks, task_splits, train_runs
+from mincam_render.studies.comparison.runs import (
+    Splits,
+    comparison_tasks,
+    task_splits,
+    train_runs,
+)
 from mincam_render.studies.comparison.study import combined_cameras, task_comparison
-
-SIDE = LabelSpec(name="bright_left", kind=LabelKind.BINARY, median_filter_s=0.0)
-
-
-def two_task_episode(n: int, seed: int) -> tr.TrainingData:
-    """The linear count task plus a binary label of the left half's brightness."""
-    data = linear_task(n, k=2, res=4, seed=seed)
-    left = np.asarray(data.transport[:, 0, :, :2].mean(axis=(1, 2)))
-    side = (left > np.median(left)).astype(np.float32)[:, None]
-    return tr.TrainingData(
-        transport=data.transport,
-        labels={**data.labels, "bright_left": side},
-        label_specs=(*data.label_specs, SIDE),
-        camera=data.camera,
-        fps=data.fps,
-        source={"family": "synthetic", "seed": seed},
-    )
 
 
 def test_a_task_is_a_headline_group_or_a_label_of_its_own():
@@ -81,21 +68,21 @@ def test_runs_of_a_task_are_named_and_seeded_by_it():
 
 @pytest.fixture(scope="module")
 def two_task_splits():
-    return {
-        "train": two_task_episode(240, 0),
-        "val": {"val-0": two_task_episode(80, 1), "val-1": two_task_episode(80, 2)},
-        "tests": {"test-0": two_task_episode(80, 3), "test-1": two_task_episode(80, 4)},
-    }
+    return Splits(
+        train=two_task_episode(240, 0),
+        val={"val-0": two_task_episode(80, 1), "val-1": two_task_episode(80, 2)},
+        tests={"test-0": two_task_episode(80, 3), "test-1": two_task_episode(80, 4)},
+    )
 
 
 def test_task_splits_keep_only_the_tasks_labels(two_task_splits):
     count = task_splits(two_task_splits, ("count",))
-    assert [s.name for s in count["train"].label_specs] == ["count"]
-    assert all(list(v.labels) == ["count"] for v in count["val"].values())
-    assert all(list(v.labels) == ["count"] for v in count["tests"].values())
-    assert task_splits(two_task_splits, ())["train"] is two_task_splits["train"]
+    assert [s.name for s in count.train.label_specs] == ["count"]
+    assert all(list(v.labels) == ["count"] for v in count.val.values())
+    assert all(list(v.labels) == ["count"] for v in count.tests.values())
+    assert task_splits(two_task_splits, ()).train is two_task_splits.train
     with pytest.raises(ValueError, match="need one or more of"):
-        two_task_splits["train"].with_labels(["zones"])
+        two_task_splits.train.with_labels(["zones"])
 
 
 def test_per_task_cameras_train_and_compare_each_task_on_its_own(two_task_splits, tmp_path):
@@ -105,23 +92,24 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(two_task_splits
     runs = train_runs(cfg, two_task_splits, tmp_path, progress=False)
     assert list(runs) == ["count", "bright_left"]
     run = runs["count"]["mincam-2px"][0]
-    assert run["run_dir"] == str(tmp_path / "runs" / "count" / "mincam-2px-seed0")
-    assert list(run["episodes"]["test-0"]["labels"]) == ["count"]
-    assert list(run["validation_episodes"]) == ["val-0", "val-1"]
-    assert list(run["validation_episodes"]["val-1"]["labels"]) == ["count"]
+    assert run.run_dir == str(tmp_path / "runs" / "count" / "mincam-2px-seed0")
+    assert list(run.episodes["test-0"].labels) == ["count"]
+    assert run.validation_episodes is not None
+    assert list(run.validation_episodes) == ["val-0", "val-1"]
+    assert list(run.validation_episodes["val-1"].labels) == ["count"]
     side = runs["bright_left"]["baseline-2x2"][1]
-    assert list(side["episodes"]["test-1"]["labels"]) == ["bright_left"]
+    assert list(side.episodes["test-1"].labels) == ["bright_left"]
     blocks = {}
     for t, by_design in runs.items():
         task = task_splits(two_task_splits, (t,))
-        blocks[t] = task_comparison(cfg, by_design, task, view_and_label_map(task["train"]))
+        blocks[t] = task_comparison(cfg, by_design, task, view_and_label_map(task.train))
     assert blocks["count"].error_name == "count RMSE"
     assert blocks["bright_left"].error_name == "bright_left error rate"
     assert set(blocks["count"].labels) == {"count"}
     combined = combined_cameras(cfg, blocks)
     assert combined["mincam-2px"].pixels == 4  # two tasks, two freeform pixels each
     assert combined["baseline-2x2"].pixels == 4  # one sensor read by two heads
-    assert combined["mincam-2px"].tasks["count"] == blocks["count"].designs["mincam-2px"]["error"]
+    assert combined["mincam-2px"].tasks["count"] == blocks["count"].designs["mincam-2px"].error
     # a joint camera learns both labels at once
     joint = train_runs(
         ComparisonConfig(designs=designs, seeds=1, train=recipe, protocol="joint"),
@@ -130,5 +118,5 @@ def test_per_task_cameras_train_and_compare_each_task_on_its_own(two_task_splits
         progress=False,
     )
     assert list(joint) == ["joint"]
-    labels = joint["joint"]["mincam-2px"][0]["episodes"]["test-0"]["labels"]
+    labels = joint["joint"]["mincam-2px"][0].episodes["test-0"].labels
     assert list(labels) == ["count", "bright_left"]

@@ -19,6 +19,7 @@ from mincam_render.data import run_dispatch
 from mincam_render.data.run_dispatch import TrainingError, check_executor, run_files
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.studies.comparison.runs import (
+    ComparisonRun,
     comparison_tasks,
     relocate_run,
     train_design_run,
@@ -72,7 +73,8 @@ def _one_task(runs: dict) -> dict:
 def _figures(runs: dict) -> dict:
     """Each run's figures and validation curve (and its masks' run's), without times and paths."""
 
-    def of(run: dict) -> dict:
+    def of(typed: ComparisonRun) -> dict:
+        run = typed.as_json()
         curve = [(h["step"], h["train_loss"], h["val_loss"]) for h in run["history"]]
         masks = run.get("mask_run", {})
         return (
@@ -104,9 +106,7 @@ def test_local_workers_train_every_run_like_this_process(rendered_splits, sequen
     assert _figures(pooled) == _figures(runs)  # bit for bit
     assert _layout(tmp_path) == _layout(out)
     head = pooled["mincam-2px-nosensor"][0]
-    assert head["run_dir"] == str(
-        tmp_path / "runs" / "mincam-2px-nosensor-seed0" / "head-with-sensor"
-    )
+    assert head.run_dir == str(tmp_path / "runs" / "mincam-2px-nosensor-seed0" / "head-with-sensor")
 
 
 def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_process_does(
@@ -123,8 +123,8 @@ def test_a_ray_task_trains_elsewhere_and_the_driver_writes_the_run_where_this_pr
     written = run_dispatch._write_run(tmp_path / "runs", task, returned, relocate=relocate_run)
     assert _figures({"d": [written]}) == _figures({"d": [runs["mincam-2px-nosensor"][0]]})
     run = tmp_path / "runs" / task.name
-    assert written["run_dir"] == str(run / "head-with-sensor")
-    assert written["mask_run"]["run_dir"] == str(run)
+    assert written.run_dir == str(run / "head-with-sensor")
+    assert written.mask_run is not None and written.mask_run.run_dir == str(run)
     assert json.loads((run / "head-with-sensor" / "run.json").read_text())[
         "frozen_masks_from"] == str(run)  # fmt: skip
     mine = {k: v for k, v in _layout(tmp_path).items() if task.name in k}
@@ -224,7 +224,7 @@ def test_a_killed_worker_names_its_run_keeps_finished_runs_and_the_rerun_resumes
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # seed 0 not trained again
     again = _one_task(train_runs(long, rendered_splits, tmp_path, train_workers=2, progress=False))
     assert {p: p.stat().st_mtime_ns for p in kept} == kept  # read back, not trained again
-    assert all(r["steps"] == STEPS for rs in again.values() for r in rs)
+    assert all(r.metrics.steps == STEPS for rs in again.values() for r in rs)
 
 
 def test_bad_executor_values_are_refused_before_anything_is_written(tmp_path):

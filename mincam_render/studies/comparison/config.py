@@ -142,15 +142,6 @@ class Design:
             tuned=bool(d.get("tuned", False)),
         )
 
-    def train_kwargs(self) -> dict[str, Any]:
-        """Keyword arguments of :func:`mincam_render.learn.train.train_run`."""
-        if self.grid is not None:
-            return {"baseline_grid": self.grid}
-        kwargs: dict[str, Any] = {"pixels": self.pixels, "sensor_model": self.sensor_model}
-        if self.reference is not None:
-            kwargs |= {"reference": self.reference, "tune_reference": self.tuned}
-        return kwargs
-
 
 @dataclass(frozen=True, kw_only=True)
 class ComparisonConfig:

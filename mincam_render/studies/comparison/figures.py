@@ -1,8 +1,10 @@
-"""Typed figures read from a comparison's result: a design's error, a paired difference.
+"""Typed figures of a comparison's design, and paired differences.
 
-A comparison (:func:`~mincam_render.studies.comparison.study.run_comparison`) writes
-its figures as JSON-ready dicts; the study reads what it reports into these
-frozen records once, so its tables and checks work on named fields.
+A comparison (:func:`~mincam_render.studies.comparison.study.run`) keeps each
+design's figures as a :class:`~.records.DesignRecord`; the studies built on it
+(design protocol, task-level fidelity) read what they report into
+:class:`DesignFigure` (flat, one interval and the errors' JSON form, as their
+reports hold it) and compare two designs with :class:`Paired`.
 """
 
 from __future__ import annotations
@@ -13,7 +15,16 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, paired_difference, paired_statement
+from mincam_render.analysis.mask_structure import MaskStructure
+from mincam_render.analysis.statistics import (
+    EpisodeErrors,
+    EpisodeErrorsJson,
+    Interval,
+    paired_difference,
+    paired_statement,
+)
+from mincam_render.core.strict_json import JsonObject
+from mincam_render.studies.comparison.records import DesignRecord
 
 
 @dataclass(frozen=True)
@@ -35,8 +46,7 @@ class DesignFigure:
         val_ci95: its 95 % interval (seeds and validation episodes).
         validation_errors: those errors per seed and validation episode (the
             form of ``episode_errors``), or None.
-        structure: a minimalist design's masks (its best-validation run):
-            :class:`~mincam_render.analysis.mask_structure.MaskStructure` fields;
+        structure: a minimalist design's masks (its best-validation run);
             None for a box camera.
     """
 
@@ -48,31 +58,36 @@ class DesignFigure:
     state: str
     steps: tuple[int, ...]
     train_s_per_run: float
-    episode_errors: Mapping[str, Any]
+    episode_errors: EpisodeErrorsJson
     val_error: float | None = None
     val_ci95: tuple[float, float] | None = None
-    validation_errors: Mapping[str, Any] | None = None
-    structure: Mapping[str, Any] | None = None
+    validation_errors: EpisodeErrorsJson | None = None
+    structure: MaskStructure | None = None
 
     @classmethod
-    def from_block(cls, block: Mapping[str, Any], name: str) -> DesignFigure:
-        """Design ``name`` of a task's block of a comparison's result."""
-        d = block["designs"][name]
-        validation = d.get("validation")
+    def of(cls, name: str, d: DesignRecord) -> DesignFigure:
+        """Design ``name``'s figures from its record in a task's block.
+
+        Raises:
+            ValueError: the record keeps no per-episode errors (an older study).
+        """
+        if d.episode_errors is None:
+            raise ValueError(f"{name}: the record keeps no per-episode test errors")
+        v = d.validation
         return cls(
             design=name,
-            pixels=int(d["model"]["pixels"]),
-            error=float(d["error"]["mean"]),
-            ci95=(float(d["error"]["ci95"][0]), float(d["error"]["ci95"][1])),
-            per_seed=tuple(float(e) for e in d["error_per_seed"]),
-            state=str(d["state"]),
-            steps=tuple(int(s) for s in d["steps"]),
-            train_s_per_run=float(np.mean(d["train_wall_time_s"])),
-            episode_errors=d["episode_errors"],
-            val_error=None if validation is None else float(validation["error"]["mean"]),
-            val_ci95=None if validation is None else tuple(validation["error"]["ci95"]),
-            validation_errors=None if validation is None else validation["episode_errors"],
-            structure=d.get("structure"),
+            pixels=d.pixels,
+            error=d.error.mean,
+            ci95=(d.error.low, d.error.high),
+            per_seed=d.error_per_seed,
+            state=d.state,
+            steps=d.steps,
+            train_s_per_run=float(np.mean(d.train_wall_time_s)),
+            episode_errors=d.episode_errors.as_dict(),
+            val_error=None if v is None else v.error.mean,
+            val_ci95=None if v is None else (v.error.low, v.error.high),
+            validation_errors=None if v is None else v.episode_errors.as_dict(),
+            structure=d.structure,
         )
 
     def errors(self) -> EpisodeErrors:
@@ -117,6 +132,22 @@ class Paired:
         diff = paired_difference(a, b, seed=seed)
         return cls(name_a, name_b, diff.mean, (diff.low, diff.high),
                    paired_statement(name_a, name_b, diff))  # fmt: skip
+
+    @property
+    def key(self) -> str:
+        """``"a - b"``: its key among a block's paired differences."""
+        return f"{self.a} - {self.b}"
+
+    def as_json(self) -> JsonObject:
+        """``{"mean", "ci95", "statement"}``: its record in a block's ``paired``."""
+        return Interval(self.mean, *self.ci95).as_dict() | {"statement": self.statement}
+
+    @classmethod
+    def from_json(cls, key: str, d: Mapping[str, Any]) -> Paired:
+        """The difference of :meth:`as_json`'s record under ``key`` (``"a - b"``)."""
+        a, b = key.split(" - ", 1)
+        iv = Interval.from_dict(d)
+        return cls(a, b, iv.mean, (iv.low, iv.high), str(d["statement"]))
 
     @property
     def a_lower(self) -> bool:

@@ -18,21 +18,148 @@ run stops the comparison; finished runs stay on disk for the next attempt.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 from mincam_render.core.labels import label_tasks
 from mincam_render.core.seeds import stream_seed
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.data.run_dispatch import check_executor, dispatch_runs
-from mincam_render.learn.train import run_finished, train_run
+from mincam_render.learn.evaluation import Evaluation
+from mincam_render.learn.runs import RunMetrics
+from mincam_render.learn.train import TrainingData, run_finished, train_run
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.studies.comparison.config import ComparisonConfig, Design
 
-#: What a comparison keeps of the masks' training in supplement A's ablation.
-_MASK_RUN_KEYS = ("steps", "best_step", "stopped_early", "train_wall_time_s", "episodes")
 #: Where supplement A's ablation trains the tested camera, inside the masks' run.
 _HEAD_RUN = "head-with-sensor"
+
+
+@dataclasses.dataclass(frozen=True)
+class Splits:
+    """A comparison's data: the training episodes joined, and the named evaluation episodes.
+
+    Args:
+        train: every training episode, joined into one split.
+        val: ``{name: validation episode}``, pooled for early stopping.
+        tests: ``{name: test episode}``.
+    """
+
+    train: TrainingData
+    val: Mapping[str, TrainingData]
+    tests: Mapping[str, TrainingData]
+
+
+def _evaluations(d: Mapping[str, Any]) -> dict[str, Evaluation]:
+    return {k: Evaluation.from_json(e) for k, e in d.items()}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MaskRun:
+    """Supplement A's ablation: the training of the masks a tested camera froze.
+
+    Args:
+        run_dir: the masks' run directory.
+        steps: its steps.
+        best_step: the step of its kept state.
+        stopped_early: whether early stopping ended it.
+        train_wall_time_s: its training wall time (s).
+        episodes: its (sensorless) camera's metrics on each test episode.
+    """
+
+    run_dir: str
+    steps: int
+    best_step: int
+    stopped_early: bool
+    train_wall_time_s: float
+    episodes: Mapping[str, Evaluation]
+
+    @classmethod
+    def of(cls, run_dir: str, m: RunMetrics) -> MaskRun:
+        """The masks' run in ``run_dir`` and its metrics."""
+        return cls(run_dir=run_dir, steps=m.steps, best_step=m.best_step,
+                   stopped_early=m.stopped_early, train_wall_time_s=m.train_wall_time_s,
+                   episodes=m.episodes)  # fmt: skip
+
+    def as_json(self) -> JsonObject:
+        """The fields, in their order, the episodes' metrics as JSON."""
+        return {"run_dir": self.run_dir, "steps": self.steps, "best_step": self.best_step,
+                "stopped_early": self.stopped_early, "train_wall_time_s": self.train_wall_time_s,
+                "episodes": {k: e.as_json() for k, e in self.episodes.items()}}  # fmt: skip
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> MaskRun:
+        """Inverse of :meth:`as_json`."""
+        return cls(run_dir=d["run_dir"], steps=d["steps"], best_step=d["best_step"],
+                   stopped_early=d["stopped_early"], train_wall_time_s=d["train_wall_time_s"],
+                   episodes=_evaluations(d["episodes"]))  # fmt: skip
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ComparisonRun:
+    """One finished run of a comparison (:func:`train_design_run`).
+
+    Args:
+        metrics: the tested camera's metrics (its ``metrics.json``), with every
+            test and validation episode's.
+        run_dir: the tested camera's run directory.
+        seed_index: which of the comparison's training seeds.
+        mask_run: supplement A's ablation: the masks' own training (None otherwise).
+    """
+
+    metrics: RunMetrics
+    run_dir: str
+    seed_index: int
+    mask_run: MaskRun | None = None
+
+    @property
+    def episodes(self) -> Mapping[str, Evaluation]:
+        """The camera's metrics on each test episode."""
+        return self.metrics.episodes
+
+    @property
+    def validation_episodes(self) -> Mapping[str, Evaluation] | None:
+        """Its metrics on each validation episode (None when not named)."""
+        return self.metrics.validation_episodes
+
+    def kept_val_error(self) -> float | None:
+        """The pooled validation error at the kept (best) step; None if not recorded."""
+        m = self.metrics
+        best = [h for h in m.history if h["step"] == m.best_step]
+        return best[0].get("val_error") if best else None
+
+    def as_json(self) -> JsonObject:
+        """The run's ``metrics.json`` with ``run_dir``, ``seed_index`` (and ``mask_run``)."""
+        out = self.metrics.as_json()
+        if self.mask_run is not None:
+            out["mask_run"] = self.mask_run.as_json()
+        return out | {"run_dir": self.run_dir, "seed_index": self.seed_index}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> ComparisonRun:
+        """Inverse of :meth:`as_json`."""
+        val, test, mask_run = d.get("validation_episodes"), d.get("test"), d.get("mask_run")
+        metrics = RunMetrics(
+            model=d["model"],
+            steps=d["steps"],
+            best_step=d["best_step"],
+            best_val_loss=d["best_val_loss"],
+            stopped_early=d["stopped_early"],
+            train_wall_time_s=d["train_wall_time_s"],
+            train_samples=d["train_samples"],
+            test=None if test is None else Evaluation.from_json(test),
+            episodes=_evaluations(d["episodes"]),
+            history=d["history"],
+            validation_episodes=None if val is None else _evaluations(val),
+        )
+        return cls(metrics=metrics, run_dir=d["run_dir"], seed_index=d["seed_index"],
+                   mask_run=None if mask_run is None else MaskRun.from_json(mask_run))  # fmt: skip
+
+
+#: ``{task: {design: [its runs, seed by seed]}}``.
+RunsByTask = Mapping[str, Mapping[str, Sequence[ComparisonRun]]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,60 +225,58 @@ def comparison_tasks(
 
 def train_design_run(
     task: RunTask,
-    splits: Mapping[str, Any],
+    splits: Splits,
     runs_dir: Path,
     *,
     progress: bool = False,
     on_progress: Callable[[int], None] | None = None,
-) -> dict[str, Any]:
+) -> ComparisonRun:
     """Train (or resume) one run into ``runs_dir/<task.name>``; its metrics (with episodes).
 
-    ``splits``: ``{"train": TrainingData, "val": {name: TrainingData}, "tests": {name:
-    TrainingData}}``; a task's run sees only its labels (:func:`task_splits`).
-    A design without the detector model is supplement A's ablation: its masks
-    are trained without the model, then frozen while a fresh head is trained
-    with it (``<run>/head-with-sensor``); that camera is the one tested (with
-    the model), and the masks' own training is kept as ``mask_run``.
+    A task's run sees only its labels (:func:`task_splits`). A design without
+    the detector model is supplement A's ablation: its masks are trained
+    without the model, then frozen while a fresh head is trained with it
+    (``<run>/head-with-sensor``); that camera is the one tested (with the
+    model), and the masks' own training is kept as ``mask_run``.
     """
     design, run_dir = task.design, runs_dir / task.name
     splits = task_splits(splits, task.labels)
-    common = {
-        "config": task.config,
-        "episodes": splits["tests"],
-        "progress": progress,
-        "on_progress": on_progress,
-    }
-    run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                    **design.train_kwargs()).as_json()  # fmt: skip
-    if not design.sensor_model:
-        masks = {"run_dir": str(run_dir), **{k: run[k] for k in _MASK_RUN_KEYS}}
-        run_dir = run_dir / _HEAD_RUN
-        run = train_run(splits["train"], splits["val"], None, run_dir, **common,
-                        frozen_masks_from=masks["run_dir"]).as_json()  # fmt: skip
-        run["mask_run"] = masks
-    return dict(run, run_dir=str(run_dir), seed_index=task.seed_index)
+    train = partial(train_run, splits.train, splits.val, None, config=task.config,
+                    episodes=splits.tests, progress=progress, on_progress=on_progress)  # fmt: skip
+    if design.grid is not None:
+        run = train(run_dir, baseline_grid=design.grid)
+    else:
+        run = train(run_dir, pixels=design.pixels, sensor_model=design.sensor_model,
+                    reference=design.reference, tune_reference=design.tuned)  # fmt: skip
+    if design.sensor_model:
+        return ComparisonRun(metrics=run, run_dir=str(run_dir), seed_index=task.seed_index)
+    masks = MaskRun.of(str(run_dir), run)
+    run_dir = run_dir / _HEAD_RUN
+    run = train(run_dir, frozen_masks_from=masks.run_dir)
+    return ComparisonRun(metrics=run, run_dir=str(run_dir), seed_index=task.seed_index,
+                         mask_run=masks)  # fmt: skip
 
 
-def task_splits(splits: Mapping[str, Any], labels: tuple[str, ...]) -> dict[str, Any]:
+def task_splits(splits: Splits, labels: tuple[str, ...]) -> Splits:
     """``splits`` with only ``labels`` (every split, every episode); all labels when empty."""
     if not labels:
-        return dict(splits)
-    return {
-        "train": splits["train"].with_labels(labels),
-        "val": {k: v.with_labels(labels) for k, v in splits["val"].items()},
-        "tests": {k: v.with_labels(labels) for k, v in splits["tests"].items()},
-    }
+        return splits
+    return Splits(
+        train=splits.train.with_labels(labels),
+        val={k: v.with_labels(labels) for k, v in splits.val.items()},
+        tests={k: v.with_labels(labels) for k, v in splits.tests.items()},
+    )
 
 
 def train_runs(
     cfg: ComparisonConfig,
-    splits: Mapping[str, Any],
+    splits: Splits,
     out: Path,
     *,
     train_workers: int = 1,
     ray_address: str | None = None,
     progress: bool = True,
-) -> dict[str, dict[str, list[dict[str, Any]]]]:
+) -> dict[str, dict[str, list[ComparisonRun]]]:
     """Every run of ``cfg`` trained (module docstring): ``{task: {design: [metrics per seed]}}``.
 
     The tasks are :meth:`ComparisonConfig.task_labels` of the training split's
@@ -165,11 +290,11 @@ def train_runs(
     from tqdm import tqdm
 
     check_executor(train_workers, ray_address)
-    tasks, runs_dir = comparison_tasks(cfg, label_tasks(splits["train"].label_specs)), out / "runs"
-    results: dict[str, dict[str, Any]] = {}
+    tasks, runs_dir = comparison_tasks(cfg, label_tasks(splits.train.label_specs)), out / "runs"
+    results: dict[str, ComparisonRun] = {}
     bar = tqdm(total=len(tasks), desc="training runs", unit="run", disable=not progress)
 
-    def done(task: RunTask, result: dict[str, Any]) -> None:
+    def done(task: RunTask, result: ComparisonRun) -> None:
         results[task.name] = result
         bar.update(1)
 
@@ -192,7 +317,7 @@ def train_runs(
             )
     finally:
         bar.close()
-    by_task: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    by_task: dict[str, dict[str, list[ComparisonRun]]] = {}
     for t in tasks:
         by_task.setdefault(t.task, {}).setdefault(t.design.name, []).append(results[t.name])
     return by_task
@@ -205,9 +330,9 @@ def _finished(task: RunTask, runs_dir: Path) -> bool:
     return run_finished(run_dir) and run_finished(tested)
 
 
-def relocate_run(result: dict[str, Any], move: Callable[[str], str]) -> dict[str, Any]:
+def relocate_run(result: ComparisonRun, move: Callable[[str], str]) -> ComparisonRun:
     """A run's metrics with its directories (and its masks' run's, in the ablation) moved."""
-    result = dict(result, run_dir=move(result["run_dir"]))
-    if "mask_run" in result:
-        result["mask_run"] = dict(result["mask_run"], run_dir=move(result["mask_run"]["run_dir"]))
-    return result
+    masks = result.mask_run
+    if masks is not None:
+        masks = dataclasses.replace(masks, run_dir=move(masks.run_dir))
+    return dataclasses.replace(result, run_dir=move(result.run_dir), mask_run=masks)

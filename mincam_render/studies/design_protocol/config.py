@@ -74,10 +74,12 @@ class RecipeVariant:
         """``base`` with this variant's changes (lists as tuples)."""
         from dataclasses import replace
 
-        changes: dict[str, Any] = {
-            k: tuple(v) if isinstance(v, list) else v for k, v in self.changes.items()
-        }
-        return replace(base, **changes)
+        return replace(base, **{k: _field_value(v) for k, v in self.changes.items()})
+
+
+def _field_value(value: Any) -> Any:
+    """A recipe change as its field holds it (a TOML or JSON list as a tuple)."""
+    return tuple(value) if isinstance(value, list) else value
 
 
 def default_recipes() -> tuple[RecipeVariant, ...]:
@@ -171,7 +173,5 @@ class DesignProtocolConfig:
         """
         from dataclasses import replace
 
-        fields_: dict[str, Any] = {"train_episodes": train_episodes, "designs": designs}
-        if "protocol" not in changes:
-            fields_["tasks"] = (self.task,)
-        return replace(self.episodes, **fields_, **changes)
+        changes.setdefault("tasks", self.episodes.tasks if "protocol" in changes else (self.task,))
+        return replace(self.episodes, train_episodes=train_episodes, designs=designs, **changes)

@@ -165,7 +165,7 @@ def _restart_lines(result: DesignProtocolResult) -> list[str]:
             r.design,
             f"{_interval(r.plain.error, r.plain.ci95)} (spread {r.spread_plain:.3f}; "
             f"{r.train_s_per_camera[0]:.0f} s)",
-            f"{_interval(c['error'], tuple(c['ci95']))} (spread {r.spread_chosen:.3f}; "
+            f"{_interval(c.error, c.ci95)} (spread {r.spread_chosen:.3f}; "
             f"{r.train_s_per_camera[1]:.0f} s)",
         ])  # fmt: skip
     r0 = result.restarts[0]

@@ -1,7 +1,7 @@
 """The design protocol: how to train masks that generalise, and what they must beat.
 
 Every section is a set of comparisons
-(:func:`~mincam_render.studies.comparison.study.run_comparison`) on one shared set
+(:func:`mincam_render.studies.comparison.study.run`) on one shared set
 of episodes: validation and test episodes are the same everywhere, training
 sets are the first ``n`` training episodes, so every figure of a section is
 measured on the same test episodes and pairs with the others.
@@ -41,11 +41,18 @@ from typing import Any
 
 import numpy as np
 
-from mincam_render.analysis.statistics import EpisodeErrors, bootstrap_interval
+from mincam_render.analysis.statistics import (
+    EpisodeErrors,
+    EpisodeErrorsJson,
+    Interval,
+    bootstrap_interval,
+)
+from mincam_render.core.strict_json import JsonObject
+from mincam_render.studies.comparison import study as comparison_study
 from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.comparison.result import ComparisonResult
-from mincam_render.studies.comparison.study import Design, run_comparison
+from mincam_render.studies.comparison.study import Design
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
 
 #: A comparison run for the study: ``(config, out_dir) -> its result``.
@@ -119,6 +126,25 @@ class ReferenceRow:
 
 
 @dataclass(frozen=True)
+class ChosenRestarts:
+    """The cameras restarts keep: each group's run of lowest validation error.
+
+    Args:
+        runs: the kept run of each group (indices among the design's runs).
+        per_seed: each kept run's test error.
+        error: mean over the kept runs of the test error pooled over test episodes.
+        ci95: its 95 % interval (kept runs and test episodes).
+        episode_errors: the kept runs' errors on each test episode.
+    """
+
+    runs: tuple[int, ...]
+    per_seed: tuple[float, ...]
+    error: float
+    ci95: tuple[float, float]
+    episode_errors: EpisodeErrorsJson
+
+
+@dataclass(frozen=True)
 class Restarts:
     """Restarts chosen on validation against plain seeds (the seed spread, section 6).
 
@@ -136,7 +162,7 @@ class Restarts:
     design: str
     restarts: int
     plain: DesignFigure
-    chosen: Mapping[str, Any]
+    chosen: ChosenRestarts
     spread_plain: float
     spread_chosen: float
     train_s_per_camera: tuple[float, float]
@@ -196,7 +222,7 @@ class DesignProtocolResult:
     floors: Sequence[FloorCheck] = ()
     versions: Mapping[str, str] = field(default_factory=dict)
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         """JSON-ready dict (every record as its fields)."""
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
 
@@ -220,9 +246,9 @@ def protocol_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> li
     )
     rows = []
     for label, lab in per_task.labels.items():
-        figures = {f"per-task {d}": _mean_ci(c) for d, c in lab["configs"].items()}
-        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint.labels[label]["configs"].items()}
-        rows.append(ProtocolRow(label=label, metric=lab["metric"], figures=figures))
+        figures = {f"per-task {d}": _mean_ci(c) for d, c in lab.configs.items()}
+        figures |= {f"joint {d}": _mean_ci(c) for d, c in joint.labels[label].configs.items()}
+        rows.append(ProtocolRow(label=label, metric=lab.metric, figures=figures))
     return rows
 
 
@@ -231,8 +257,8 @@ def _minimalist(pixels: Sequence[int]) -> tuple[Design, ...]:
     return tuple(Design(pixels=k) for k in pixels)
 
 
-def _mean_ci(c: Mapping[str, Any]) -> tuple[float, tuple[float, float]]:
-    return float(c["mean"]), (float(c["ci95"][0]), float(c["ci95"][1]))
+def _mean_ci(c: Interval) -> tuple[float, tuple[float, float]]:
+    return c.mean, (c.low, c.high)
 
 
 def recipe_table(
@@ -403,14 +429,14 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
             Restarts(
                 design=d.name,
                 restarts=r,
-                plain=_replace(every, per_seed=every.per_seed[:seeds], **_figure_of(plain)),
-                chosen={
-                    "runs": picks,
-                    "per_seed": [every.per_seed[i] for i in picks],
-                    "error": iv.mean,
-                    "ci95": (iv.low, iv.high),
-                    "episode_errors": chosen.as_dict(),
-                },  # fmt: skip
+                plain=_with_errors(every, plain, every.per_seed[:seeds]),
+                chosen=ChosenRestarts(
+                    runs=tuple(picks),
+                    per_seed=tuple(every.per_seed[i] for i in picks),
+                    error=iv.mean,
+                    ci95=(iv.low, iv.high),
+                    episode_errors=chosen.as_dict(),
+                ),
                 spread_plain=float(np.std(every.per_seed[:seeds], ddof=1)),
                 spread_chosen=float(np.std([every.per_seed[i] for i in picks], ddof=1)),
                 train_s_per_camera=(every.train_s_per_run, every.train_s_per_run * r),
@@ -419,9 +445,13 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
     return rows
 
 
-def _figure_of(errors: EpisodeErrors) -> dict[str, Any]:
+def _with_errors(
+    figure: DesignFigure, errors: EpisodeErrors, per_seed: tuple[float, ...]
+) -> DesignFigure:
+    """``figure`` with the test errors of only some of its runs (``errors``, ``per_seed``)."""
     iv = bootstrap_interval(errors)
-    return {"error": iv.mean, "ci95": (iv.low, iv.high), "episode_errors": errors.as_dict()}
+    return dataclasses.replace(figure, per_seed=per_seed, error=iv.mean, ci95=(iv.low, iv.high),
+                               episode_errors=errors.as_dict())  # fmt: skip
 
 
 def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[ReferenceRow]:
@@ -506,36 +536,38 @@ def run(
     error_names: dict[str, str] = {}
 
     def compare(comparison: ComparisonConfig, where: Path) -> ComparisonResult:
-        result = run_comparison(comparison, where, episodes_dir=episodes, masks_dir=None,
-                                train_workers=train_workers, progress=progress)  # fmt: skip
+        result = comparison_study.run(comparison, where, episodes_dir=episodes, masks_dir=None,
+                                      train_workers=train_workers, progress=progress)  # fmt: skip
         error_names.setdefault("task", result.block(cfg.task).error_name)
         return result
 
     seconds = render_seconds or (lambda n: training_render_seconds(episodes, n))
-    parts: dict[str, Any] = {}
-    if "protocol" in sections:
-        parts["protocol"] = protocol_table(cfg, compare, out)
-    if "recipes" in sections:
-        parts["recipes"], parts["chosen_recipe"] = recipe_table(cfg, compare, out)
-    if "ladder" in sections:
-        parts["ladder"], parts["doublings"] = learning_curves(cfg, compare, out, seconds)
-        parts["floors"] = floor_checks(cfg, parts["ladder"][-1])
-    if "references" in sections:
-        parts["references"] = reference_table(cfg, compare, out)
-    if "oracle" in sections:
-        parts["oracle"] = oracle_point(cfg, compare, out)
-    if "restarts" in sections:
-        parts["restarts"] = restart_table(cfg, compare, out)
-    figures = [f for r in parts.get("recipes", []) for f in r.designs.values()]
-    figures += [f for p in parts.get("ladder", []) for f in p.designs.values()]
-    return DesignProtocolResult(
+    replace = dataclasses.replace
+    result = DesignProtocolResult(
         config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         task=cfg.task,
-        error_name=error_names.get("task", ""),
-        selection=selection_agreement(figures) if figures else None,
+        error_name="",
         versions=package_versions(),
-        **parts,
     )
+    if "protocol" in sections:
+        result = replace(result, protocol=protocol_table(cfg, compare, out))
+    if "recipes" in sections:
+        recipes, chosen = recipe_table(cfg, compare, out)
+        result = replace(result, recipes=recipes, chosen_recipe=chosen)
+    if "ladder" in sections:
+        ladder, doublings = learning_curves(cfg, compare, out, seconds)
+        result = replace(result, ladder=ladder, doublings=doublings,
+                         floors=floor_checks(cfg, ladder[-1]))  # fmt: skip
+    if "references" in sections:
+        result = replace(result, references=reference_table(cfg, compare, out))
+    if "oracle" in sections:
+        result = replace(result, oracle=oracle_point(cfg, compare, out))
+    if "restarts" in sections:
+        result = replace(result, restarts=restart_table(cfg, compare, out))
+    figures = [f for r in result.recipes for f in r.designs.values()]
+    figures += [f for p in result.ladder for f in p.designs.values()]
+    selection = selection_agreement(figures) if figures else None
+    return replace(result, error_name=error_names.get("task", ""), selection=selection)
 
 
 def training_render_seconds(episodes: Path, n: int) -> float:

@@ -111,8 +111,6 @@ class FidelityBenchConfig:
     @classmethod
     def from_json(cls, record: Mapping[str, Any], families: Sequence[str]) -> FidelityBenchConfig:
         """The config of a result: its ``config`` record (:meth:`sizes_json`) and families."""
-        sizes: JsonObject = {
-            k: tuple(v) if isinstance(v, list) else v for k, v in record.items()
-        }
+        sizes: JsonObject = {k: tuple(v) if isinstance(v, list) else v for k, v in record.items()}
         sizes.setdefault("signal_seconds", None)
         return cls(families=tuple(families), **sizes)

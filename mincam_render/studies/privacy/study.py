@@ -1,6 +1,6 @@
 """The privacy audit: task error against attack success, per design (:func:`run`).
 
-1. Render and train as the comparison does (:func:`run_comparison`): workspace
+1. Render and train as the comparison does (its ``run``): workspace
    episodes with a roster of people, each design trained for the task (people
    count) with several seeds; the test episodes give the task error.
 2. Render the full view of every frame of every episode and its background
@@ -66,7 +66,6 @@ from mincam_render.studies.privacy.result import (
     PriorAudit,
     PrivacyResult,
     TrivialAudit,
-    interval_from_json,
 )
 
 if TYPE_CHECKING:
@@ -391,7 +390,7 @@ def run(
     """Run the audit (module docstring) into ``out``.
 
     ``workers``, ``train_workers`` and ``ray_address``: where episodes render and
-    the task's runs train (:func:`~mincam_render.studies.comparison.study.run_comparison`);
+    the task's runs train (:func:`mincam_render.studies.comparison.study.run`);
     the attacks train in this process.
 
     Writes ``out/privacy.json`` (the result's :meth:`~.result.PrivacyResult.as_json`)
@@ -400,11 +399,11 @@ def run(
     """
     from tqdm import tqdm
 
-    from mincam_render.studies.comparison.study import render_episodes, run_comparison
+    from mincam_render.studies.comparison import study as comparison
 
     out = Path(out)
     cfg = config
-    result = run_comparison(
+    result = comparison.run(
         cfg.comparison,
         out,
         workers=workers,
@@ -412,21 +411,23 @@ def run(
         ray_address=ray_address,
         progress=progress,
     )
-    data = render_episodes(cfg.comparison, out / "episodes", workers=workers, progress=False)
-    paths = {k: v["dataset"] for k, v in result.episodes.items()}
+    data = comparison.render_episodes(
+        cfg.comparison, out / "episodes", workers=workers, progress=False
+    )
+    paths = {k: v.dataset for k, v in result.episodes.items()}
     episodes = load_episodes(paths, out / "views", cfg, progress)
     trivial, prior = trivial_attack(episodes), prior_attack(episodes)
     designs, examples = {}, {}
     block = result.headline
     todo = tqdm(block.designs.items(), desc="attacks", unit="design", disable=not progress)
     for name, d in todo:
-        attack, ex = attack_design(d["runs"], data, episodes, cfg, name, trivial=trivial,
+        attack, ex = attack_design(d.runs, data, episodes, cfg, name, trivial=trivial,
                                    prior=prior)  # fmt: skip
         designs[name] = DesignAudit(
-            pixels=d["model"]["pixels"],
-            task_error=interval_from_json(d["error"]),
-            task_state=d["state"],
-            task_seeds=len(d["runs"]),
+            pixels=d.pixels,
+            task_error=d.error,
+            task_state=d.state,
+            task_seeds=len(d.runs),
             attack=attack,
         )
         examples[name] = ex["test-0"]
@@ -437,9 +438,9 @@ def run(
         error_name=block.error_name,
         config=json.loads(json.dumps(dataclasses.asdict(cfg), default=str)),
         roster=int(episodes["test-0"].present.shape[1]),
-        episodes=result.episodes,
+        episodes={k: e.as_json() for k, e in result.episodes.items()},
         designs=designs,
-        trivial=_trivial_audit(trivial, frames, interval_from_json(block.trivial["error"]), seed),
+        trivial=_trivial_audit(trivial, frames, block.trivial.error, seed),
         prior=_prior_audit(prior, trivial, frames, seed),
         comparison=str(out / "metrics.json"),
         corner={},

@@ -158,7 +158,7 @@ def trivial_error(episodes: dict) -> float:
     """The trivial predictor's error (training-label mean, mode if binary) on the test episodes."""
     train = training_split(episodes)
     tests = [d for n, d in episodes.items() if n.startswith("test")]
-    return pool_episode_metrics([trivial_metrics(train, d) for d in tests])
+    return pool_episode_metrics([trivial_metrics(train, d).as_json() for d in tests])
 
 
 def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, out: Path) -> None:
@@ -188,7 +188,7 @@ def keep_robust_masks(runs: list[Path], episodes: dict, entry: dict, task: str, 
             "specs": {name: c["spec"] for name, c in design["curves"].items()},
             "verdict": entry["verdict"],
         },
-        "episodes": {n: episode_record(d) for n, d in episodes.items()},
+        "episodes": {n: episode_record(d).as_json() for n, d in episodes.items()},
     }
     keep_run_masks(best, out, task, figures)
 

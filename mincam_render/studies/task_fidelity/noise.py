@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -151,12 +150,11 @@ def noise_figures(
     return NoiseFigures(
         episodes=tuple(Path(p).name for p in paths),
         reference=ref_name,
-        error_rms_w={k: v["error"] for k, v in pooled.items()},
-        noise_rms_w={k: v["noise"] for k, v in pooled.items()},
-        signal_rms_w={k: v["signal"] for k, v in pooled.items()},
+        error_rms_w={k: v.error for k, v in pooled.items()},
+        noise_rms_w={k: v.noise for k, v in pooled.items()},
+        signal_rms_w={k: v.signal for k, v in pooled.items()},
         autocorrelation={
-            k: {"lag_1_frame": v["lag_1"], "lag_1_window": v["lag_window"]}
-            for k, v in pooled.items()
+            k: {"lag_1_frame": v.lag_1, "lag_1_window": v.lag_window} for k, v in pooled.items()
         },
         window_frames=window_frames,
     )
@@ -189,17 +187,28 @@ def _add(
     entry["rw"].append(acf[window_frames])
 
 
-def _pooled(entry: Mapping[str, list[float]], share: float) -> dict[str, Any]:
+@dataclass(frozen=True)
+class _Pooled:
+    """One measurement kind's figures pooled over episodes (:func:`_pooled`; W, and lags)."""
+
+    error: float
+    noise: float
+    signal: float
+    lag_1: float
+    lag_window: float
+
+
+def _pooled(entry: Mapping[str, list[float]], share: float) -> _Pooled:
     """Frame-weighted means over episodes; the powers' level share (square roots)."""
     w = np.asarray(entry["w"], dtype=np.float64)
 
     def mean(key: str) -> float:
         return float(np.sum(w * np.asarray(entry[key])) / np.sum(w))
 
-    return {
-        "error": float(np.sqrt(share * mean("e2"))),
-        "noise": float(np.sqrt(share * mean("n2"))),
-        "signal": float(np.sqrt(mean("s2"))),
-        "lag_1": mean("r1"),
-        "lag_window": mean("rw"),
-    }
+    return _Pooled(
+        error=float(np.sqrt(share * mean("e2"))),
+        noise=float(np.sqrt(share * mean("n2"))),
+        signal=float(np.sqrt(mean("s2"))),
+        lag_1=mean("r1"),
+        lag_window=mean("rw"),
+    )

@@ -39,11 +39,15 @@ from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from mincam_render.core.strict_json import JsonObject
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.task_fidelity.config import SampleLevel, TaskFidelityConfig
 from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figures
+
+if TYPE_CHECKING:
+    from mincam_render.data.render_job import RenderRequest
 
 
 @dataclass(frozen=True)
@@ -129,7 +133,7 @@ class TaskFidelityResult:
             ),
         }
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> JsonObject:
         """JSON-ready dict (every record as its fields) with every level's verdict."""
         out = json.loads(json.dumps(dataclasses.asdict(self), default=str))
         out["verdicts"] = {name: self.verdict(name) for name in self.acceptance}
@@ -146,7 +150,7 @@ def scaled_samples(samples: int, factor: float) -> int:
     return max(1, int(samples * factor + 0.5))
 
 
-def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, Any]:
+def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, RenderRequest]:
     """``{episode: RenderRequest}`` of a level: the plan's, or its samples times the factor.
 
     A level other than the plan renders with full fidelity and explicit
@@ -172,21 +176,24 @@ def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, Any
             else plan_render(request)
         )
         plan = manifest["job"]["render"]
-        background = plan["background"]
-        changes: dict[str, Any] = {
-            "fidelity": Fidelity.FULL,
-            "spp": scaled_samples(plan["spp"], level.factor),
-            "max_depth": level.max_depth if level.max_depth is not None else plan["max_depth"],
-            "shared_render": plan["shared_render"],
-            "dtype": plan["dtype"],
-            "differential": background is not None,
-        }
-        if background is not None:
-            changes["background_spp"] = scaled_samples(background["spp"], level.factor)
-            changes["shared_difference"] = background["shared_difference"]
-            if level.difference_seeds is DifferenceSeeds.FRAME:
-                changes["difference_seeds"] = level.difference_seeds
-        out[name] = dataclasses.replace(request, **changes)
+        bg = plan["background"]  # the request's own fields stay where there is none
+        frame_seeds = bg is not None and level.difference_seeds is DifferenceSeeds.FRAME
+        out[name] = dataclasses.replace(
+            request,
+            fidelity=Fidelity.FULL,
+            spp=scaled_samples(plan["spp"], level.factor),
+            max_depth=level.max_depth if level.max_depth is not None else plan["max_depth"],
+            shared_render=plan["shared_render"],
+            dtype=plan["dtype"],
+            differential=bg is not None,
+            background_spp=(
+                request.background_spp if bg is None else scaled_samples(bg["spp"], level.factor)
+            ),
+            shared_difference=(
+                request.shared_difference if bg is None else bg["shared_difference"]
+            ),
+            difference_seeds=level.difference_seeds if frame_seeds else request.difference_seeds,
+        )
     return out
 
 
@@ -237,10 +244,10 @@ def level_figures(
     runs = train_runs(
         cfg.trained, splits, out / level.name, train_workers=train_workers, progress=progress
     )
-    labels = comparison.task_labels(label_tasks(splits["train"].label_specs))
+    labels = comparison.task_labels(label_tasks(splits.train.label_specs))
     task = next(iter(labels))
     task_data = task_splits(splits, labels[task])
-    view_map = view_and_label_map(task_data["train"])
+    view_map = view_and_label_map(task_data.train)
     n = comparison.seeds
     seeds = {d: rs[:n] for d, rs in runs[task].items()}
     block = task_comparison(comparison, seeds, task_data, view_map)
