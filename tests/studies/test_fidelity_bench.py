@@ -21,25 +21,25 @@ KEPT = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "fidelit
 
 
 @pytest.fixture(scope="module")
-def kept() -> FidelityBenchResult:
+def kept_fidelity() -> FidelityBenchResult:
     return FidelityBenchResult.from_json(json.loads(KEPT.read_text()))
 
 
-def test_the_kept_result_is_written_back_byte_for_byte(kept):
-    assert json_bytes(kept.as_json()) == KEPT.read_bytes()
-    assert FidelityBenchResult.from_json(kept.as_json()) == kept
-    assert kept.config.families == ("patches", "workspace", "lighting", "traffic")
+def test_the_kept_result_is_written_back_byte_for_byte(kept_fidelity):
+    assert json_bytes(kept_fidelity.as_json()) == KEPT.read_bytes()
+    assert FidelityBenchResult.from_json(kept_fidelity.as_json()) == kept_fidelity
+    assert kept_fidelity.config.families == ("patches", "workspace", "lighting", "traffic")
 
 
-def test_statements_of_the_typed_rows_are_those_kept(kept):
-    for family in kept.families:
+def test_statements_of_the_typed_rows_are_those_kept(kept_fidelity):
+    for family in kept_fidelity.families:
         statements = fidelity_statements(family.family, family.rows, family.base, family.reference)
         assert tuple(statements) == family.statements
 
 
-def test_a_result_with_label_signal_errors_round_trips(kept):
+def test_a_result_with_label_signal_errors_round_trips(kept_fidelity):
     """Results since the label signal carry its errors and signal_seconds: both come back."""
-    family = kept.families[0]
+    family = kept_fidelity.families[0]
     rows = tuple(
         dataclasses.replace(
             r,
@@ -52,7 +52,7 @@ def test_a_result_with_label_signal_errors_round_trips(kept):
         )
         for r in family.rows
     )
-    config = dataclasses.replace(kept.config, families=("patches",), signal_seconds=600.0)
+    config = dataclasses.replace(kept_fidelity.config, families=("patches",), signal_seconds=600.0)
     result = FidelityBenchResult(
         config=config,
         families=(dataclasses.replace(family, rows=rows, config=config),),
@@ -65,16 +65,16 @@ def test_a_result_with_label_signal_errors_round_trips(kept):
     assert "/signal" in pareto_table(result.families[0])
 
 
-def test_the_report_writes_the_kept_json(kept, tmp_path):
-    paths = write_report(kept, tmp_path)
+def test_the_report_writes_the_kept_json(kept_fidelity, tmp_path):
+    paths = write_report(kept_fidelity, tmp_path)
     assert paths["json"].read_bytes() == KEPT.read_bytes()
     assert {p.name for k, p in paths.items() if k.startswith("pareto_")} == {
-        f"pareto_{f.family}.png" for f in kept.families
+        f"pareto_{f.family}.png" for f in kept_fidelity.families
     }
 
 
-def test_every_row_off_the_pareto_front_is_dominated_by_one_on_it(kept):
-    rows = kept.families[1].rows
+def test_every_row_off_the_pareto_front_is_dominated_by_one_on_it(kept_fidelity):
+    rows = kept_fidelity.families[1].rows
     front = pareto_front(rows)
     assert front[0].seconds == min(r.seconds for r in rows)
     for r in rows:
