@@ -25,8 +25,9 @@ from __future__ import annotations
 import json
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 from mincam_render.core.checks import check_int
 
@@ -72,6 +73,22 @@ TrainRun = Callable[..., R]
 Relocate = Callable[[R, Callable[[str], str]], R]
 #: Called in this process with each finished run and its figures.
 Done = Callable[[Any, R], None]
+
+
+@dataclass(frozen=True)
+class RayRun(Generic[R]):
+    """What a Ray task sends back: the run's figures and its directory's files.
+
+    Attributes:
+        figures: what the train function returned.
+        files: ``{relative path: bytes}`` of the run's directory.
+        worker_runs: the task's temporary runs directory, which the figures'
+            and files' paths point into.
+    """
+
+    figures: R
+    files: dict[str, bytes]
+    worker_runs: str
 
 
 def dispatch_runs(
@@ -170,9 +187,9 @@ def _on_ray(
 
     by_name = {t.name: t for t in tasks}
 
-    def write(name: Any, returned: tuple[R, dict[str, bytes], str]) -> None:
+    def write(name: Any, returned: RayRun[R]) -> None:
         task = by_name[name]
-        done(task, _write_run(runs_dir, task, *returned, relocate=relocate))
+        done(task, _write_run(runs_dir, task, returned, relocate=relocate))
 
     try:
         with ray_session(address) as ray:
@@ -189,13 +206,8 @@ def _on_ray(
 
 def _ray_train(
     train: TrainRun[R], splits: object, task: RunJob, files: Mapping[str, bytes]
-) -> tuple[R, dict[str, bytes], str]:
-    """A Ray task: the run resumed from ``files`` in a temporary directory.
-
-    Returns:
-        ``(run metrics, {relative path: bytes} of the run directory, the
-        temporary runs directory the metrics' and files' paths point into)``.
-    """
+) -> RayRun[R]:
+    """A Ray task: the run resumed from ``files`` in a temporary directory; what it sends back."""
     import torch
 
     torch.set_num_threads(1)  # the task holds one CPU
@@ -203,7 +215,7 @@ def _ray_train(
         runs = Path(tmp)
         _write_files(runs / task.name, files)
         result = train(task, splits, runs)
-        return result, run_files(runs / task.name), str(runs)
+        return RayRun(result, run_files(runs / task.name), str(runs))
 
 
 def run_files(run_dir: Path) -> dict[str, bytes]:
@@ -235,9 +247,7 @@ def _write_files(run_dir: Path, files: Mapping[str, bytes]) -> None:
 def _write_run(
     runs_dir: Path,
     task: RunJob,
-    result: R,
-    files: dict[str, bytes],
-    worker_runs: str,
+    returned: RayRun[R],
     *,
     relocate: Relocate[R],
 ) -> R:
@@ -248,11 +258,11 @@ def _write_run(
     """
     from mincam_render.data.writer_lock import exclusive_writer
 
-    new = str(runs_dir)
+    new, worker_runs = str(runs_dir), returned.worker_runs
     old_json, new_json = json.dumps(worker_runs)[1:-1].encode(), json.dumps(new)[1:-1].encode()
     moved = {
         rel: data.replace(old_json, new_json) if rel.endswith((".json", ".jsonl")) else data
-        for rel, data in files.items()
+        for rel, data in returned.files.items()
     }
     with exclusive_writer(runs_dir / task.name, "training") as run_dir:
         _write_files(run_dir, moved)
@@ -260,4 +270,4 @@ def _write_run(
     def move(path: str) -> str:
         return new + path[len(worker_runs) :] if path.startswith(worker_runs) else path
 
-    return relocate(result, move)
+    return relocate(returned.figures, move)
