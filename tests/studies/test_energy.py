@@ -372,6 +372,30 @@ def test_run_without_a_family_is_refused_naming_the_argument(tmp_path, families)
     assert not (tmp_path / "out").exists()
 
 
+def test_a_killed_study_reads_each_rendered_family_back_instead_of_rendering_it(
+    variant, tmp_path, monkeypatch
+):
+    import mincam_render.studies.energy.study as study
+    from mincam_render.studies.energy import load_energy_config, run
+
+    small = {"max_pixels": 2, "schedule": {"step_min": 120.0}, "render": {"spp": 8, "batches": 2,
+             "max_depth": 2}}  # fmt: skip
+    config = load_energy_config(None, small)
+    first = run(config, tmp_path, families=["workspace"])
+    kept = tmp_path / "panel_light" / "workspace.json"
+    assert kept.is_file()
+
+    def rendered(*args, **kwargs):
+        raise AssertionError("rendered again")
+
+    monkeypatch.setattr(study, "render_panel_light", rendered)
+    again = run(config, tmp_path, families=["workspace"])  # read back: the same day
+    assert again.as_json() == first.as_json()
+    other = load_energy_config(None, small | {"render": {"spp": 16, "batches": 2, "max_depth": 2}})
+    with pytest.raises(AssertionError, match="rendered again"):  # another description
+        run(other, tmp_path, families=["workspace"])
+
+
 def test_a_read_back_description_is_refused_naming_the_field():
     """``EnergyResult.from_json`` checks the description it reads as a file's."""
     from mincam_render.studies.energy import EnergyResult

@@ -47,6 +47,20 @@ class PanelPose:
     normal: tuple[float, float, float]
     tangent: tuple[float, float, float]
 
+    def as_json(self) -> JsonObject:
+        """``{"center_m", "normal", "tangent"}``, each a list of 3 floats."""
+        return {k: list(v) for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> PanelPose:
+        """Inverse of :meth:`as_json`."""
+
+        def vector(key: str) -> tuple[float, float, float]:
+            x, y, z = (float(v) for v in record[key])
+            return x, y, z
+
+        return cls(center_m=vector("center_m"), normal=vector("normal"), tangent=vector("tangent"))
+
 
 @dataclass(frozen=True, kw_only=True)
 class PanelLight:
@@ -64,6 +78,35 @@ class PanelLight:
     hours: np.ndarray
     daylight: tuple[IrradianceEstimate | None, ...]
     seconds: float
+
+    def as_json(self) -> JsonObject:
+        """Every estimate as ``{"mean_w_m2", "stderr_w_m2", "spp"}`` (null: not rendered)."""
+
+        def est(e: IrradianceEstimate | None) -> JsonObject | None:
+            return None if e is None else dataclasses.asdict(e)
+
+        return {
+            "lights": {name: est(e) for name, e in self.lights.items()},
+            "hours": [float(h) for h in self.hours],
+            "daylight": [est(e) for e in self.daylight],
+            "seconds": self.seconds,
+        }
+
+    @classmethod
+    def from_json(cls, record: JsonObject) -> PanelLight:
+        """Inverse of :meth:`as_json`."""
+        from mincam_render.render.irradiance import IrradianceEstimate
+
+        def est(r: JsonObject | None) -> IrradianceEstimate | None:
+            return None if r is None else IrradianceEstimate(**r)
+
+        lights = {name: est(r) for name, r in record["lights"].items()}
+        return cls(
+            lights=cast("dict[str, IrradianceEstimate]", lights),
+            hours=np.asarray(record["hours"], dtype=np.float64),
+            daylight=tuple(est(r) for r in record["daylight"]),
+            seconds=float(record["seconds"]),
+        )
 
     def max_relative_error(self) -> float:
         """Largest standard error / mean of the components rendered (0 if none)."""

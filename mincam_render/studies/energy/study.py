@@ -12,6 +12,7 @@ is put through the same budget.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Sequence
 from dataclasses import replace
@@ -20,6 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mincam_render.core.config import to_dict
 from mincam_render.core.photometry import WHITE_LIGHT_EFFICACY_LM_PER_W, irradiance_to_lux
 from mincam_render.studies.energy.config import ConsumptionConfig, EnergyConfig
 from mincam_render.studies.energy.consumption import (
@@ -52,6 +54,7 @@ from mincam_render.studies.energy.storage import simulate_storage
 if TYPE_CHECKING:
     from mincam_render.core.labels import LabelSpec
     from mincam_render.render.irradiance import IrradianceEstimate
+    from mincam_render.scenes.indoor import IndoorFamily
 
 log = logging.getLogger(__name__)
 #: Days simulated; the last is reported (the first charges the capacitor from its initial state).
@@ -244,9 +247,11 @@ def run(
 
     Args:
         config: panel, storage, electronics, schedule and render settings.
-        out: the study's directory, where :func:`.report.write_report` writes;
-            the analysis itself writes nothing (the panel's light is rendered in
-            memory), so a refused input leaves no directory behind.
+        out: the study's directory: each family's rendered panel light is kept
+            in ``out/panel_light/<family>.json`` as soon as it is rendered (a killed
+            study run again renders only the families it had not finished), and
+            :func:`.report.write_report` writes there; a refused input leaves no
+            directory behind.
         families: indoor scene families (names or TOML paths) to render the day in
             (at least one).
         studies_dir: directory of ``study_<family>.json`` tables for the matched
@@ -274,7 +279,7 @@ def run(
     comparisons: dict[str, Comparison] = {}
     for name in families:
         fam = day_family(name, config)
-        pose, light = render_panel_light(fam, config)
+        pose, light = _kept_or_rendered(fam, config, Path(out) / "panel_light")
         budgets = [mincam_budget(k, fam.labels, config) for k in range(1, config.max_pixels + 1)]
         days[fam.name] = family_budget(light, pose, budgets, config)
         study = Path(studies_dir) / f"study_{fam.name}.json" if studies_dir else None
@@ -286,6 +291,32 @@ def run(
         budget=days[first].budgets[-1], family=first, paper_lux=config.paper_threshold_lux
     )
     return EnergyResult(config=config, families=days, comparisons=comparisons, threshold=threshold)
+
+
+def _kept_or_rendered(
+    fam: IndoorFamily, config: EnergyConfig, kept_dir: Path
+) -> tuple[PanelPose, PanelLight]:
+    """The panel's pose and light kept in ``kept_dir`` for this description, or rendered and kept.
+
+    The render is the study's long step (minutes per family at the shipped
+    sizes); keeping each family's as soon as it is done means a killed study run
+    again with the same description renders only the families it had not
+    finished. A kept light of another description (or scene) is rendered again.
+    """
+    from mincam_render.data.dataset import atomic_write_bytes, json_bytes
+
+    path = kept_dir / f"{fam.name}.json"
+    key = {"family": fam.name, "scene": to_dict(fam.config), "config": to_dict(config)}
+    if path.is_file():
+        record = json.loads(path.read_text())
+        if {k: record.get(k) for k in key} == json.loads(json_bytes(key)):
+            log.info("%s: the panel's light read back from %s", fam.name, path)
+            return PanelPose.from_json(record["pose"]), PanelLight.from_json(record["light"])
+        log.info("%s: %s holds another description's light; rendering again", fam.name, path)
+    pose, light = render_panel_light(fam, config)
+    kept_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, json_bytes(key | {"pose": pose.as_json(), "light": light.as_json()}))
+    return pose, light
 
 
 def _tabled_comparisons(
