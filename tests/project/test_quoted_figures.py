@@ -84,6 +84,9 @@ NOT_KEPT = {
             "−0.128 [−0.137, −0.119]",
             "+0.059 [+0.037, +0.077]",
             "+0.064 [+0.049, +0.077]",
+            "−0.371 [−0.401, −0.348]",
+            "−0.159 [−0.174, −0.143]",
+            "−0.012 [−0.029, +0.006]",
         ),
         "paired differences at the ladder's largest size, not stored: recomputed from its "
         "episode errors by test_the_design_protocols_paired_differences_are_its_episode_errors",
@@ -204,6 +207,9 @@ def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
         ("patches", "mincam-2px", "baseline-2x2", "mincam 2 px − 2×2"),
         ("patches", "mincam-8px", "baseline-8x8", "mincam 8 px − 8×8"),
         ("patches", "mincam-8px", "baseline-32x32", "− 32×32"),
+        ("patches-narrow", "mincam-2px", "baseline-2x2", "mincam 2 px − 2×2"),
+        ("patches-narrow", "mincam-8px", "baseline-8x8", "mincam 8 px − 8×8"),
+        ("patches-narrow", "mincam-8px", "baseline-32x32", "− 32×32"),
     ],
 )
 def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a, b, quoted):
