@@ -53,6 +53,18 @@ SCENES = Path(__file__).resolve().parents[1] / "scenes"
 #: room for 10,000 steps (early stopping ends most runs near 3,000: at 8 workspace
 #: episodes, 3,000 and 10,000 steps gave the same kept states).
 BASE_RECIPE = TrainConfig(gain_range=(1.0, 1.0), max_steps=10000)
+#: The patches studies' episodes: 16 detectors, 3,000 independent frames a training
+#: episode, 4 x 1,000 validation and 6 x 1,000 test frames.
+PATCHES_EPISODES = ComparisonConfig(
+    family="patches",
+    overrides={"camera": {"detectors": 16}},
+    train_frames=3000,
+    val_episodes=4,
+    val_frames=1000,
+    test_episodes=6,
+    test_frames=1000,
+    train=BASE_RECIPE,
+)
 #: Episodes and task of each study (``DesignProtocolConfig`` fields).
 TASKS: dict[str, dict[str, Any]] = {
     "workspace": {
@@ -89,33 +101,11 @@ TASKS: dict[str, dict[str, Any]] = {
             Design(grid=(32, 32)),
         ),
     },
-    "patches": {
-        "episodes": ComparisonConfig(
-            family="patches",
-            overrides={"camera": {"detectors": 16}},
-            train_frames=3000,
-            val_episodes=4,
-            val_frames=1000,
-            test_episodes=6,
-            test_frames=1000,
-            train=BASE_RECIPE,
-        ),
-        "task": "count",
-        "ladder": (1, 2, 4, 8, 16),
-    },
+    "patches": {"episodes": PATCHES_EPISODES, "task": "count", "ladder": (1, 2, 4, 8, 16)},
     # the narrow ranges of scenes/patches_narrow.toml, a sensitivity variant chosen
     # after the wide result (docs/studies.md); otherwise the patches study's sizes
     "patches-narrow": {
-        "episodes": ComparisonConfig(
-            family=str(SCENES / "patches_narrow.toml"),
-            overrides={"camera": {"detectors": 16}},
-            train_frames=3000,
-            val_episodes=4,
-            val_frames=1000,
-            test_episodes=6,
-            test_frames=1000,
-            train=BASE_RECIPE,
-        ),
+        "episodes": replace(PATCHES_EPISODES, family=str(SCENES / "patches_narrow.toml")),
         "task": "count",
         "ladder": (1, 2, 4, 8, 16),
     },
