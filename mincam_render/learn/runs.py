@@ -83,6 +83,26 @@ class RunMetrics:
             }
         return out
 
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> RunMetrics:
+        """Inverse of :meth:`as_json` (extra keys beside them are ignored)."""
+        test, val = d.get("test"), d.get("validation_episodes")
+        return cls(
+            model=d["model"],
+            steps=d["steps"],
+            best_step=d["best_step"],
+            best_val_loss=d["best_val_loss"],
+            stopped_early=d["stopped_early"],
+            train_wall_time_s=d["train_wall_time_s"],
+            train_samples=d["train_samples"],
+            test=None if test is None else Evaluation.from_json(test),
+            episodes={k: Evaluation.from_json(e) for k, e in d["episodes"].items()},
+            history=d["history"],
+            validation_episodes=None
+            if val is None
+            else {k: Evaluation.from_json(e) for k, e in val.items()},
+        )
+
 
 def train_run(
     train: TrainingData,

@@ -140,20 +140,8 @@ class ComparisonRun:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> ComparisonRun:
         """Inverse of :meth:`as_json`."""
-        val, test, mask_run = d.get("validation_episodes"), d.get("test"), d.get("mask_run")
-        metrics = RunMetrics(
-            model=d["model"],
-            steps=d["steps"],
-            best_step=d["best_step"],
-            best_val_loss=d["best_val_loss"],
-            stopped_early=d["stopped_early"],
-            train_wall_time_s=d["train_wall_time_s"],
-            train_samples=d["train_samples"],
-            test=None if test is None else Evaluation.from_json(test),
-            episodes=_evaluations(d["episodes"]),
-            history=d["history"],
-            validation_episodes=None if val is None else _evaluations(val),
-        )
+        mask_run = d.get("mask_run")
+        metrics = RunMetrics.from_json(d)
         return cls(metrics=metrics, run_dir=d["run_dir"], seed_index=d["seed_index"],
                    mask_run=None if mask_run is None else MaskRun.from_json(mask_run))  # fmt: skip
 
