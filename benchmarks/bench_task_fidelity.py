@@ -4,11 +4,14 @@ Usage::
 
     python benchmarks/bench_task_fidelity.py --work /data/fidelity \
         [--sections render,check,plans] [--levels 1x,0.25x,4x,16x] [--lock /tmp/mincam-cpu.lock]
-        [--one-x /data/episodes/ws8] [--families workspace,lighting,patches,traffic]
+        [--one-x /data/episodes/ws8] [--family workspace|lighting]
+        [--families workspace,lighting,patches,traffic]
         [--seeds 8] [--replicate-seeds 8] [--episodes 2,4,3]
 
-``check`` (workspace): the plan's episodes (2 training episodes of 1,200 frames at
-2 fps, 4 validation and 3 test episodes of 600 frames, the people count) at every
+``check`` (``--family``, :data:`CHECKED`): the plan's episodes (workspace: 2
+training episodes of 1,200 frames at 2 fps, 4 validation and 3 test episodes of
+600 frames, the people count; lighting: the toggling room at 30 fps, episodes of
+3,600 and 1,800 frames, the five lights) at every
 level of :data:`LEVELS` (samples of frames and backgrounds times a factor, path
 depth 16; per-window or per-frame seeds of ``X - C``), count-only cameras
 (mincam 2 and 8 px, baselines 8x8 and 32x32, 8 seeds and a replicate of 8 other
@@ -17,11 +20,14 @@ against the reference (16x): accepted when every design's test RMSE moves by
 less than a quarter of its 95 % half-width; each level's render error against
 the label signal on the test episodes and its autocorrelation at lags of one
 frame and one window.
-``render`` renders the levels' episodes first (``WORK/ws-<level>``, one episode
+``render`` renders the levels' episodes first (``WORK/<prefix>-<level>``, one episode
 per acquisition of ``--lock``; the check's episodes of the plan are copied from
 ``--one-x`` when given, which is only read). ``plans``: each family's plan
 measured by the planner (every figure relative to the total and to the label
 signal).
+
+Each family's check merges under its own key of the JSON and writes
+``task_fidelity_<family>.md`` and ``.png``; give each family its own ``--work``.
 
 The level with the most samples is the reference, the next the label signal's
 second estimate. A *reduced* check, e.g. ``--levels 1x,0.25x`` on a machine
@@ -30,25 +36,24 @@ whether the cheaper level moves the task figures from the plan's (so whether the
 plan could be cheaper), not whether the plan has converged; the plan's own
 noise is then measured against the cheaper level, its share of their
 difference's power taken by samples (1/samples). The JSON's
-``workspace.check_scope`` records the levels, reference, episodes and seeds, and
+``<family>.check_scope`` records the levels, reference, episodes and seeds, and
 says so. ``--seeds``, ``--replicate-seeds`` and ``--episodes`` cut it further.
-The reduced check sized for a 2-core machine (3 and 3 seeds, 2 training episodes
-of 1,200 frames, 2 validation and 2 test episodes of 600; the 0.25x episodes
-rendered, the plan's copied from a workspace job's at 1x) is::
+The checks sized for a 2-core machine (3 and 3 seeds, 2 training, 2 validation
+and 2 test episodes; the plan's episodes copied from the design protocol's, the
+others rendered), as kept in ``benchmarks/results/task_fidelity.json``::
 
     python benchmarks/bench_task_fidelity.py --work /work/tf38 \
-        --sections render,check --levels 1x,0.25x --one-x /work/episodes/ws8 \
+        --sections render,check --levels 0.25x,4x --one-x /work/episodes/ws8 \
         --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
-
-It has not been run yet (the CPU lock was held by a full pipeline), and no
-``check`` section has: ``benchmarks/results/task_fidelity.json`` holds the
-``plans`` section alone, so it gives no task verdict and no chosen target.
+    python benchmarks/bench_task_fidelity.py --work /work/tf38-light --family lighting \
+        --sections render,check --levels 0.25x,4x --one-x /work/episodes/light \
+        --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
 render noise at the plan for random masks and the finest box pixel, their
 ratio, the chosen target, the noise's autocorrelation, the check per design
-and level, verdicts; a ``machine`` block), ``task_fidelity_workspace.md`` and
-``task_fidelity_workspace.png`` (measurement error and task error against
+and level, verdicts; a ``machine`` block), ``task_fidelity_<family>.md`` and
+``task_fidelity_<family>.png`` (measurement error and task error against
 render seconds per frame). Training runs are kept in ``WORK/runs`` (resumable).
 """
 
@@ -102,6 +107,22 @@ PLAN_REQUESTS: dict[str, dict[str, Any]] = {
     },
     "traffic": {"family": "traffic", "num_frames": 1800},
 }
+#: The families the task-level check runs on: ``(episode directory prefix,
+#: ComparisonConfig fields)``; the design protocol's episode sizes and task.
+CHECKED: dict[str, tuple[str, dict[str, Any]]] = {
+    "workspace": ("ws", {}),
+    "lighting": (
+        "light",
+        {
+            "family": str(SCENES / "lighting_toggling.toml"),
+            "fps": 30.0,
+            "train_frames": 3600,
+            "val_frames": 1800,
+            "test_frames": 1800,
+            "tasks": ("lights",),
+        },
+    ),
+}
 
 
 def config(
@@ -110,14 +131,19 @@ def config(
     seeds: int | None = None,
     replicate_seeds: int | None = None,
     episodes: tuple[int, int, int] | None = None,
+    family: str = "workspace",
 ) -> TaskFidelityConfig:
-    """The workspace check over the named levels (``1x`` always), episodes under ``work``.
+    """The check of ``family`` (:data:`CHECKED`) over the named levels (``1x`` always).
 
+    Episodes under ``work``.
     ``seeds`` and ``replicate_seeds``: training seeds per design and of the
     replicate; ``episodes``: ``(train, val, test)`` episode counts, render noise
     measured on the first three test episodes (None: :class:`TaskFidelityConfig`'s:
     8 and 8 seeds, 2, 4 and 3 episodes).
     """
+    if family not in CHECKED:
+        raise ValueError(f"family {family!r}: the check runs on {sorted(CHECKED)}")
+    prefix, fields = CHECKED[family]
     levels = []
     for name, factor, depth, difference_seeds in LEVELS:
         if name != "1x" and name not in names:
@@ -126,7 +152,7 @@ def config(
             SampleLevel(
                 name=name,
                 factor=factor,
-                episodes=work / f"ws-{name}",
+                episodes=work / f"{prefix}-{name}",
                 max_depth=depth,
                 difference_seeds=difference_seeds,
                 planned=name == "1x",
@@ -141,6 +167,7 @@ def config(
     cfg = TaskFidelityConfig(
         levels=tuple(levels), reference=ranked[0].name, second_reference=second
     )
+    cfg = dataclasses.replace(cfg, comparison=dataclasses.replace(cfg.comparison, **fields))
     if seeds is not None:
         cfg = dataclasses.replace(cfg, comparison=dataclasses.replace(cfg.comparison, seeds=seeds))
     if replicate_seeds is not None:
@@ -275,7 +302,9 @@ def main() -> None:
     ap.add_argument("--levels", default=",".join(name for name, *_ in LEVELS))
     ap.add_argument("--one-x", type=Path, default=None, help="the plan's rendered episodes")
     ap.add_argument("--lock", type=Path, default=None, help="a CPU lock held per episode")
-    ap.add_argument("--families", default=",".join(PLAN_REQUESTS))
+    ap.add_argument("--family", default="workspace", choices=sorted(CHECKED),
+                    help="the family of render and check")  # fmt: skip
+    ap.add_argument("--families", default=",".join(PLAN_REQUESTS), help="the plans'")
     ap.add_argument("--train-workers", type=int, default=1)
     ap.add_argument("--seeds", type=int, default=None, help="training seeds per design (8)")
     ap.add_argument("--replicate-seeds", type=int, default=None, help="the replicate's (8)")
@@ -284,19 +313,24 @@ def main() -> None:
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
-    episodes = None if args.episodes is None else tuple(map(int, args.episodes.split(",")))
-    cfg = config(args.work, args.levels.split(","), args.seeds, args.replicate_seeds, episodes)
+    episodes = None
+    if args.episodes is not None:
+        train, val, test = map(int, args.episodes.split(","))
+        episodes = (train, val, test)
+    cfg = config(
+        args.work, args.levels.split(","), args.seeds, args.replicate_seeds, episodes, args.family
+    )
     merged = json.loads(args.out.read_text()) if args.out.is_file() else {}
     if "render" in sections:
         render(cfg, args.one_x, args.lock)
     if "check" in sections:
         result = run(cfg, args.work / "runs", train_workers=args.train_workers,
                      hold=lambda: holding(args.lock), progress=True)  # fmt: skip
-        paths = write_report(result, args.out.parent, stem=f"{args.out.stem}_workspace")
+        paths = write_report(result, args.out.parent, stem=f"{args.out.stem}_{args.family}")
         print(paths["md"].read_text())
         entry = result.as_json()
-        merged.setdefault("workspace", {})
-        merged["workspace"] |= {"check": entry, "check_scope": scope(cfg), **summary(entry, cfg)}
+        merged.setdefault(args.family, {})
+        merged[args.family] |= {"check": entry, "check_scope": scope(cfg), **summary(entry, cfg)}
     if "plans" in sections:
         for name, record in plans(args.families.split(","), args.lock).items():
             merged.setdefault(name, {})["plan"] = record
