@@ -4,14 +4,15 @@ Usage::
 
     python benchmarks/bench_task_fidelity.py --work /data/fidelity \
         [--sections render,check,plans] [--levels 1x,0.25x,4x,16x] [--lock /tmp/mincam-cpu.lock]
-        [--one-x /data/episodes/ws8] [--family workspace|lighting]
+        [--one-x /data/episodes/ws8] [--family workspace|lighting|patches]
         [--families workspace,lighting,patches,traffic]
         [--seeds 8] [--replicate-seeds 8] [--episodes 2,4,3]
 
 ``check`` (``--family``, :data:`CHECKED`): the plan's episodes (workspace: 2
 training episodes of 1,200 frames at 2 fps, 4 validation and 3 test episodes of
 600 frames, the people count; lighting: the toggling room at 30 fps, episodes of
-3,600 and 1,800 frames, the five lights) at every
+3,600 and 1,800 frames, the five lights; patches: 16 detectors, 3,000 and 1,000
+independent frames, the count) at every
 level of :data:`LEVELS` (samples of frames and backgrounds times a factor, path
 depth 16; per-window or per-frame seeds of ``X - C``), count-only cameras
 (mincam 2 and 8 px, baselines 8x8 and 32x32, 8 seeds and a replicate of 8 other
@@ -47,6 +48,9 @@ others rendered), as kept in ``benchmarks/results/task_fidelity.json``::
         --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
     python benchmarks/bench_task_fidelity.py --work /work/tf38-light --family lighting \
         --sections render,check --levels 0.25x,4x --one-x /work/episodes/light \
+        --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
+    python benchmarks/bench_task_fidelity.py --work /work/tf38-patches --family patches \
+        --sections render,check --levels 0.25x,4x --one-x /work/episodes/patches \
         --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
@@ -120,6 +124,17 @@ CHECKED: dict[str, tuple[str, dict[str, Any]]] = {
             "val_frames": 1800,
             "test_frames": 1800,
             "tasks": ("lights",),
+        },
+    ),
+    "patches": (
+        "patches",
+        {
+            "family": "patches",
+            "overrides": {"camera": {"detectors": 16}},
+            "train_frames": 3000,
+            "val_frames": 1000,
+            "test_frames": 1000,
+            "tasks": ("count",),
         },
     ),
 }
