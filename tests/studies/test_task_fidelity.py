@@ -174,6 +174,30 @@ def test_noise_figures_against_closed_forms():
     assert figures.ratio()["box_1"] == pytest.approx(box / figures.signal_rms_w["box_1"])
 
 
+def test_a_window_as_long_as_the_episodes_leaves_its_lag_unmeasured():
+    # the lighting room's test episodes: 1,800 frames, one 60 s window at 30 fps
+    rng = np.random.default_rng(6)
+    frames, shape = 300, (2, 8, 8)
+    signal = rng.integers(0, 3, size=frames).astype(np.float64)[:, None, None, None] * np.ones(
+        shape
+    )
+    exact = 5.0 + signal
+    noisy = exact + rng.normal(0.0, 0.1, size=exact.shape)  # independent per frame
+    episodes = {Path("ref"): (exact, signal), Path("level"): (noisy, signal)}
+    figures = noise_figures(
+        ([Path("level")], 1.0),
+        ([Path("ref")], 1e9, "ref"),
+        None,
+        window_frames=frames,
+        load=episodes.__getitem__,
+        transmittance_range=(0.01, 0.67),
+    )
+    acf = figures.autocorrelation["box_1"]
+    assert acf["lag_1_window"] is None
+    np.testing.assert_allclose(acf["lag_1_frame"], 0.0, atol=0.1)
+    np.testing.assert_allclose(figures.error_rms_w["box_1"], 0.1, rtol=0.05)
+
+
 def test_levels_take_the_plans_seeds_unless_told(tmp_path):
     level = SampleLevel(name="4x", factor=4, episodes=str(tmp_path))
     assert level.difference_seeds is DifferenceSeeds.WINDOW

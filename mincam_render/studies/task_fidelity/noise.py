@@ -16,6 +16,7 @@ whose covariance over frames is the signal's power without their noise
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -45,7 +46,10 @@ class NoiseFigures:
             part that moves from frame to frame (a constant offset, like a
             missing bounce or a converged background's noise, is left out).
         signal_rms_w: the label signal's RMS over frames (W).
-        autocorrelation: ``{kind: {"lag_1_frame", "lag_1_window"}}`` of the error.
+        autocorrelation: ``{kind: {"lag_1_frame", "lag_1_window"}}`` of the error;
+            ``lag_1_window`` is None where no episode is longer than a window
+            (the lighting room's 1,800-frame test episodes hold one 60 s window
+            at 30 fps).
         window_frames: frames of one background window (the second lag).
     """
 
@@ -54,7 +58,7 @@ class NoiseFigures:
     error_rms_w: Mapping[str, float]
     noise_rms_w: Mapping[str, float]
     signal_rms_w: Mapping[str, float]
-    autocorrelation: Mapping[str, Mapping[str, float]]
+    autocorrelation: Mapping[str, Mapping[str, float | None]]
     window_frames: int
 
     def ratio(self, figure: str = "error_rms_w") -> dict[str, float]:
@@ -177,14 +181,15 @@ def _add(
     """One episode's powers and autocorrelations, weighted by its frames."""
     frames = error.shape[0]
     flat = error.reshape(frames, -1)
-    acf = noise_autocorrelation(flat, [1, window_frames])
+    # a lag of one window needs an episode longer than a window; else not measured
+    acf = noise_autocorrelation(flat, [1] + ([window_frames] if window_frames < frames else []))
     entry = sums.setdefault(kind, {k: [] for k in ("w", "e2", "n2", "s2", "r1", "rw")})
     entry["w"].append(frames)
     entry["e2"].append(float(np.mean(flat**2)))
     entry["n2"].append(float(np.mean((flat - flat.mean(axis=0)) ** 2)))
     entry["s2"].append(signal_rms**2)
     entry["r1"].append(acf[1])
-    entry["rw"].append(acf[window_frames])
+    entry["rw"].append(acf.get(window_frames, math.nan))
 
 
 @dataclass(frozen=True)
@@ -195,7 +200,7 @@ class _Pooled:
     noise: float
     signal: float
     lag_1: float
-    lag_window: float
+    lag_window: float | None
 
 
 def _pooled(entry: Mapping[str, list[float]], share: float) -> _Pooled:
@@ -205,10 +210,15 @@ def _pooled(entry: Mapping[str, list[float]], share: float) -> _Pooled:
     def mean(key: str) -> float:
         return float(np.sum(w * np.asarray(entry[key])) / np.sum(w))
 
+    rw = np.asarray(entry["rw"], dtype=np.float64)
+    measured = ~np.isnan(rw)  # the episodes longer than a window
+
     return _Pooled(
         error=float(np.sqrt(share * mean("e2"))),
         noise=float(np.sqrt(share * mean("n2"))),
         signal=float(np.sqrt(mean("s2"))),
         lag_1=mean("r1"),
-        lag_window=mean("rw"),
+        lag_window=float(np.sum(w[measured] * rw[measured]) / np.sum(w[measured]))
+        if measured.any()
+        else None,
     )

@@ -84,7 +84,7 @@ def _noise_row(lv: LevelFigures) -> list[str]:
         lv.noise.reference,
         " / ".join(f"{err[k]:.3f}" for k in kinds),
         " / ".join(f"{noise[k]:.3f}" for k in kinds),
-        f"{acf['lag_1_frame']:.2f} / {acf['lag_1_window']:.2f}",
+        f"{acf['lag_1_frame']:.2f} / {_lag(acf['lag_1_window'])}",
     ]
 
 
@@ -136,3 +136,8 @@ def plot_paretos(levels: Sequence[LevelFigures], error_name: str, path: Path) ->
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def _lag(rho: float | None) -> str:
+    """An autocorrelation as the table shows it; None: not measured (episodes of one window)."""
+    return "n/a (episodes of one window)" if rho is None else f"{rho:.2f}"
