@@ -61,10 +61,11 @@ def predictions(runs: list[Path], tests: list[TrainingData], label: str) -> np.n
     """``[seed, frame]`` post-processed predictions of ``label``, test episodes in order."""
     out = []
     for path in runs:
-        run = open_run(path)
+        # one camera per run: the test episodes share its detectors and mask resolution
+        model = restore_model(open_run(path), tests[0])
         per_episode = []
         for data in tests:
-            pred, _, _ = predict(restore_model(run, data), data)
+            pred, _, _ = predict(model, data)
             post = postprocess(pred, data.label_specs, data.fps)
             per_episode.append(post[label].ravel())
         out.append(np.concatenate(per_episode))
