@@ -254,3 +254,83 @@ def test_noise_is_taken_against_the_reference_or_the_plans_against_the_second(
 def test_a_reference_has_no_noise_of_its_own_to_measure(tmp_path, monkeypatch, reference, second):
     cfg = _three_levels(tmp_path, reference, second)
     assert _noise_arguments(monkeypatch, cfg, reference) == {}
+
+
+def _cross_config(tmp_path: Path, cross) -> TaskFidelityConfig:
+    cfg = _three_levels(tmp_path, "1x", "0.25x")
+    test_level = SampleLevel(name="16x", factor=16, episodes=tmp_path / "16x")
+    return TaskFidelityConfig(levels=cfg.levels[:2], reference="1x", second_reference="0.25x",
+                              test_levels=(test_level,), cross=cross)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "cross",
+    [(("1x", "1x"),), (("16x", "1x"),), (("1x", "64x"),)],
+    ids=["same level", "test level trained", "unknown level"],
+)
+def test_cross_pairs_train_at_a_level_and_test_at_another(tmp_path, cross):
+    with pytest.raises(ValueError, match="train at one of the levels"):
+        _cross_config(tmp_path, cross)
+
+
+def test_a_test_level_is_not_the_plan_nor_a_second_level_of_one_name(tmp_path):
+    cfg = _cross_config(tmp_path, (("1x", "16x"),))
+    assert cfg.level("16x").factor == 16
+    with pytest.raises(ValueError, match="give each name once"):
+        TaskFidelityConfig(levels=cfg.levels, reference="1x", test_levels=(cfg.level("0.25x"),))
+    plan = SampleLevel(name="p", factor=1, episodes=tmp_path, max_depth=None, planned=True)
+    with pytest.raises(ValueError, match="cannot be the plan"):
+        TaskFidelityConfig(levels=cfg.levels, reference="1x", test_levels=(plan,))
+
+
+def test_a_test_level_renders_its_test_episodes_alone(tmp_path, monkeypatch):
+    from mincam_render.data import render_job
+    from mincam_render.studies.task_fidelity import study
+
+    cfg = _cross_config(tmp_path, (("1x", "16x"),))
+    names = study.episode_names(cfg)
+    monkeypatch.setattr(study, "level_requests", lambda c, lv: dict.fromkeys(names))
+    rendered: list[Path] = []
+    monkeypatch.setattr(render_job, "render_dataset", lambda req, path, **kw: rendered.append(path))
+    study.render_level(cfg, cfg.level("16x"))
+    assert rendered == [tmp_path / "16x" / n for n in names if n.startswith("test-")]
+    rendered.clear()
+    study.render_level(cfg, cfg.level("0.25x"))
+    assert rendered == [tmp_path / "0.25x" / n for n in names]
+
+
+def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, monkeypatch):
+    from mincam_render.studies.task_fidelity import study
+
+    cfg = _cross_config(tmp_path, (("0.25x", "1x"), ("1x", "16x")))
+    out = tmp_path / "runs"
+    for level in ("0.25x", "1x"):
+        (out / level / "runs" / "run-a").mkdir(parents=True)
+        (out / level / "runs" / "run-a" / "metrics.json").write_text(level)
+    # errors equal over a seed's episodes, so that pooling (RMS) keeps differences exact
+    own = {
+        "1x": _level({"a": _figure("a", [[1.05, 1.05], [1.45, 1.45]])}),
+        "0.25x": _level({"a": _figure("a", [[1.2, 1.2], [1.6, 1.6]])}),
+    }
+    # the 0.25x runs on 1x test renders: each error 0.1 below their own, 0.05 above 1x's
+    crossed = {"a": _figure("a", [[1.1, 1.1], [1.5, 1.5]])}
+    seen = []
+
+    def tested(c, episodes, here, workers, progress):
+        seen.append((here, {n: episodes(n) for n in study.episode_names(c)}))
+        return study._Tested(crossed, 2.0, None, "RMSE")
+
+    monkeypatch.setattr(study, "_tested_designs", tested)
+    c = study.cross_figures(cfg, cfg.level("0.25x"), cfg.level("1x"), out, own)
+    here, episodes = seen[0]
+    assert here == out / "0.25x-on-1x"
+    assert (here / "runs" / "run-a" / "metrics.json").read_text() == "0.25x"  # a copy
+    assert all(p.parent.name == ("1x" if n.startswith("test-") else "0.25x")
+               for n, p in episodes.items())  # fmt: skip
+    np.testing.assert_allclose(c.test_noise["a"].mean, -0.1, atol=1e-9)
+    np.testing.assert_allclose(c.train_noise["a"].mean, 0.05, atol=1e-9)
+    # seeds resampled on both sides: the interval spans the seeds' spread (1.1 - 1.6, 1.5 - 1.2)
+    lo, hi = c.test_noise["a"].ci95
+    assert -0.5 - 1e-9 <= lo < -0.1 < hi <= 0.3 + 1e-9
+    c = study.cross_figures(cfg, cfg.level("1x"), cfg.level("16x"), out, own)
+    assert c.train_noise is None  # 16x is a test level: nothing trained there

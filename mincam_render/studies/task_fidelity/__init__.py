@@ -9,6 +9,7 @@ from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figure
 from mincam_render.studies.task_fidelity.report import write_report
 from mincam_render.studies.task_fidelity.study import (
     Acceptance,
+    CrossFigures,
     LevelFigures,
     TaskFidelityResult,
     level_requests,
@@ -19,6 +20,7 @@ from mincam_render.studies.task_fidelity.study import (
 __all__ = [
     "CHECK_DESIGNS",
     "Acceptance",
+    "CrossFigures",
     "LevelFigures",
     "NoiseFigures",
     "SampleLevel",

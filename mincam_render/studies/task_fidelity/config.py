@@ -78,6 +78,12 @@ class TaskFidelityConfig:
             training seeds change, the floor the acceptance is read against.
         noise_episodes: episodes whose render noise is measured at every level.
         background_interval_s: the plan's background window (s): the noise's second lag.
+        test_levels: levels of which only the test episodes are rendered (not
+            trained): runs of other levels are tested on them (``cross``).
+        cross: ``(trained, tested)`` level names: the runs trained at the first
+            tested on the second's test episodes (same scene seeds), which
+            separates what render noise does in training data from what it does
+            in test data; ``tested`` is among ``levels`` or ``test_levels``.
     """
 
     comparison: ComparisonConfig = field(
@@ -97,11 +103,22 @@ class TaskFidelityConfig:
     replicate_seeds: int = 8
     noise_episodes: tuple[str, ...] = ("test-0", "test-1", "test-2")
     background_interval_s: float = 60.0
+    test_levels: tuple[SampleLevel, ...] = ()
+    cross: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         names = [lv.name for lv in self.levels]
-        if len(set(names)) != len(names):
-            raise ValueError(f"levels {names}: give each name once")
+        every = names + [lv.name for lv in self.test_levels]
+        if len(set(every)) != len(every):
+            raise ValueError(f"levels and test levels {every}: give each name once")
+        if any(lv.planned for lv in self.test_levels):
+            raise ValueError("a test level cannot be the plan: the plan is trained")
+        for trained, tested in self.cross:
+            if trained not in names or tested not in every or trained == tested:
+                raise ValueError(
+                    f"cross ({trained!r}, {tested!r}): train at one of the levels {names} "
+                    f"and test at another level or test level {every}"
+                )
         for name in (self.reference, self.second_reference):
             if name is not None and name not in names:
                 raise ValueError(f"level {name!r} is not among the levels {names}")
@@ -112,8 +129,8 @@ class TaskFidelityConfig:
         check_number("background_interval_s", self.background_interval_s, 0, 1e6, lo_open=True)
 
     def level(self, name: str) -> SampleLevel:
-        """The level called ``name``."""
-        return next(lv for lv in self.levels if lv.name == name)
+        """The level (or test level) called ``name``."""
+        return next(lv for lv in (*self.levels, *self.test_levels) if lv.name == name)
 
     @property
     def plan(self) -> SampleLevel:

@@ -5,7 +5,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-from mincam_render.studies.task_fidelity.study import Acceptance, LevelFigures, TaskFidelityResult
+from mincam_render.studies.comparison.figures import DesignFigure, Paired
+from mincam_render.studies.task_fidelity.study import (
+    Acceptance,
+    CrossFigures,
+    LevelFigures,
+    TaskFidelityResult,
+)
 
 
 def write_report(result: TaskFidelityResult, out: str | Path, *, stem: str) -> dict[str, Path]:
@@ -32,7 +38,7 @@ def markdown(result: TaskFidelityResult) -> str:
             f"{lv.factor:g}",
             lv.difference_seeds,
             f"{lv.render_s_per_frame:.3f}",
-            *(f"{f.error:.3f} [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}]" for f in lv.designs.values()),
+            *(_figure_cell(f) for f in lv.designs.values()),
         ]
         for lv in result.levels
     ]
@@ -61,7 +67,41 @@ def markdown(result: TaskFidelityResult) -> str:
         lines.append(f"- **{level}** ({said}):")
         lines += [f"  - {_acceptance_cell(a)}" for a in checks]
     lines += ["", f"Chosen (cheapest supported level with the plan's seeds): {result.chosen}."]
+    if result.cross:
+        lines += ["", *_cross_lines(result.cross, names)]
     return "\n".join(lines)
+
+
+def _cross_lines(cross: Sequence[CrossFigures], names: Sequence[str]) -> list[str]:
+    """Runs tested on another level's test episodes: figures, test and training noise moves."""
+    lines = [
+        "## Trained at one level, tested at another (same scene seeds)",
+        "",
+        "Test noise: the same runs on these test renders less on their own level's "
+        "(paired by episode). Training noise: these runs less those trained at the "
+        "tested level, on the same test episodes.",
+        "",
+    ]
+    rows = []
+    for c in cross:
+        for kind, moves in (("figure", None), ("test noise", c.test_noise),
+                            ("training noise", c.train_noise)):  # fmt: skip
+            if kind != "figure" and moves is None:
+                continue
+            cells = (
+                _paired_cell(moves[n]) if moves is not None else _figure_cell(c.designs[n])
+                for n in names
+            )
+            rows.append([f"{c.trained} on {c.tested}", kind, *cells])
+    return lines + _table(["trained on tested", "", *names], rows)
+
+
+def _figure_cell(f: DesignFigure) -> str:
+    return f"{f.error:.3f} [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}]"
+
+
+def _paired_cell(p: Paired) -> str:
+    return f"{p.mean:+.3f} [{p.ci95[0]:+.3f}, {p.ci95[1]:+.3f}]"
 
 
 def _acceptance_cell(a: Acceptance) -> str:

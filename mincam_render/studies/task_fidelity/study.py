@@ -26,6 +26,12 @@ on better renders does not settle it):
 3. **The target** (:func:`chosen_level`): the cheapest supported level with the
    plan's seeds; its error relative to the label signal (random masks) is the
    loosest target the task check supports.
+4. **Training noise or test noise** (:func:`cross_figures`, ``cfg.cross``):
+   runs trained at one level tested on another's test episodes, paired with
+   the same runs on their own tests (what test-data noise changes) and with the
+   runs trained at the other level (what training-data noise changes). A test
+   level (``cfg.test_levels``) has only its test episodes rendered: what better
+   test renders alone would change, for a fraction of a level's render.
 
 Everything resumes: training runs are kept on disk.
 """
@@ -35,6 +41,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import shutil
 from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -100,6 +107,29 @@ class Acceptance:
 
 
 @dataclass(frozen=True)
+class CrossFigures:
+    """Runs trained at one level tested on another level's test episodes (same scene seeds).
+
+    Args:
+        trained: the level the runs were trained (and validated) at.
+        tested: the level whose test episodes they are tested on.
+        designs: each design's figure there.
+        test_noise: per design, these figures less the same runs' on their own
+            level's test episodes (paired by episode): what the test data's
+            render noise changes.
+        train_noise: per design, these figures less those of the runs trained
+            at ``tested`` on the same test episodes: what the training data's
+            render noise changes; None when ``tested`` is a test level (not trained).
+    """
+
+    trained: str
+    tested: str
+    designs: Mapping[str, DesignFigure]
+    test_noise: Mapping[str, Paired]
+    train_noise: Mapping[str, Paired] | None
+
+
+@dataclass(frozen=True)
 class TaskFidelityResult:
     """The check's figures (:mod:`~mincam_render.studies.task_fidelity.study`)."""
 
@@ -110,6 +140,7 @@ class TaskFidelityResult:
     acceptance: Mapping[str, tuple[Acceptance, ...]]
     chosen: str | None
     versions: Mapping[str, str]
+    cross: tuple[CrossFigures, ...] = ()
 
     def accepted(self, level: str) -> bool:
         """Every design's figure at ``level`` within the share of its interval."""
@@ -206,11 +237,15 @@ def render_level(
 ) -> None:
     """Render (or resume) a level's episodes, one at a time, each inside ``hold()``.
 
-    ``hold``: e.g. a lock on the machine's CPUs, so other jobs interleave.
+    Of a test level (``cfg.test_levels``) only the test episodes. ``hold``: e.g.
+    a lock on the machine's CPUs, so other jobs interleave.
     """
     from mincam_render.data.render_job import render_dataset
 
+    tests_only = level in cfg.test_levels
     for name, request in level_requests(cfg, level).items():
+        if tests_only and not name.startswith("test-"):
+            continue
         with hold():
             render_dataset(request, level.episodes / name, workers=workers, progress=False)
 
@@ -227,6 +262,81 @@ def level_figures(
 
     Runs go to ``out/<level>/runs`` (kept: a second call reads them back).
     """
+    names = episode_names(cfg)
+    tested = _tested_designs(
+        cfg, lambda n: level.episodes / n, out / level.name, train_workers, progress
+    )
+    figures = LevelFigures(
+        level=level.name,
+        factor=level.factor,
+        difference_seeds=level.difference_seeds.value,
+        render_s_per_frame=render_seconds_per_frame([level.episodes / n for n in names]),
+        designs=tested.designs,
+        trivial=tested.trivial,
+        noise=None,
+        replicate=tested.replicate,
+    )
+    return figures, tested.error_name
+
+
+def cross_figures(
+    cfg: TaskFidelityConfig,
+    trained: SampleLevel,
+    tested: SampleLevel,
+    out: Path,
+    own: Mapping[str, LevelFigures],
+    *,
+    progress: bool = False,
+) -> CrossFigures:
+    """``trained``'s runs (copied to ``out/<trained>-on-<tested>``) tested on ``tested``'s tests.
+
+    ``own``: every trained level's figures on its own episodes. The copies are
+    read back like any kept run and evaluated on the other test episodes; the
+    runs of ``out/<trained>`` are left as they are.
+    """
+    here = out / f"{trained.name}-on-{tested.name}"
+    if not (here / "runs").is_dir():
+        shutil.copytree(out / trained.name / "runs", here / "runs.partial")
+        (here / "runs.partial").rename(here / "runs")
+
+    def episodes(name: str) -> Path:
+        return (tested if name.startswith("test-") else trained).episodes / name
+
+    designs = _tested_designs(cfg, episodes, here, 1, progress).designs
+    mine = own[trained.name].designs
+    there = own.get(tested.name)
+    return CrossFigures(
+        trained=trained.name,
+        tested=tested.name,
+        designs=dict(designs),
+        test_noise={d: Paired.of(f, mine[d]) for d, f in designs.items()},
+        train_noise=None
+        if there is None
+        else {d: Paired.of(f, there.designs[d]) for d, f in designs.items()},
+    )
+
+
+@dataclass(frozen=True)
+class _Tested:
+    """Every design's test figure (comparison seeds), the trivial predictor's, the replicate's."""
+
+    designs: dict[str, DesignFigure]
+    trivial: float
+    replicate: dict[str, DesignFigure] | None
+    error_name: str
+
+
+def _tested_designs(
+    cfg: TaskFidelityConfig,
+    episodes: Callable[[str], Path],
+    out: Path,
+    train_workers: int,
+    progress: bool,
+) -> _Tested:
+    """Train (or read back) every run into ``out/runs`` and test it on the test episodes.
+
+    ``episodes``: the dataset of each episode name.
+    """
     from mincam_render.analysis.mask_structure import view_and_label_map
     from mincam_render.core.labels import label_tasks
     from mincam_render.data.dataset import open_dataset
@@ -235,38 +345,26 @@ def level_figures(
     from mincam_render.studies.comparison.study import comparison_splits, task_comparison
 
     comparison = cfg.comparison
-    names = episode_names(cfg)
     data = {
-        n: TrainingData.from_dataset(open_dataset(level.episodes / n), n.split("-")[0])
-        for n in names
+        n: TrainingData.from_dataset(open_dataset(episodes(n)), n.split("-")[0])
+        for n in episode_names(cfg)
     }
     splits = comparison_splits(data)
-    runs = train_runs(
-        cfg.trained, splits, out / level.name, train_workers=train_workers, progress=progress
-    )
+    runs = train_runs(cfg.trained, splits, out, train_workers=train_workers, progress=progress)
     labels = comparison.task_labels(label_tasks(splits.train.label_specs))
     task = next(iter(labels))
     task_data = task_splits(splits, labels[task])
     view_map = view_and_label_map(task_data.train)
     n = comparison.seeds
-    seeds = {d: rs[:n] for d, rs in runs[task].items()}
-    block = task_comparison(comparison, seeds, task_data, view_map)
+    block = task_comparison(comparison, {d: rs[:n] for d, rs in runs[task].items()},
+                            task_data, view_map)  # fmt: skip
     replicate = None
     if cfg.replicate_seeds:
         others = {d: rs[n:] for d, rs in runs[task].items()}
         rep = task_comparison(comparison, others, task_data, view_map)
         replicate = {d.name: rep.figure(d.name) for d in comparison.designs}
-    figures = LevelFigures(
-        level=level.name,
-        factor=level.factor,
-        difference_seeds=level.difference_seeds.value,
-        render_s_per_frame=render_seconds_per_frame([level.episodes / n for n in names]),
-        designs={d.name: block.figure(d.name) for d in comparison.designs},
-        trivial=block.trivial_error.mean,
-        noise=None,
-        replicate=replicate,
-    )
-    return figures, block.error_name
+    designs = {d.name: block.figure(d.name) for d in comparison.designs}
+    return _Tested(designs, block.trivial_error.mean, replicate, block.error_name)
 
 
 def episode_names(cfg: TaskFidelityConfig) -> list[str]:
@@ -361,6 +459,11 @@ def run(
                 cfg, level, out, train_workers=train_workers, progress=progress
             )
         figures[level.name] = dataclasses.replace(fig, noise=_noise(cfg, level))
+    cross = []
+    for trained, tested in cfg.cross:
+        with hold():
+            cross.append(cross_figures(cfg, cfg.level(trained), cfg.level(tested), out, figures,
+                                       progress=progress))  # fmt: skip
     ref = figures[cfg.reference].designs
     checks = {
         name: acceptance(f, ref, cfg.acceptance_share)
@@ -376,6 +479,7 @@ def run(
         acceptance=checks,
         chosen=chosen_level(cfg, held),
         versions=package_versions(),
+        cross=tuple(cross),
     )
 
 
