@@ -309,11 +309,15 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
         (out / level / "runs" / "run-a" / "metrics.json").write_text(level)
     # errors equal over a seed's episodes, so that pooling (RMS) keeps differences exact
     own = {
-        "1x": _level({"a": _figure("a", [[1.05, 1.05], [1.45, 1.45]])}),
-        "0.25x": _level({"a": _figure("a", [[1.2, 1.2], [1.6, 1.6]])}),
+        "1x": _level(
+            {"a": _figure("a", [[1.05, 1.05], [1.45, 1.45]]), "b": _figure("b", [[1.3] * 2] * 2)}
+        ),
+        "0.25x": _level(
+            {"a": _figure("a", [[1.2, 1.2], [1.6, 1.6]]), "b": _figure("b", [[1.4] * 2] * 2)}
+        ),
     }
     # the 0.25x runs on 1x test renders: each error 0.1 below their own, 0.05 above 1x's
-    crossed = {"a": _figure("a", [[1.1, 1.1], [1.5, 1.5]])}
+    crossed = {"a": _figure("a", [[1.1, 1.1], [1.5, 1.5]]), "b": _figure("b", [[1.3, 1.3]] * 2)}
     seen = []
 
     def tested(c, episodes, here, workers, progress):
@@ -332,5 +336,9 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
     # seeds resampled on both sides: the interval spans the seeds' spread (1.1 - 1.6, 1.5 - 1.2)
     lo, hi = c.test_noise["a"].ci95
     assert -0.5 - 1e-9 <= lo < -0.1 < hi <= 0.3 + 1e-9
+    # the designs ranked on the other renders: a (1.1 and 1.5 by seed) less b (1.3)
+    assert list(c.between) == ["a - b"]
+    np.testing.assert_allclose(c.between["a - b"].mean, 0.0, atol=1e-9)
+    assert c.between["a - b"].ci95[0] < 0 < c.between["a - b"].ci95[1]
     c = study.cross_figures(cfg, cfg.level("1x"), cfg.level("16x"), out, own)
     assert c.train_noise is None  # 16x is a test level: nothing trained there

@@ -93,7 +93,12 @@ def _cross_lines(cross: Sequence[CrossFigures], names: Sequence[str]) -> list[st
                 for n in names
             )
             rows.append([f"{c.trained} on {c.tested}", kind, *cells])
-    return lines + _table(["trained on tested", "", *names], rows)
+    lines += _table(["trained on tested", "", *names], rows)
+    lines += ["", "Between designs on those test episodes (paired):", ""]
+    for c in cross:
+        pairs = "; ".join(f"{key} {_paired_cell(p)}" for key, p in c.between.items())
+        lines.append(f"- {c.trained} on {c.tested}: {pairs}")
+    return lines
 
 
 def _figure_cell(f: DesignFigure) -> str:

@@ -120,6 +120,8 @@ class CrossFigures:
         train_noise: per design, these figures less those of the runs trained
             at ``tested`` on the same test episodes: what the training data's
             render noise changes; None when ``tested`` is a test level (not trained).
+        between: every two designs' paired difference on these test episodes
+            (``"a - b"``, in the designs' order): how they rank on other renders.
     """
 
     trained: str
@@ -127,6 +129,7 @@ class CrossFigures:
     designs: Mapping[str, DesignFigure]
     test_noise: Mapping[str, Paired]
     train_noise: Mapping[str, Paired] | None
+    between: Mapping[str, Paired]
 
 
 @dataclass(frozen=True)
@@ -313,6 +316,11 @@ def cross_figures(
         train_noise=None
         if there is None
         else {d: Paired.of(f, there.designs[d]) for d, f in designs.items()},
+        between={
+            p.key: p
+            for i, a in enumerate(designs)
+            for p in (Paired.of(designs[a], designs[b]) for b in list(designs)[i + 1 :])
+        },
     )
 
 
