@@ -66,7 +66,8 @@ validation and 10 test episodes, the plan as the reference; 4x renders of the
 test episodes alone)::
 
     python benchmarks/bench_task_fidelity.py --work /work/tf38-full --key workspace-32 \
-        --sections render,check --levels 1x,0.25x --cross 0.25x:1x,1x:0.25x,1x:4x \
+        --sections render,check --levels 1x,0.25x,0.25x-frame-seeds \
+        --cross 0.25x:1x,1x:0.25x,1x:4x \
         --one-x /work/episodes/ws8 --seeds 3 --replicate-seeds 3 --episodes 32,4,10 \
         --lock /tmp/mincam-cpu.lock
 
@@ -380,9 +381,10 @@ def main() -> None:
     if args.episodes is not None:
         train, val, test = map(int, args.episodes.split(","))
         episodes = (train, val, test)
-    cross = tuple(
-        (a, b) for a, _, b in (pair.partition(":") for pair in args.cross.split(",") if pair)
-    )
+    pairs = [pair.strip() for pair in args.cross.split(",") if pair.strip()]
+    if any(":" not in pair for pair in pairs):
+        ap.error(f"--cross {args.cross!r}: give TRAINED:TESTED level pairs, e.g. 0.25x:1x")
+    cross = tuple((a.strip(), b.strip()) for a, _, b in (p.partition(":") for p in pairs))
     cfg = config(args.work, args.levels.split(","), args.seeds, args.replicate_seeds, episodes,
                  args.family, cross)  # fmt: skip
     merged = json.loads(args.out.read_text()) if args.out.is_file() else {}

@@ -325,10 +325,14 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
         return study._Tested(crossed, 2.0, None, "RMSE")
 
     monkeypatch.setattr(study, "_tested_designs", tested)
+    stale = out / "0.25x-on-1x" / "runs" / "run-old"  # a copy of runs since trained again
+    stale.mkdir(parents=True)
     c = study.cross_figures(cfg, cfg.level("0.25x"), cfg.level("1x"), out, own)
     here, episodes = seen[0]
     assert here == out / "0.25x-on-1x"
     assert (here / "runs" / "run-a" / "metrics.json").read_text() == "0.25x"  # a copy
+    assert not stale.exists()
+    assert c.test_noise["a"].key == "a (1x) - a (0.25x)"
     assert all(p.parent.name == ("1x" if n.startswith("test-") else "0.25x")
                for n, p in episodes.items())  # fmt: skip
     np.testing.assert_allclose(c.test_noise["a"].mean, -0.1, atol=1e-9)

@@ -293,14 +293,17 @@ def cross_figures(
 ) -> CrossFigures:
     """``trained``'s runs (copied to ``out/<trained>-on-<tested>``) tested on ``tested``'s tests.
 
-    ``own``: every trained level's figures on its own episodes. The copies are
-    read back like any kept run and evaluated on the other test episodes; the
-    runs of ``out/<trained>`` are left as they are.
+    ``own``: every trained level's figures on its own episodes. The runs are
+    copied afresh on every call (a copy of runs trained again since, or a copy
+    a kill cut short, is replaced), read back like any kept run and evaluated
+    on the other test episodes; the runs of ``out/<trained>`` are left as they
+    are. The paired intervals resample training seeds on both sides
+    independently, also where both sides are the same runs (``test_noise``):
+    conservative there.
     """
     here = out / f"{trained.name}-on-{tested.name}"
-    if not (here / "runs").is_dir():
-        shutil.copytree(out / trained.name / "runs", here / "runs.partial")
-        (here / "runs.partial").rename(here / "runs")
+    shutil.rmtree(here / "runs", ignore_errors=True)
+    shutil.copytree(out / trained.name / "runs", here / "runs")
 
     def episodes(name: str) -> Path:
         return (tested if name.startswith("test-") else trained).episodes / name
@@ -312,16 +315,22 @@ def cross_figures(
         trained=trained.name,
         tested=tested.name,
         designs=dict(designs),
-        test_noise={d: Paired.of(f, mine[d]) for d, f in designs.items()},
+        test_noise={d: _between(f, tested, mine[d], trained) for d, f in designs.items()},
         train_noise=None
         if there is None
-        else {d: Paired.of(f, there.designs[d]) for d, f in designs.items()},
+        else {d: _between(f, trained, there.designs[d], tested) for d, f in designs.items()},
         between={
             p.key: p
             for i, a in enumerate(designs)
             for p in (Paired.of(designs[a], designs[b]) for b in list(designs)[i + 1 :])
         },
     )
+
+
+def _between(a: DesignFigure, a_is: SampleLevel, b: DesignFigure, b_is: SampleLevel) -> Paired:
+    """``a - b`` of one design's runs tested two ways, each named by what it is."""
+    return Paired.between(f"{a.design} ({a_is.name})", a.errors(),
+                          f"{b.design} ({b_is.name})", b.errors())  # fmt: skip
 
 
 @dataclass(frozen=True)
