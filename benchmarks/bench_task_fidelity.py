@@ -320,23 +320,6 @@ def summary(result: dict[str, Any], cfg: TaskFidelityConfig) -> dict[str, Any]:
     }
 
 
-def planner_target(figures: dict[str, Any], plan: dict[str, Any] | None) -> float | None:
-    """The chosen level's target in the planner's own measure, or None without a plan record.
-
-    The check measures render noise over its test episodes against its
-    reference; the planner over its probe frames against its own reference
-    (``achieved.against_reference``). The two estimates differ (workspace:
-    0.22 and 0.32 of the label signal at the plan), so the target a family is
-    given (``signal_target_error``) is the planner's figure at the plan times
-    the check's ratio of the chosen level's noise to the plan's.
-    """
-    chosen = figures["chosen_signal_target_error"]
-    if plan is None or chosen is None or plan.get("achieved") is None:
-        return None
-    at_plan = plan["achieved"]["against_reference"]["signal_relative"]["rms"]
-    return float(at_plan * chosen / figures["noise_over_signal_at_plan"]["random_masks"])
-
-
 def plans(families: list[str], lock: Path | None) -> dict[str, Any]:
     """Each family's plan, measured afresh, with its figures in both metrics."""
     from mincam_render.data.render_job import RenderRequest, plan_render
@@ -397,10 +380,7 @@ def main() -> None:
         print(paths["md"].read_text())
         entry = result.as_json()
         merged.setdefault(key, {})
-        figures = summary(entry, cfg)
-        plan = merged.get(args.family, {}).get("plan")
-        figures["chosen_planner_signal_target_error"] = planner_target(figures, plan)
-        merged[key] |= {"check": entry, "check_scope": scope(cfg), **figures}
+        merged[key] |= {"check": entry, "check_scope": scope(cfg), **summary(entry, cfg)}
     if "plans" in sections:
         for name, record in plans(args.families.split(","), args.lock).items():
             merged.setdefault(name, {})["plan"] = record

@@ -320,7 +320,8 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
     crossed = {"a": _figure("a", [[1.1, 1.1], [1.5, 1.5]]), "b": _figure("b", [[1.3, 1.3]] * 2)}
     seen = []
 
-    def tested(c, episodes, here, workers, progress):
+    def tested(c, episodes, here, workers, progress, *, replicate=True):
+        assert not replicate  # the replicate's runs are not tested across levels
         seen.append((here, {n: episodes(n) for n in study.episode_names(c)}))
         return study._Tested(crossed, 2.0, None, "RMSE")
 

@@ -84,15 +84,12 @@ def _cross_lines(cross: Sequence[CrossFigures], names: Sequence[str]) -> list[st
     ]
     rows = []
     for c in cross:
-        for kind, moves in (("figure", None), ("test noise", c.test_noise),
-                            ("training noise", c.train_noise)):  # fmt: skip
-            if kind != "figure" and moves is None:
-                continue
-            cells = (
-                _paired_cell(moves[n]) if moves is not None else _figure_cell(c.designs[n])
-                for n in names
-            )
-            rows.append([f"{c.trained} on {c.tested}", kind, *cells])
+        pair = f"{c.trained} on {c.tested}"
+        rows.append([pair, "figure", *(_figure_cell(c.designs[n]) for n in names)])
+        moves = {"test noise": c.test_noise, "training noise": c.train_noise}
+        for kind, paired in moves.items():
+            if paired is not None:  # no training noise against a test level
+                rows.append([pair, kind, *(_paired_cell(paired[n]) for n in names)])
     lines += _table(["trained on tested", "", *names], rows)
     lines += ["", "Between designs on those test episodes (paired):", ""]
     for c in cross:

@@ -308,7 +308,7 @@ def cross_figures(
     def episodes(name: str) -> Path:
         return (tested if name.startswith("test-") else trained).episodes / name
 
-    designs = _tested_designs(cfg, episodes, here, 1, progress).designs
+    designs = _tested_designs(cfg, episodes, here, 1, progress, replicate=False).designs
     mine = own[trained.name].designs
     there = own.get(tested.name)
     return CrossFigures(
@@ -349,10 +349,14 @@ def _tested_designs(
     out: Path,
     train_workers: int,
     progress: bool,
+    *,
+    replicate: bool = True,
 ) -> _Tested:
     """Train (or read back) every run into ``out/runs`` and test it on the test episodes.
 
-    ``episodes``: the dataset of each episode name.
+    ``episodes``: the dataset of each episode name. ``replicate``: the
+    replicate's runs too (their seeds come after the comparison's, so leaving
+    them out leaves the comparison's runs as they are).
     """
     from mincam_render.analysis.mask_structure import view_and_label_map
     from mincam_render.core.labels import label_tasks
@@ -367,7 +371,8 @@ def _tested_designs(
         for n in episode_names(cfg)
     }
     splits = comparison_splits(data)
-    runs = train_runs(cfg.trained, splits, out, train_workers=train_workers, progress=progress)
+    trained = cfg.trained if replicate else comparison
+    runs = train_runs(trained, splits, out, train_workers=train_workers, progress=progress)
     labels = comparison.task_labels(label_tasks(splits.train.label_specs))
     task = next(iter(labels))
     task_data = task_splits(splits, labels[task])
@@ -375,13 +380,13 @@ def _tested_designs(
     n = comparison.seeds
     block = task_comparison(comparison, {d: rs[:n] for d, rs in runs[task].items()},
                             task_data, view_map)  # fmt: skip
-    replicate = None
-    if cfg.replicate_seeds:
-        others = {d: rs[n:] for d, rs in runs[task].items()}
-        rep = task_comparison(comparison, others, task_data, view_map)
-        replicate = {d.name: rep.figure(d.name) for d in comparison.designs}
+    others = None
+    if replicate and cfg.replicate_seeds:
+        rep = task_comparison(comparison, {d: rs[n:] for d, rs in runs[task].items()},
+                              task_data, view_map)  # fmt: skip
+        others = {d.name: rep.figure(d.name) for d in comparison.designs}
     designs = {d.name: block.figure(d.name) for d in comparison.designs}
-    return _Tested(designs, block.trivial_error.mean, replicate, block.error_name)
+    return _Tested(designs, block.trivial_error.mean, others, block.error_name)
 
 
 def episode_names(cfg: TaskFidelityConfig) -> list[str]:
