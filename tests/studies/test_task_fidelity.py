@@ -17,7 +17,6 @@ from mincam_render.studies.task_fidelity.study import (
     acceptance,
     chosen_level,
     render_seconds_per_frame,
-    scaled_samples,
     supported,
 )
 
@@ -118,13 +117,6 @@ def test_exactly_one_level_is_the_plan(tmp_path):
         TaskFidelityConfig(levels=levels, reference="4x")
     with pytest.raises(ValueError, match="factor 1"):
         SampleLevel(name="2x", factor=2, episodes=tmp_path, max_depth=None, planned=True)
-
-
-@pytest.mark.parametrize(
-    ("samples", "factor", "expected"), [(24, 4, 96), (195, 0.25, 49), (20, 0.0625, 1)]
-)
-def test_scaled_samples_round_and_stay_positive(samples, factor, expected):
-    assert scaled_samples(samples, factor) == expected
 
 
 def test_render_seconds_leave_planning_out(tmp_path):

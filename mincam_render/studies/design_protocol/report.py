@@ -63,12 +63,14 @@ def _floor_lines(result: DesignProtocolResult) -> list[str]:
         [
             f"{c.floor.design} - {c.floor.baseline} < {c.floor.margin:g}",
             str(c.episodes),
+            "the plan's" if c.test_samples == 1 else f"{c.test_samples:g}x samples",
             _interval(c.paired.mean, c.paired.ci95, "+"),
             c.verdict.value,
         ]
         for c in result.floors
     ]
-    header = ["floor", "training episodes", "paired difference [95 % CI]", "verdict"]
+    header = ["floor", "training episodes", "test renders", "paired difference [95 % CI]",
+              "verdict"]  # fmt: skip
     return ["## Floors (paired on the same test episodes)", "", *_table(header, rows), ""]
 
 

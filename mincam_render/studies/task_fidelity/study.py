@@ -179,56 +179,31 @@ def supported(checks: tuple[Acceptance, ...]) -> bool:
     return all(a.passes or a.within_seed_noise for a in checks)
 
 
-def scaled_samples(samples: int, factor: float) -> int:
-    """``samples`` times ``factor``, rounded, at least 1."""
-    return max(1, int(samples * factor + 0.5))
-
-
 def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, RenderRequest]:
     """``{episode: RenderRequest}`` of a level: the plan's, or its samples times the factor.
 
     A level other than the plan renders with full fidelity and explicit
-    settings: the plan's (as the plan's episode was rendered, else looked up or
+    settings (:func:`~mincam_render.data.render_job.rescale.rescaled_request`):
+    the plan's (as the plan's episode was rendered, else looked up or
     measured) with frames' and backgrounds' samples scaled, the level's depth
-    and seeds (per-window seeds leave the request's field open).
+    and seeds.
     """
-    from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
-    from mincam_render.data.render_job import plan_render
-    from mincam_render.render.differential import DifferenceSeeds
-    from mincam_render.render.fidelity import Fidelity
+    from mincam_render.data.render_job.rescale import rescaled_request
     from mincam_render.studies.comparison.study import episode_requests
 
     requests = episode_requests(cfg.comparison)
     if level.planned:
         return dict(requests)
-    out = {}
-    for name, request in requests.items():
-        rendered = cfg.plan.episodes / name
-        manifest = (
-            read_manifest(rendered)
-            if (rendered / MANIFEST_NAME).is_file()
-            else plan_render(request)
-        )
-        plan = manifest["job"]["render"]
-        bg = plan["background"]  # the request's own fields stay where there is none
-        frame_seeds = bg is not None and level.difference_seeds is DifferenceSeeds.FRAME
-        out[name] = dataclasses.replace(
+    return {
+        name: rescaled_request(
             request,
-            fidelity=Fidelity.FULL,
-            spp=scaled_samples(plan["spp"], level.factor),
-            max_depth=level.max_depth if level.max_depth is not None else plan["max_depth"],
-            shared_render=plan["shared_render"],
-            dtype=plan["dtype"],
-            differential=bg is not None,
-            background_spp=(
-                request.background_spp if bg is None else scaled_samples(bg["spp"], level.factor)
-            ),
-            shared_difference=(
-                request.shared_difference if bg is None else bg["shared_difference"]
-            ),
-            difference_seeds=level.difference_seeds if frame_seeds else request.difference_seeds,
+            cfg.plan.episodes / name,
+            level.factor,
+            max_depth=level.max_depth,
+            difference_seeds=level.difference_seeds,
         )
-    return out
+        for name, request in requests.items()
+    }
 
 
 def render_level(
