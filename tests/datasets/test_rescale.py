@@ -45,9 +45,7 @@ def test_a_differential_plan_scales_frames_and_backgrounds(differential_dataset)
 
 
 def test_a_direct_plan_keeps_its_request_background_fields(tiny_patches):
-    out = rescaled_request(
-        TINY_PATCHES, tiny_patches, 2, difference_seeds=DifferenceSeeds.FRAME
-    )
+    out = rescaled_request(TINY_PATCHES, tiny_patches, 2, difference_seeds=DifferenceSeeds.FRAME)
     assert out.spp == 2 * TINY_PATCHES.spp and not out.differential
     assert out.background_spp == TINY_PATCHES.background_spp
     assert out.difference_seeds == TINY_PATCHES.difference_seeds  # no differences to seed

@@ -129,8 +129,9 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
     for name in ("test-0", "test-1"):  # same scenes, rendered again with twice the samples
         source = again["episodes"][name]["dataset"]
         assert source == str(out / "tests-2x" / name)
+        seed = read_manifest(out / "episodes" / name)["request"]["seed"]
         manifest = read_manifest(source)
-        assert manifest["request"]["seed"] == read_manifest(out / "episodes" / name)["request"]["seed"]
+        assert manifest["request"]["seed"] == seed
         assert manifest["job"]["render"]["max_depth"] == 16
     for design in ("mincam-2px", "baseline-2x2"):
         old, new = plan["designs"][design], again["designs"][design]

@@ -36,7 +36,7 @@ def rescaled_request(
     max_depth: int | None = FULL_PATH_DEPTH,
     difference_seeds: DifferenceSeeds = DifferenceSeeds.WINDOW,
 ) -> RenderRequest:
-    """``request`` at full fidelity with its plan's samples of frames and backgrounds times ``factor``.
+    """``request`` at full fidelity, its plan's samples of frames and backgrounds times ``factor``.
 
     The plan is read from the manifest of ``rendered`` (``request`` rendered
     there) when it exists, else planned now (measured, or looked up in the plan

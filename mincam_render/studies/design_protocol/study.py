@@ -59,13 +59,13 @@ from mincam_render.studies.comparison.study import Design
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
 
 
-
 class Compare(Interface):
     """A comparison run for the study: ``(config, out_dir[, test episodes]) -> its result``."""
 
     def __call__(
         self, comparison: ComparisonConfig, where: Path, tests: Path | None = None
-    ) -> ComparisonResult: ...
+    ) -> ComparisonResult:
+        """The comparison's result in ``where``; tested on ``tests`` when given."""
 
 
 @dataclass(frozen=True)
