@@ -137,6 +137,10 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
         old, new = plan["designs"][design], again["designs"][design]
         assert new["steps"] == old["steps"]  # the same runs (copied), not trained again
         assert new["error"]["mean"] != old["error"]["mean"]  # tested on other renders
+    assert (
+        result.retested.designs["mincam-2px"].error
+        == again["designs"]["mincam-2px"]["error"]["mean"]
+    )
     _, retested = result.floors
     assert retested.paired.mean == pytest.approx(
         again["designs"]["mincam-2px"]["error"]["mean"]
@@ -201,6 +205,7 @@ def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     assert "## Seed spread" in text
     assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | the plan's |" in text
     assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | 2x samples |" in text
+    assert "| 2, tested at 2x samples | 80 |  |" in text
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
 

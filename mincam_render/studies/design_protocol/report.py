@@ -119,6 +119,13 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
         ]
         for p in result.ladder
     ]
+    if result.retested is not None:  # the largest point's runs on tests with more samples
+        p, factor = result.retested, result.config["floor_test_samples"]
+        rows.append(
+            [f"{p.episodes}, tested at {factor:g}x samples", str(p.frames), "",
+             *(f"{_interval(f.error, f.ci95)} {f.state}" for f in p.designs.values()),
+             f"{p.trivial:.3f}"]
+        )  # fmt: skip
     header = ["episodes", "frames", "render (s)", *names, "trivial"]
     lines = ["## Learning curves (test error [95 % CI], training state)", ""]
     lines += [

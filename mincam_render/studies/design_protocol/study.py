@@ -232,6 +232,7 @@ class DesignProtocolResult:
     restarts: Sequence[Restarts] = ()
     selection: Selection | None = None
     floors: Sequence[FloorCheck] = ()
+    retested: LadderPoint | None = None
     versions: Mapping[str, str] = field(default_factory=dict)
 
     def as_json(self) -> JsonObject:
@@ -611,11 +612,12 @@ def run(
         result = replace(result, recipes=recipes, chosen_recipe=chosen)
     if "ladder" in sections:
         ladder, doublings = learning_curves(cfg, compare, out, seconds)
-        floors = floor_checks(cfg, ladder[-1])
+        floors, retested = floor_checks(cfg, ladder[-1]), None
         if cfg.floor_test_samples is not None:
             retested = retested_point(cfg, compare, out, episodes, progress=progress)
             floors += floor_checks(cfg, retested, cfg.floor_test_samples)
-        result = replace(result, ladder=ladder, doublings=doublings, floors=floors)
+        result = replace(result, ladder=ladder, doublings=doublings, floors=floors,
+                         retested=retested)  # fmt: skip
     if "references" in sections:
         result = replace(result, references=reference_table(cfg, compare, out))
     if "oracle" in sections:
