@@ -339,3 +339,18 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
     assert c.between["a - b"].ci95[0] < 0 < c.between["a - b"].ci95[1]
     c = study.cross_figures(cfg, cfg.level("1x"), cfg.level("16x"), out, own)
     assert c.train_noise is None  # 16x is a test level: nothing trained there
+
+
+def test_every_two_designs_are_paired_in_order_on_their_common_episodes():
+    from mincam_render.studies.task_fidelity.study import between_designs
+
+    base = [[1.0, 1.0], [1.4, 1.4]]  # equal over a seed's episodes: RMS keeps shifts exact
+    designs = {
+        name: _figure(name, [[e + shift for e in seed] for seed in base])
+        for name, shift in (("a", 0.0), ("b", 0.3), ("c", -0.1))
+    }
+    pairs = between_designs(designs)
+    assert list(pairs) == ["a - b", "a - c", "b - c"]
+    for key, expected in (("a - b", -0.3), ("a - c", 0.1), ("b - c", 0.4)):
+        np.testing.assert_allclose(pairs[key].mean, expected, atol=1e-9)
+    assert between_designs({"a": designs["a"]}) == {}

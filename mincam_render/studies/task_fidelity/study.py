@@ -63,6 +63,7 @@ class LevelFigures:
 
     ``designs`` are trained with the comparison's seeds, ``replicate`` with the
     replicate's (None without): the same renders, other training seeds.
+    ``between``: every two designs paired on the level's test episodes.
     """
 
     level: str
@@ -73,6 +74,7 @@ class LevelFigures:
     trivial: float
     noise: NoiseFigures | None
     replicate: Mapping[str, DesignFigure] | None = None
+    between: Mapping[str, Paired] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -253,6 +255,7 @@ def level_figures(
         trivial=tested.trivial,
         noise=None,
         replicate=tested.replicate,
+        between=between_designs(tested.designs),
     )
     return figures, tested.error_name
 
@@ -294,12 +297,18 @@ def cross_figures(
         train_noise=None
         if there is None
         else {d: _between(f, trained, there.designs[d], tested) for d, f in designs.items()},
-        between={
-            p.key: p
-            for i, a in enumerate(designs)
-            for p in (Paired.of(designs[a], designs[b]) for b in list(designs)[i + 1 :])
-        },
+        between=between_designs(designs),
     )
+
+
+def between_designs(designs: Mapping[str, DesignFigure]) -> dict[str, Paired]:
+    """Every two designs' paired difference (``a - b``, in order) on their common test episodes."""
+    names = list(designs)
+    return {
+        p.key: p
+        for i, a in enumerate(names)
+        for p in (Paired.of(designs[a], designs[b]) for b in names[i + 1 :])
+    }
 
 
 def _between(a: DesignFigure, a_is: SampleLevel, b: DesignFigure, b_is: SampleLevel) -> Paired:
