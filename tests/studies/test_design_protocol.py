@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from mincam_render.data.dataset import read_manifest
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.studies.comparison.config import ComparisonConfig, Design
 from mincam_render.studies.comparison.figures import DesignFigure
@@ -44,6 +45,7 @@ CFG = DesignProtocolConfig(
     protocol_episodes=1,
     restarts=2,
     floors=(Floor(design="mincam-2px", baseline="baseline-2x2", margin=0.05),),
+    floor_test_samples=2,
 )
 
 
@@ -104,7 +106,8 @@ def test_the_figures_are_the_comparisons_on_disk(study):
 
 def test_floors_are_paired_on_the_largest_training_set(study):
     _, result = study
-    (check,) = result.floors
+    check, retested = result.floors
+    assert (check.test_samples, retested.test_samples) == (1.0, 2)
     last = result.ladder[-1]
     assert check.episodes == 2 and check.floor.margin == 0.05
     a, b = last.designs["mincam-2px"].errors(), last.designs["baseline-2x2"].errors()
@@ -115,6 +118,34 @@ def test_floors_are_paired_on_the_largest_training_set(study):
         else FloorVerdict.UNDECIDED
     )  # fmt: skip
     assert check.verdict is expected
+
+
+def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study):
+    out, result = study
+    again = json.loads((out / "ladder" / "episodes-2-tests-2x" / "metrics.json").read_text())
+    plan = json.loads((out / "ladder" / "episodes-2" / "metrics.json").read_text())
+    for name in ("val-0", "train-1"):  # trained and validated where the ladder was
+        assert again["episodes"][name] == plan["episodes"][name]
+    for name in ("test-0", "test-1"):  # same scenes, rendered again with twice the samples
+        source = again["episodes"][name]["dataset"]
+        assert source == str(out / "tests-2x" / name)
+        seed = read_manifest(out / "episodes" / name)["request"]["seed"]
+        manifest = read_manifest(source)
+        assert manifest["request"]["seed"] == seed
+        assert manifest["job"]["render"]["max_depth"] == 16
+    for design in ("mincam-2px", "baseline-2x2"):
+        old, new = plan["designs"][design], again["designs"][design]
+        assert new["steps"] == old["steps"]  # the same runs (copied), not trained again
+        assert new["error"]["mean"] != old["error"]["mean"]  # tested on other renders
+    assert (
+        result.retested.designs["mincam-2px"].error
+        == again["designs"]["mincam-2px"]["error"]["mean"]
+    )
+    _, retested = result.floors
+    assert retested.paired.mean == pytest.approx(
+        again["designs"]["mincam-2px"]["error"]["mean"]
+        - again["designs"]["baseline-2x2"]["error"]["mean"], abs=1e-9
+    )  # fmt: skip
 
 
 def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
@@ -172,7 +203,9 @@ def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     text = paths["md"].read_text()
     assert "## Learning curves" in text and "## Recipes" in text and "### 2 px" in text
     assert "## Seed spread" in text
-    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 |" in text
+    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | the plan's |" in text
+    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | 2x samples |" in text
+    assert "| 2, tested at 2x samples | 80 |  |" in text
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
 
@@ -192,3 +225,11 @@ def test_configuration_is_validated():
         Floor(design="mincam-2px", baseline="baseline-8x8", margin=-0.1)
     with pytest.raises(ValueError, match="both must be ladder designs"):
         DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))
+    floors = (Floor(design="mincam-2px", baseline="baseline-8x8"),)
+    for factor in (1, 1.0):
+        with pytest.raises(ValueError, match="other than 1"):
+            DesignProtocolConfig(floors=floors, floor_test_samples=factor)
+    with pytest.raises(ValueError, match="give floors"):
+        DesignProtocolConfig(floor_test_samples=4)
+    with pytest.raises(ValueError, match="floor_test_samples"):
+        DesignProtocolConfig(floors=floors, floor_test_samples=-4)

@@ -17,7 +17,6 @@ from mincam_render.studies.task_fidelity.study import (
     acceptance,
     chosen_level,
     render_seconds_per_frame,
-    scaled_samples,
     supported,
 )
 
@@ -118,13 +117,6 @@ def test_exactly_one_level_is_the_plan(tmp_path):
         TaskFidelityConfig(levels=levels, reference="4x")
     with pytest.raises(ValueError, match="factor 1"):
         SampleLevel(name="2x", factor=2, episodes=tmp_path, max_depth=None, planned=True)
-
-
-@pytest.mark.parametrize(
-    ("samples", "factor", "expected"), [(24, 4, 96), (195, 0.25, 49), (20, 0.0625, 1)]
-)
-def test_scaled_samples_round_and_stay_positive(samples, factor, expected):
-    assert scaled_samples(samples, factor) == expected
 
 
 def test_render_seconds_leave_planning_out(tmp_path):
@@ -347,3 +339,18 @@ def test_cross_figures_copy_the_runs_and_pair_test_and_training_noise(tmp_path, 
     assert c.between["a - b"].ci95[0] < 0 < c.between["a - b"].ci95[1]
     c = study.cross_figures(cfg, cfg.level("1x"), cfg.level("16x"), out, own)
     assert c.train_noise is None  # 16x is a test level: nothing trained there
+
+
+def test_every_two_designs_are_paired_in_order_on_their_common_episodes():
+    from mincam_render.studies.task_fidelity.study import between_designs
+
+    base = [[1.0, 1.0], [1.4, 1.4]]  # equal over a seed's episodes: RMS keeps shifts exact
+    designs = {
+        name: _figure(name, [[e + shift for e in seed] for seed in base])
+        for name, shift in (("a", 0.0), ("b", 0.3), ("c", -0.1))
+    }
+    pairs = between_designs(designs)
+    assert list(pairs) == ["a - b", "a - c", "b - c"]
+    for key, expected in (("a - b", -0.3), ("a - c", 0.1), ("b - c", 0.4)):
+        np.testing.assert_allclose(pairs[key].mean, expected, atol=1e-9)
+    assert between_designs({"a": designs["a"]}) == {}

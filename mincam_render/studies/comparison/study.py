@@ -145,6 +145,7 @@ def render_episodes(
     workers: int = 2,
     ray_address: str | None = None,
     progress: bool = True,
+    tests_dir: Path | None = None,
 ) -> dict[str, TrainingData]:
     """Render (or resume) every episode into ``episodes_dir/<name>``; their training views.
 
@@ -152,8 +153,12 @@ def render_episodes(
     ``cfg.oracle_background`` every frame's converged background is replaced by
     one fixed background (the first episode's mean). ``ray_address``:
     render the shards as Ray tasks there (``workers`` is then ignored).
+    ``tests_dir``: the test episodes' views are read from ``tests_dir/<name>``
+    instead, finished renders of the same scenes at another fidelity
+    (:func:`~mincam_render.data.render_job.rescale.same_scene`, checked).
     """
     from mincam_render.data.render_job.backgrounds import converged_backgrounds
+    from mincam_render.data.render_job.rescale import same_scene
 
     data = {}
     fixed: np.ndarray | None = None
@@ -161,6 +166,9 @@ def render_episodes(
         path = episodes_dir / name
         render_dataset(request, path, workers=workers, ray_address=ray_address, progress=progress)
         role = name.split("-")[0]
+        if tests_dir is not None and role == "test":
+            same_scene(path, tests_dir / name)
+            path = tests_dir / name
         view = TrainingData.from_dataset(open_dataset(path), role)
         if cfg.oracle_background:  # one fixed background: the first episode's mean
             static = converged_backgrounds(path)[slice(*view.source["range"])]
@@ -415,6 +423,7 @@ def run(
     masks_dir: str | os.PathLike | None = None,
     episodes_dir: str | os.PathLike | None = None,
     progress: bool = True,
+    test_episodes_dir: str | os.PathLike | None = None,
 ) -> ComparisonResult:
     """Render, train, test and compare (module docstring); write its report; its result.
 
@@ -424,6 +433,10 @@ def run(
     design's best masks into ``masks_dir/<task>/<design>/``; then the report
     (:func:`~.report.write_report`: ``out_dir/metrics.json``, its
     :meth:`~.result.ComparisonResult.as_json`, and ``out_dir/comparison.png``).
+    With ``test_episodes_dir`` the designs are tested on the test episodes
+    there instead: renders of the same scenes at another fidelity, rendered
+    already (e.g. at more samples, so the figures carry less render noise);
+    runs kept in ``out_dir/runs`` are read back, not trained again.
 
     Episodes render in ``workers`` processes; the training runs in this process
     (``train_workers=1``) or ``train_workers`` worker processes
@@ -447,6 +460,7 @@ def run(
             masks_dir=masks_dir,
             episodes_dir=episodes_dir,
             progress=progress,
+            test_episodes_dir=test_episodes_dir,
         )
 
 
@@ -460,12 +474,15 @@ def _run(
     masks_dir: str | os.PathLike | None,
     episodes_dir: str | os.PathLike | None,
     progress: bool,
+    test_episodes_dir: str | os.PathLike | None,
 ) -> ComparisonResult:
     out.mkdir(parents=True, exist_ok=True)
     episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
+    tests = Path(test_episodes_dir) if test_episodes_dir is not None else None
     data = render_episodes(
-        cfg, episodes, workers=workers, ray_address=ray_address, progress=progress
-    )
+        cfg, episodes, workers=workers, ray_address=ray_address, progress=progress,
+        tests_dir=tests,
+    )  # fmt: skip
     splits = comparison_splits(data)
     family = Path(str(data["val-0"].source.get("family") or cfg.family)).stem
     # before training: a split that misses part of the label space is logged at once

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from mincam_render.core.checks import check_int
+from mincam_render.core.checks import check_int, check_number
 from mincam_render.learn.train_config import MaskReference, TrainConfig
 from mincam_render.studies.comparison.config import ComparisonConfig, Design
 
@@ -123,6 +123,11 @@ class DesignProtocolConfig:
             validation is kept).
         floors: what the learning curves' largest training set is held to
             (both designs among ``ladder_designs``).
+        floor_test_samples: the floors are also read on the test episodes
+            rendered again at this many times the plan's samples, at full path
+            depth (the task-fidelity check's level of that factor), by the same
+            runs: the figures with less render noise in the test data, nearer
+            what a deployed camera reads. None: on the plan's tests alone.
     """
 
     episodes: ComparisonConfig = field(
@@ -140,8 +145,16 @@ class DesignProtocolConfig:
     protocol_pixels: tuple[int, ...] = (2,)
     restarts: int = 3
     floors: tuple[Floor, ...] = ()
+    floor_test_samples: float | None = None
 
     def __post_init__(self) -> None:
+        if self.floor_test_samples is not None:
+            check_number("floor_test_samples", self.floor_test_samples, 0, 1e4, lo_open=True)
+            if self.floor_test_samples == 1 or not self.floors:
+                raise ValueError(
+                    f"floor_test_samples {self.floor_test_samples}: give floors and a factor "
+                    "other than 1 (the plan's tests are read anyway)"
+                )
         if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
             raise ValueError(f"ladder {self.ladder}: need increasing episode counts")
         for n in (*self.ladder, self.recipe_episodes, self.reference_episodes,

@@ -63,12 +63,14 @@ def _floor_lines(result: DesignProtocolResult) -> list[str]:
         [
             f"{c.floor.design} - {c.floor.baseline} < {c.floor.margin:g}",
             str(c.episodes),
+            "the plan's" if c.test_samples == 1 else f"{c.test_samples:g}x samples",
             _interval(c.paired.mean, c.paired.ci95, "+"),
             c.verdict.value,
         ]
         for c in result.floors
     ]
-    header = ["floor", "training episodes", "paired difference [95 % CI]", "verdict"]
+    header = ["floor", "training episodes", "test renders", "paired difference [95 % CI]",
+              "verdict"]  # fmt: skip
     return ["## Floors (paired on the same test episodes)", "", *_table(header, rows), ""]
 
 
@@ -117,6 +119,13 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
         ]
         for p in result.ladder
     ]
+    if result.retested is not None:  # the largest point's runs on tests with more samples
+        p, factor = result.retested, result.config["floor_test_samples"]
+        rows.append(
+            [f"{p.episodes}, tested at {factor:g}x samples", str(p.frames), "",
+             *(f"{_interval(f.error, f.ci95)} {f.state}" for f in p.designs.values()),
+             f"{p.trivial:.3f}"]
+        )  # fmt: skip
     header = ["episodes", "frames", "render (s)", *names, "trivial"]
     lines = ["## Learning curves (test error [95 % CI], training state)", ""]
     lines += [

@@ -24,7 +24,8 @@ measured on the same test episodes and pairs with the others.
 7. **Selection** (:func:`selection_agreement`): how well the pooled validation
    error ranks runs and designs against their test error.
 8. **Floors** (:func:`floor_checks`): the configured floors (a design against a
-   box camera, with a margin) on the learning curves' largest training set.
+   box camera, with a margin) on the learning curves' largest training set;
+   also on its test episodes rendered with more samples (:func:`retested_point`).
 
 Everything resumes: comparisons keep their finished runs on disk.
 """
@@ -34,10 +35,12 @@ from __future__ import annotations
 import dataclasses
 import enum
 import json
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from typing import Protocol as Interface
 
 import numpy as np
 
@@ -55,8 +58,14 @@ from mincam_render.studies.comparison.result import ComparisonResult
 from mincam_render.studies.comparison.study import Design
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
 
-#: A comparison run for the study: ``(config, out_dir) -> its result``.
-Compare = Callable[[ComparisonConfig, Path], ComparisonResult]
+
+class Compare(Interface):
+    """A comparison run for the study: ``(config, out_dir[, test episodes]) -> its result``."""
+
+    def __call__(
+        self, comparison: ComparisonConfig, where: Path, tests: Path | None = None
+    ) -> ComparisonResult:
+        """The comparison's result in ``where``; tested on ``tests`` when given."""
 
 
 @dataclass(frozen=True)
@@ -195,12 +204,15 @@ class FloorCheck:
         episodes: training episodes of the comparison it was measured on.
         paired: ``design - baseline`` on the same test episodes.
         verdict: met, missed or undecided.
+        test_samples: samples of the test renders relative to the plan's (1:
+            the plan's tests; see ``DesignProtocolConfig.floor_test_samples``).
     """
 
     floor: Floor
     episodes: int
     paired: Paired
     verdict: FloorVerdict
+    test_samples: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -220,6 +232,7 @@ class DesignProtocolResult:
     restarts: Sequence[Restarts] = ()
     selection: Selection | None = None
     floors: Sequence[FloorCheck] = ()
+    retested: LadderPoint | None = None
     versions: Mapping[str, str] = field(default_factory=dict)
 
     def as_json(self) -> JsonObject:
@@ -331,16 +344,7 @@ def learning_curves(
     points = []
     for n in cfg.ladder:
         result = compare(cfg.comparison(n, cfg.ladder_designs), out / "ladder" / f"episodes-{n}")
-        block = result.block(cfg.task)
-        points.append(
-            LadderPoint(
-                episodes=n,
-                frames=n * cfg.episodes.train_frames,
-                render_s=render_seconds(n),
-                designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
-                trivial=block.trivial_error.mean,
-            )
-        )
+        points.append(_ladder_point(cfg, n, result, render_seconds(n)))
     doublings = [
         Doubling(
             design=name,
@@ -354,8 +358,27 @@ def learning_curves(
     return points, doublings
 
 
-def floor_checks(cfg: DesignProtocolConfig, point: LadderPoint) -> list[FloorCheck]:
-    """Every configured floor on ``point`` (the learning curves' largest training set)."""
+def _ladder_point(
+    cfg: DesignProtocolConfig, n: int, result: ComparisonResult, render_s: float
+) -> LadderPoint:
+    """The ladder's designs in ``result``, trained on ``n`` episodes."""
+    block = result.block(cfg.task)
+    return LadderPoint(
+        episodes=n,
+        frames=n * cfg.episodes.train_frames,
+        render_s=render_s,
+        designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
+        trivial=block.trivial_error.mean,
+    )
+
+
+def floor_checks(
+    cfg: DesignProtocolConfig, point: LadderPoint, test_samples: float = 1.0
+) -> list[FloorCheck]:
+    """Every configured floor on ``point`` (the learning curves' largest training set).
+
+    ``test_samples``: the samples of ``point``'s test renders relative to the plan's.
+    """
     checks = []
     for f in cfg.floors:
         paired = Paired.of(point.designs[f.design], point.designs[f.baseline])
@@ -367,7 +390,7 @@ def floor_checks(cfg: DesignProtocolConfig, point: LadderPoint) -> list[FloorChe
             if low >= f.margin
             else FloorVerdict.UNDECIDED
         )
-        checks.append(FloorCheck(f, point.episodes, paired, verdict))
+        checks.append(FloorCheck(f, point.episodes, paired, verdict, test_samples))
     return checks
 
 
@@ -384,14 +407,44 @@ def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> Ladd
         cfg.comparison(n, cfg.ladder_designs, oracle_background=True),
         out / "oracle" / f"episodes-{n}",
     )
-    block = result.block(cfg.task)
-    return LadderPoint(
-        episodes=n,
-        frames=n * cfg.episodes.train_frames,
-        render_s=0.0,
-        designs={d.name: block.figure(d.name) for d in cfg.ladder_designs},
-        trivial=block.trivial_error.mean,
-    )
+    return _ladder_point(cfg, n, result, 0.0)
+
+
+def retested_point(
+    cfg: DesignProtocolConfig,
+    compare: Compare,
+    out: Path,
+    episodes: Path,
+    *,
+    progress: bool = False,
+) -> LadderPoint:
+    """The learning curves' largest point tested on renders with ``cfg.floor_test_samples``.
+
+    The test episodes are rendered again (resumable) into ``out/tests-<f>x``
+    from their plans in ``episodes`` with the samples times the factor at full
+    path depth (:func:`~mincam_render.data.render_job.rescale.rescaled_request`);
+    the point's runs are copied afresh into
+    ``out/ladder/episodes-<n>-tests-<f>x`` (nothing is trained again; the
+    ladder's runs are left as they are) and tested there.
+    """
+    from mincam_render.data.render_job import render_dataset
+    from mincam_render.data.render_job.rescale import rescaled_request
+
+    factor = cfg.floor_test_samples
+    if factor is None:
+        raise ValueError("retested_point: the study has no floor_test_samples")
+    n = cfg.ladder[-1]
+    comparison = cfg.comparison(n, cfg.ladder_designs)
+    tests = out / f"tests-{factor:g}x"
+    for name, request in comparison_study.episode_requests(comparison).items():
+        if name.startswith("test-"):
+            again = rescaled_request(request, episodes / name, factor)
+            render_dataset(again, tests / name, workers=2, progress=progress)
+    ladder = out / "ladder" / f"episodes-{n}"
+    here = ladder.with_name(f"{ladder.name}-tests-{factor:g}x")
+    shutil.rmtree(here / "runs", ignore_errors=True)
+    shutil.copytree(ladder / "runs", here / "runs")
+    return _ladder_point(cfg, n, compare(comparison, here, tests), 0.0)
 
 
 def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[Restarts]:
@@ -535,9 +588,12 @@ def run(
 
     error_names: dict[str, str] = {}
 
-    def compare(comparison: ComparisonConfig, where: Path) -> ComparisonResult:
+    def compare(
+        comparison: ComparisonConfig, where: Path, tests: Path | None = None
+    ) -> ComparisonResult:
         result = comparison_study.run(comparison, where, episodes_dir=episodes, masks_dir=None,
-                                      train_workers=train_workers, progress=progress)  # fmt: skip
+                                      train_workers=train_workers, progress=progress,
+                                      test_episodes_dir=tests)  # fmt: skip
         error_names.setdefault("task", result.block(cfg.task).error_name)
         return result
 
@@ -556,8 +612,12 @@ def run(
         result = replace(result, recipes=recipes, chosen_recipe=chosen)
     if "ladder" in sections:
         ladder, doublings = learning_curves(cfg, compare, out, seconds)
-        result = replace(result, ladder=ladder, doublings=doublings,
-                         floors=floor_checks(cfg, ladder[-1]))  # fmt: skip
+        floors, retested = floor_checks(cfg, ladder[-1]), None
+        if cfg.floor_test_samples is not None:
+            retested = retested_point(cfg, compare, out, episodes, progress=progress)
+            floors += floor_checks(cfg, retested, cfg.floor_test_samples)
+        result = replace(result, ladder=ladder, doublings=doublings, floors=floors,
+                         retested=retested)  # fmt: skip
     if "references" in sections:
         result = replace(result, references=reference_table(cfg, compare, out))
     if "oracle" in sections:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mincam_render.core.checks import check_int, check_number
+from mincam_render.data.render_job.rescale import FULL_PATH_DEPTH
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.studies.comparison.config import ComparisonConfig, Design
@@ -38,7 +39,7 @@ class SampleLevel:
     name: str
     factor: float
     episodes: Path
-    max_depth: int | None = 16
+    max_depth: int | None = FULL_PATH_DEPTH
     difference_seeds: DifferenceSeeds = DifferenceSeeds.WINDOW
     planned: bool = False
 

@@ -63,6 +63,7 @@ class LevelFigures:
 
     ``designs`` are trained with the comparison's seeds, ``replicate`` with the
     replicate's (None without): the same renders, other training seeds.
+    ``between``: every two designs paired on the level's test episodes.
     """
 
     level: str
@@ -73,6 +74,7 @@ class LevelFigures:
     trivial: float
     noise: NoiseFigures | None
     replicate: Mapping[str, DesignFigure] | None = None
+    between: Mapping[str, Paired] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -179,56 +181,31 @@ def supported(checks: tuple[Acceptance, ...]) -> bool:
     return all(a.passes or a.within_seed_noise for a in checks)
 
 
-def scaled_samples(samples: int, factor: float) -> int:
-    """``samples`` times ``factor``, rounded, at least 1."""
-    return max(1, int(samples * factor + 0.5))
-
-
 def level_requests(cfg: TaskFidelityConfig, level: SampleLevel) -> dict[str, RenderRequest]:
     """``{episode: RenderRequest}`` of a level: the plan's, or its samples times the factor.
 
     A level other than the plan renders with full fidelity and explicit
-    settings: the plan's (as the plan's episode was rendered, else looked up or
+    settings (:func:`~mincam_render.data.render_job.rescale.rescaled_request`):
+    the plan's (as the plan's episode was rendered, else looked up or
     measured) with frames' and backgrounds' samples scaled, the level's depth
-    and seeds (per-window seeds leave the request's field open).
+    and seeds.
     """
-    from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
-    from mincam_render.data.render_job import plan_render
-    from mincam_render.render.differential import DifferenceSeeds
-    from mincam_render.render.fidelity import Fidelity
+    from mincam_render.data.render_job.rescale import rescaled_request
     from mincam_render.studies.comparison.study import episode_requests
 
     requests = episode_requests(cfg.comparison)
     if level.planned:
         return dict(requests)
-    out = {}
-    for name, request in requests.items():
-        rendered = cfg.plan.episodes / name
-        manifest = (
-            read_manifest(rendered)
-            if (rendered / MANIFEST_NAME).is_file()
-            else plan_render(request)
-        )
-        plan = manifest["job"]["render"]
-        bg = plan["background"]  # the request's own fields stay where there is none
-        frame_seeds = bg is not None and level.difference_seeds is DifferenceSeeds.FRAME
-        out[name] = dataclasses.replace(
+    return {
+        name: rescaled_request(
             request,
-            fidelity=Fidelity.FULL,
-            spp=scaled_samples(plan["spp"], level.factor),
-            max_depth=level.max_depth if level.max_depth is not None else plan["max_depth"],
-            shared_render=plan["shared_render"],
-            dtype=plan["dtype"],
-            differential=bg is not None,
-            background_spp=(
-                request.background_spp if bg is None else scaled_samples(bg["spp"], level.factor)
-            ),
-            shared_difference=(
-                request.shared_difference if bg is None else bg["shared_difference"]
-            ),
-            difference_seeds=level.difference_seeds if frame_seeds else request.difference_seeds,
+            cfg.plan.episodes / name,
+            level.factor,
+            max_depth=level.max_depth,
+            difference_seeds=level.difference_seeds,
         )
-    return out
+        for name, request in requests.items()
+    }
 
 
 def render_level(
@@ -278,6 +255,7 @@ def level_figures(
         trivial=tested.trivial,
         noise=None,
         replicate=tested.replicate,
+        between=between_designs(tested.designs),
     )
     return figures, tested.error_name
 
@@ -319,12 +297,18 @@ def cross_figures(
         train_noise=None
         if there is None
         else {d: _between(f, trained, there.designs[d], tested) for d, f in designs.items()},
-        between={
-            p.key: p
-            for i, a in enumerate(designs)
-            for p in (Paired.of(designs[a], designs[b]) for b in list(designs)[i + 1 :])
-        },
+        between=between_designs(designs),
     )
+
+
+def between_designs(designs: Mapping[str, DesignFigure]) -> dict[str, Paired]:
+    """Every two designs' paired difference (``a - b``, in order) on their common test episodes."""
+    names = list(designs)
+    return {
+        p.key: p
+        for i, a in enumerate(names)
+        for p in (Paired.of(designs[a], designs[b]) for b in names[i + 1 :])
+    }
 
 
 def _between(a: DesignFigure, a_is: SampleLevel, b: DesignFigure, b_is: SampleLevel) -> Paired:

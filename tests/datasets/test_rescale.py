@@ -1,0 +1,74 @@
+"""An episode's request at other samples, and the check that two renders share a scene."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+
+import pytest
+from support import TINY_DIFFERENTIAL, TINY_PATCHES
+
+from mincam_render.data.dataset import read_manifest, write_manifest
+from mincam_render.data.render_job import render_dataset
+from mincam_render.data.render_job.rescale import (
+    FULL_PATH_DEPTH,
+    rescaled_request,
+    same_scene,
+    scaled_samples,
+)
+from mincam_render.render.differential import DifferenceSeeds
+from mincam_render.render.fidelity import Fidelity
+
+
+@pytest.mark.parametrize(
+    ("samples", "factor", "expected"), [(24, 4, 96), (195, 0.25, 49), (20, 0.0625, 1)]
+)
+def test_scaled_samples_round_and_stay_positive(samples, factor, expected):
+    assert scaled_samples(samples, factor) == expected
+
+
+def test_a_differential_plan_scales_frames_and_backgrounds(differential_dataset):
+    plan = read_manifest(differential_dataset)["job"]["render"]
+    out = rescaled_request(TINY_DIFFERENTIAL, differential_dataset, 4)
+    assert out.fidelity is Fidelity.FULL
+    assert (out.spp, out.background_spp) == (4 * plan["spp"], 4 * plan["background"]["spp"])
+    assert out.max_depth == FULL_PATH_DEPTH and out.differential
+    assert out.difference_seeds == TINY_DIFFERENTIAL.difference_seeds  # per window
+    framed = rescaled_request(
+        TINY_DIFFERENTIAL, differential_dataset, 0.5, max_depth=None,
+        difference_seeds=DifferenceSeeds.FRAME,
+    )  # fmt: skip
+    assert framed.max_depth == plan["max_depth"]
+    assert framed.difference_seeds is DifferenceSeeds.FRAME
+    scene = ("family", "num_frames", "seed", "overrides", "splits", "shard_frames")
+    assert all(getattr(out, f) == getattr(TINY_DIFFERENTIAL, f) for f in scene)
+
+
+def test_a_direct_plan_keeps_its_request_background_fields(tiny_patches):
+    out = rescaled_request(TINY_PATCHES, tiny_patches, 2, difference_seeds=DifferenceSeeds.FRAME)
+    assert out.spp == 2 * TINY_PATCHES.spp and not out.differential
+    assert out.background_spp == TINY_PATCHES.background_spp
+    assert out.difference_seeds == TINY_PATCHES.difference_seeds  # no differences to seed
+
+
+def test_a_render_at_other_samples_is_the_same_scene(differential_dataset, tmp_path):
+    request = rescaled_request(TINY_DIFFERENTIAL, differential_dataset, 2, max_depth=3)
+    render_dataset(request, tmp_path / "2x", workers=0)
+    same_scene(differential_dataset, tmp_path / "2x")  # no error
+    other = dataclasses.replace(request, seed=request.seed + 1)
+    render_dataset(other, tmp_path / "other", workers=0)
+    with pytest.raises(ValueError, match=r"not a render of the scene.*\['seed'\]"):
+        same_scene(differential_dataset, tmp_path / "other")
+
+
+def test_another_family_missing_or_unfinished_renders_are_refused(
+    differential_dataset, tiny_patches, tmp_path
+):
+    with pytest.raises(ValueError, match="description"):
+        same_scene(differential_dataset, tiny_patches)
+    with pytest.raises(ValueError, match="no dataset there"):
+        same_scene(differential_dataset, tmp_path / "nothing")
+    cut = shutil.copytree(differential_dataset, tmp_path / "cut")
+    write_manifest(cut, {**read_manifest(cut), "complete": False})
+    with pytest.raises(ValueError, match="unfinished"):
+        same_scene(differential_dataset, cut)
