@@ -71,6 +71,14 @@ test episodes alone)::
         --one-x /work/episodes/ws8 --seeds 3 --replicate-seeds 3 --episodes 32,4,10 \
         --lock /tmp/mincam-cpu.lock
 
+and the workspace trained and tested at 4x (16 training episodes; ``WORK/ws-1x``
+and ``WORK/ws-4x`` linked to the 32-episode check's, so only the 4x training
+and validation episodes render)::
+
+    python benchmarks/bench_task_fidelity.py --work /work/tf38-16 --key workspace-16 \
+        --sections render,check --levels 1x,4x --cross 1x:4x \
+        --seeds 3 --replicate-seeds 3 --episodes 16,4,10 --lock /tmp/mincam-cpu.lock
+
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,
 render noise at the plan for random masks and the finest box pixel, their
 ratio, the chosen target, the noise's autocorrelation, the check per design
