@@ -148,6 +148,12 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
     )  # fmt: skip
 
 
+def test_floors_on_re_rendered_tests_need_the_ladder(tmp_path):
+    with pytest.raises(ValueError, match="run 'ladder'"):
+        run(CFG, tmp_path / "study", sections=("recipes",))
+    assert not (tmp_path / "study").exists()  # refused before anything is written
+
+
 def _figure(name: str, errors: list[list[float]]) -> DesignFigure:
     flat = [e for seed in errors for e in seed]
     return DesignFigure(

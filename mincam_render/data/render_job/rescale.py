@@ -19,8 +19,9 @@ from mincam_render.render.differential import DifferenceSeeds
 #: Path depth of re-rendered episodes ("full path depth": far beyond where
 #: another bounce changes a measurement at the plans' error).
 FULL_PATH_DEPTH = 16
-#: Manifest request fields that fix what happens in an episode (not how it is rendered).
-SCENE_FIELDS = ("description", "seed", "num_frames", "splits")
+#: Manifest request fields that fix what happens in an episode and the texels it
+#: is seen through (not how many samples render it).
+SCENE_FIELDS = ("description", "seed", "num_frames", "splits", "mask_res")
 
 
 def scaled_samples(samples: int, factor: float) -> int:

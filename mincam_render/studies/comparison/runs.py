@@ -18,6 +18,7 @@ run stops the comparison; finished runs stay on disk for the next attempt.
 from __future__ import annotations
 
 import dataclasses
+import shutil
 from collections.abc import Callable, Mapping, Sequence
 from functools import partial
 from pathlib import Path
@@ -324,3 +325,13 @@ def relocate_run(result: ComparisonRun, move: Callable[[str], str]) -> Compariso
     if masks is not None:
         masks = dataclasses.replace(masks, run_dir=move(masks.run_dir))
     return dataclasses.replace(result, run_dir=move(result.run_dir), mask_run=masks)
+
+
+def copy_runs_afresh(runs: Path, to: Path) -> None:
+    """Copy a comparison's ``runs`` directory to ``to``, replacing whatever is there.
+
+    For testing kept runs on other episodes without touching them: a copy a
+    kill cut short, or one of runs trained again since, is replaced whole.
+    """
+    shutil.rmtree(to, ignore_errors=True)
+    shutil.copytree(runs, to)

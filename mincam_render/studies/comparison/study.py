@@ -435,8 +435,10 @@ def run(
     :meth:`~.result.ComparisonResult.as_json`, and ``out_dir/comparison.png``).
     With ``test_episodes_dir`` the designs are tested on the test episodes
     there instead: renders of the same scenes at another fidelity, rendered
-    already (e.g. at more samples, so the figures carry less render noise);
-    runs kept in ``out_dir/runs`` are read back, not trained again.
+    already (e.g. at more samples, so the figures carry less render noise).
+    The plan's own test episodes are still rendered into ``episodes_dir``
+    (their manifests are what the others are checked against); runs finished
+    in ``out_dir/runs`` are read back and tested again, missing ones trained.
 
     Episodes render in ``workers`` processes; the training runs in this process
     (``train_workers=1``) or ``train_workers`` worker processes

@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses
 import enum
 import json
-import shutil
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,6 +54,7 @@ from mincam_render.studies.comparison import study as comparison_study
 from mincam_render.studies.comparison.config import ComparisonConfig, Protocol
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.comparison.result import ComparisonResult
+from mincam_render.studies.comparison.runs import copy_runs_afresh
 from mincam_render.studies.comparison.study import Design
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
 
@@ -442,8 +442,7 @@ def retested_point(
             render_dataset(again, tests / name, workers=2, progress=progress)
     ladder = out / "ladder" / f"episodes-{n}"
     here = ladder.with_name(f"{ladder.name}-tests-{factor:g}x")
-    shutil.rmtree(here / "runs", ignore_errors=True)
-    shutil.copytree(ladder / "runs", here / "runs")
+    copy_runs_afresh(ladder / "runs", here / "runs")
     return _ladder_point(cfg, n, compare(comparison, here, tests), 0.0)
 
 
@@ -583,6 +582,8 @@ def run(
     """
     from mincam_render.data.render_job import package_versions
 
+    if cfg.floor_test_samples is not None and "ladder" not in sections:
+        raise ValueError("floor_test_samples retests the ladder's largest point: run 'ladder'")
     out = Path(out)
     episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
 

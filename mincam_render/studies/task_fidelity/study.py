@@ -41,7 +41,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import shutil
 from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass
@@ -50,6 +49,7 @@ from typing import TYPE_CHECKING, Any
 
 from mincam_render.core.strict_json import JsonObject
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
+from mincam_render.studies.comparison.runs import copy_runs_afresh
 from mincam_render.studies.task_fidelity.config import SampleLevel, TaskFidelityConfig
 from mincam_render.studies.task_fidelity.noise import NoiseFigures, noise_figures
 
@@ -280,8 +280,7 @@ def cross_figures(
     conservative there.
     """
     here = out / f"{trained.name}-on-{tested.name}"
-    shutil.rmtree(here / "runs", ignore_errors=True)
-    shutil.copytree(out / trained.name / "runs", here / "runs")
+    copy_runs_afresh(out / trained.name / "runs", here / "runs")
 
     def episodes(name: str) -> Path:
         return (tested if name.startswith("test-") else trained).episodes / name
