@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -354,3 +355,24 @@ def test_every_two_designs_are_paired_in_order_on_their_common_episodes():
     for key, expected in (("a - b", -0.3), ("a - c", 0.1), ("b - c", 0.4)):
         np.testing.assert_allclose(pairs[key].mean, expected, atol=1e-9)
     assert between_designs({"a": designs["a"]}) == {}
+
+
+def test_the_report_shows_each_levels_figures_and_its_pairs_between_designs():
+    from mincam_render.studies.task_fidelity.report import markdown
+    from mincam_render.studies.task_fidelity.study import TaskFidelityResult, between_designs
+
+    designs = {"a": _figure("a", [[1.0, 1.0], [1.2, 1.2]]), "b": _figure("b", [[1.5] * 2] * 2)}
+    paired = dataclasses.replace(_level(designs), between=between_designs(designs))
+    unpaired = dataclasses.replace(_level(designs), level="4x", factor=4.0)  # e.g. an old JSON's
+    result = TaskFidelityResult(
+        config={}, task="count", error_name="count RMSE", levels=(paired, unpaired),
+        acceptance={}, chosen=None, versions={},
+    )  # fmt: skip
+    lines = markdown(result).splitlines()
+    assert "| 1x | 1 | window | 0.100 | 1.100 [1.000, 1.200] | 1.500 [1.400, 1.600] |" in lines
+    assert "| 4x | 4 | window | 0.100 | 1.100 [1.000, 1.200] | 1.500 [1.400, 1.600] |" in lines
+    # per seed a - b is -0.5 and -0.3: the mean and the seeds' range
+    assert "- 1x: a - b -0.400 [-0.500, -0.300]" in lines
+    assert not [ln for ln in lines if ln.startswith("- 4x")]  # no pairs, no empty line
+    result = dataclasses.replace(result, levels=(unpaired,))
+    assert "Between designs at each level" not in markdown(result)

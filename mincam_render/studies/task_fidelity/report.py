@@ -44,11 +44,13 @@ def markdown(result: TaskFidelityResult) -> str:
     ]
     lines = [f"# Task-level fidelity check: {result.task} ({result.error_name})", ""]
     lines += _table(["level", "samples", "seeds", "render s/frame", *names], rows) + [""]
-    lines += ["Between designs at each level, trained and tested there (paired):", ""]
-    for lv in result.levels:
-        pairs = "; ".join(f"{key} {_paired_cell(p)}" for key, p in lv.between.items())
-        lines.append(f"- {lv.level}: {pairs}")
-    lines.append("")
+    paired = [lv for lv in result.levels if lv.between]
+    if paired:
+        lines += ["Between designs at each level, trained and tested there (paired):", ""]
+        for lv in paired:
+            pairs = "; ".join(f"{key} {_paired_cell(p)}" for key, p in lv.between.items())
+            lines.append(f"- {lv.level}: {pairs}")
+        lines.append("")
     lines += ["## Render error against the label signal (test episodes)", ""]
     lines += _table(
         [
