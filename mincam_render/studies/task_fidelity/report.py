@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from mincam_render.studies.comparison.figures import DesignFigure, Paired
@@ -47,9 +47,7 @@ def markdown(result: TaskFidelityResult) -> str:
     paired = [lv for lv in result.levels if lv.between]
     if paired:
         lines += ["Between designs at each level, trained and tested there (paired):", ""]
-        for lv in paired:
-            pairs = "; ".join(f"{key} {_paired_cell(p)}" for key, p in lv.between.items())
-            lines.append(f"- {lv.level}: {pairs}")
+        lines += [f"- {lv.level}: {_pairs(lv.between)}" for lv in paired]
         lines.append("")
     lines += ["## Render error against the label signal (test episodes)", ""]
     lines += _table(
@@ -99,10 +97,7 @@ def _cross_lines(cross: Sequence[CrossFigures], names: Sequence[str]) -> list[st
                 rows.append([pair, kind, *(_paired_cell(paired[n]) for n in names)])
     lines += _table(["trained on tested", "", *names], rows)
     lines += ["", "Between designs on those test episodes (paired):", ""]
-    for c in cross:
-        pairs = "; ".join(f"{key} {_paired_cell(p)}" for key, p in c.between.items())
-        lines.append(f"- {c.trained} on {c.tested}: {pairs}")
-    return lines
+    return lines + [f"- {c.trained} on {c.tested}: {_pairs(c.between)}" for c in cross]
 
 
 def _figure_cell(f: DesignFigure) -> str:
@@ -111,6 +106,11 @@ def _figure_cell(f: DesignFigure) -> str:
 
 def _paired_cell(p: Paired) -> str:
     return f"{p.mean:+.3f} [{p.ci95[0]:+.3f}, {p.ci95[1]:+.3f}]"
+
+
+def _pairs(between: Mapping[str, Paired]) -> str:
+    """Every pair of designs on one line: ``a - b +0.010 [...]; a - c ...``."""
+    return "; ".join(f"{key} {_paired_cell(p)}" for key, p in between.items())
 
 
 def _acceptance_cell(a: Acceptance) -> str:
