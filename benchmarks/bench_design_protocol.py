@@ -5,7 +5,7 @@ Usage::
     python benchmarks/bench_design_protocol.py --task workspace --work /data/protocol-ws \\
         [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
-        [--floor-test-samples 4]
+        [--floor-test-factors 4,16]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -22,15 +22,16 @@ detectors, episodes of 3,000 independent frames, 4 x 1,000 validation and 6 x
 ``scenes/patches_narrow.toml``, a variant chosen after the wide result). Every comparison trains 3 seeds per design. ``--ladder`` and
 ``--test-episodes`` change those sizes for one run, whose entry ``--key`` names
 (so a re-scoring on more test episodes sits beside the task's full study).
-``--floor-test-samples F`` also reads the floors on the test episodes rendered
-again at F times the plan's samples and full path depth (``WORK/tests-Fx``,
+``--floor-test-factors F,G`` also reads the floors on the test episodes rendered
+again at F (and G) times the plan's samples and full path depth (``WORK/tests-Fx``,
 resumable; the task-fidelity check's level ``Fx`` renders the same datasets), by
 the runs of the largest ladder point: the floors with less render noise in the
-test data. The workspace floors as kept in ``workspace-10test``::
+test data. The workspace floors as kept in ``workspace-10test`` (the 16x tests
+hard-linked from the task-fidelity check's ``ws-16x``, resumed as finished)::
 
     python benchmarks/bench_design_protocol.py --task workspace --work /work/protocol-ws10 \
         --episodes /work/episodes/ws8 --sections ladder --ladder 16,32 --test-episodes 10 \
-        --key workspace-10test --floor-test-samples 4
+        --key workspace-10test --floor-test-factors 4,16
 """
 
 from __future__ import annotations
@@ -138,10 +139,10 @@ def main() -> None:
         "--test-episodes", type=int, default=None, help="test episodes (default: the task's)"
     )
     ap.add_argument(
-        "--floor-test-samples",
-        type=float,
-        default=None,
-        help="also read the floors on tests rendered at this many times the plan's samples",
+        "--floor-test-factors",
+        default="",
+        help="also read the floors on tests rendered at these multiples of the plan's "
+        "samples, e.g. 4,16",
     )
     ap.add_argument(
         "--key",
@@ -156,7 +157,8 @@ def main() -> None:
         task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
     if args.test_episodes:
         task["episodes"] = replace(task["episodes"], test_episodes=args.test_episodes)
-    cfg = DesignProtocolConfig(**task, floor_test_samples=args.floor_test_samples)
+    factors = tuple(float(f) for f in args.floor_test_factors.split(",") if f.strip())
+    cfg = DesignProtocolConfig(**task, floor_test_factors=factors)
     key = args.key or args.task
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
     result = run(cfg, args.work, episodes_dir=args.episodes, sections=sections,

@@ -64,9 +64,9 @@ def test_the_design_protocols_floors_are_the_jsons(entry):
         (lo, hi), mean = check["paired"]["ci95"], check["paired"]["mean"]
         quoted = f"{mean:+.3f} [{lo:+.3f}, {hi:+.3f}] | {check['verdict']} |"
         name = f"{check['floor']['design']} − {check['floor']['baseline']}"
-        samples = check.get("test_samples", 1.0)  # on re-rendered tests: its own row
+        factor = check.get("test_factor", 1.0)  # on re-rendered tests: its own row
         rows = [ln for ln in doc.splitlines() if ln.startswith(f"| {name} <")]
-        rows = [ln for ln in rows if (f"| {samples:g}x samples |" in ln) == (samples != 1)]
+        rows = [ln for ln in rows if (f"| {factor:g}x samples |" in ln) == (factor != 1)]
         assert rows and quoted in rows[0], f"docs/design_protocol.md: {entry}'s floor {name}"
 
 

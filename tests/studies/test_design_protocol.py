@@ -45,7 +45,7 @@ CFG = DesignProtocolConfig(
     protocol_episodes=1,
     restarts=2,
     floors=(Floor(design="mincam-2px", baseline="baseline-2x2", margin=0.05),),
-    floor_test_samples=2,
+    floor_test_factors=(0.5, 2),
 )
 
 
@@ -106,8 +106,9 @@ def test_the_figures_are_the_comparisons_on_disk(study):
 
 def test_floors_are_paired_on_the_largest_training_set(study):
     _, result = study
-    check, retested = result.floors
-    assert (check.test_samples, retested.test_samples) == (1.0, 2)
+    check, *retested = result.floors
+    assert [c.test_factor for c in (check, *retested)] == [1.0, 0.5, 2]
+    assert list(result.retested) == ["0.5x", "2x"]
     last = result.ladder[-1]
     assert check.episodes == 2 and check.floor.margin == 0.05
     a, b = last.designs["mincam-2px"].errors(), last.designs["baseline-2x2"].errors()
@@ -138,10 +139,10 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
         assert new["steps"] == old["steps"]  # the same runs (copied), not trained again
         assert new["error"]["mean"] != old["error"]["mean"]  # tested on other renders
     assert (
-        result.retested.designs["mincam-2px"].error
+        result.retested["2x"].designs["mincam-2px"].error
         == again["designs"]["mincam-2px"]["error"]["mean"]
     )
-    _, retested = result.floors
+    *_, retested = result.floors
     assert retested.paired.mean == pytest.approx(
         again["designs"]["mincam-2px"]["error"]["mean"]
         - again["designs"]["baseline-2x2"]["error"]["mean"], abs=1e-9
@@ -232,10 +233,12 @@ def test_configuration_is_validated():
     with pytest.raises(ValueError, match="both must be ladder designs"):
         DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))
     floors = (Floor(design="mincam-2px", baseline="baseline-8x8"),)
-    for factor in (1, 1.0):
+    for factors in ((1,), (4, 1.0)):
         with pytest.raises(ValueError, match="other than 1"):
-            DesignProtocolConfig(floors=floors, floor_test_samples=factor)
+            DesignProtocolConfig(floors=floors, floor_test_factors=factors)
+    with pytest.raises(ValueError, match="distinct"):
+        DesignProtocolConfig(floors=floors, floor_test_factors=(4, 16, 4.0))
     with pytest.raises(ValueError, match="give floors"):
-        DesignProtocolConfig(floor_test_samples=4)
-    with pytest.raises(ValueError, match="floor_test_samples"):
-        DesignProtocolConfig(floors=floors, floor_test_samples=-4)
+        DesignProtocolConfig(floor_test_factors=(4,))
+    with pytest.raises(ValueError, match="floor_test_factors"):
+        DesignProtocolConfig(floors=floors, floor_test_factors=(4, -4))

@@ -123,11 +123,11 @@ class DesignProtocolConfig:
             validation is kept).
         floors: what the learning curves' largest training set is held to
             (both designs among ``ladder_designs``).
-        floor_test_samples: the floors are also read on the test episodes
-            rendered again at this many times the plan's samples, at full path
-            depth (the task-fidelity check's level of that factor), by the same
-            runs: the figures with less render noise in the test data, nearer
-            what a deployed camera reads. None: on the plan's tests alone.
+        floor_test_factors: the floors are also read on the test episodes
+            rendered again at each of these multiples of the plan's samples, at
+            full path depth (the task-fidelity check's level of that factor), by
+            the same runs: the figures with less render noise in the test data,
+            nearer what a deployed camera reads. Empty: on the plan's tests alone.
     """
 
     episodes: ComparisonConfig = field(
@@ -145,16 +145,17 @@ class DesignProtocolConfig:
     protocol_pixels: tuple[int, ...] = (2,)
     restarts: int = 3
     floors: tuple[Floor, ...] = ()
-    floor_test_samples: float | None = None
+    floor_test_factors: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        if self.floor_test_samples is not None:
-            check_number("floor_test_samples", self.floor_test_samples, 0, 1e4, lo_open=True)
-            if self.floor_test_samples == 1 or not self.floors:
-                raise ValueError(
-                    f"floor_test_samples {self.floor_test_samples}: give floors and a factor "
-                    "other than 1 (the plan's tests are read anyway)"
-                )
+        factors = self.floor_test_factors
+        for factor in factors:
+            check_number("floor_test_factors", factor, 0, 1e4, lo_open=True)
+        if factors and (1 in factors or not self.floors or len(set(factors)) < len(factors)):
+            raise ValueError(
+                f"floor_test_factors {factors}: give floors and distinct factors other than 1 "
+                "(the plan's tests are read anyway)"
+            )
         if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
             raise ValueError(f"ladder {self.ladder}: need increasing episode counts")
         for n in (*self.ladder, self.recipe_episodes, self.reference_episodes,

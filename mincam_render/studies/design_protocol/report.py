@@ -63,7 +63,7 @@ def _floor_lines(result: DesignProtocolResult) -> list[str]:
         [
             f"{c.floor.design} - {c.floor.baseline} < {c.floor.margin:g}",
             str(c.episodes),
-            "the plan's" if c.test_samples == 1 else f"{c.test_samples:g}x samples",
+            "the plan's" if c.test_factor == 1 else f"{c.test_factor:g}x samples",
             _interval(c.paired.mean, c.paired.ci95, "+"),
             c.verdict.value,
         ]
@@ -119,10 +119,9 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
         ]
         for p in result.ladder
     ]
-    if result.retested is not None:  # the largest point's runs on tests with more samples
-        p, factor = result.retested, result.config["floor_test_samples"]
+    for level, p in result.retested.items():  # the largest point's runs on cleaner tests
         rows.append(
-            [f"{p.episodes}, tested at {factor:g}x samples", str(p.frames), "",
+            [f"{p.episodes}, tested at {level} samples", str(p.frames), "",
              *(f"{_interval(f.error, f.ci95)} {f.state}" for f in p.designs.values()),
              f"{p.trivial:.3f}"]
         )  # fmt: skip

@@ -204,15 +204,15 @@ class FloorCheck:
         episodes: training episodes of the comparison it was measured on.
         paired: ``design - baseline`` on the same test episodes.
         verdict: met, missed or undecided.
-        test_samples: samples of the test renders relative to the plan's (1:
-            the plan's tests; see ``DesignProtocolConfig.floor_test_samples``).
+        test_factor: samples of the test renders relative to the plan's (1:
+            the plan's tests; see ``DesignProtocolConfig.floor_test_factors``).
     """
 
     floor: Floor
     episodes: int
     paired: Paired
     verdict: FloorVerdict
-    test_samples: float = 1.0
+    test_factor: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -232,7 +232,8 @@ class DesignProtocolResult:
     restarts: Sequence[Restarts] = ()
     selection: Selection | None = None
     floors: Sequence[FloorCheck] = ()
-    retested: LadderPoint | None = None
+    #: The largest point's runs on its tests rendered again, by samples factor (``"4x"``).
+    retested: Mapping[str, LadderPoint] = field(default_factory=dict)
     versions: Mapping[str, str] = field(default_factory=dict)
 
     def as_json(self) -> JsonObject:
@@ -373,11 +374,11 @@ def _ladder_point(
 
 
 def floor_checks(
-    cfg: DesignProtocolConfig, point: LadderPoint, test_samples: float = 1.0
+    cfg: DesignProtocolConfig, point: LadderPoint, test_factor: float = 1.0
 ) -> list[FloorCheck]:
     """Every configured floor on ``point`` (the learning curves' largest training set).
 
-    ``test_samples``: the samples of ``point``'s test renders relative to the plan's.
+    ``test_factor``: the samples of ``point``'s test renders relative to the plan's.
     """
     checks = []
     for f in cfg.floors:
@@ -390,7 +391,7 @@ def floor_checks(
             if low >= f.margin
             else FloorVerdict.UNDECIDED
         )
-        checks.append(FloorCheck(f, point.episodes, paired, verdict, test_samples))
+        checks.append(FloorCheck(f, point.episodes, paired, verdict, test_factor))
     return checks
 
 
@@ -415,10 +416,11 @@ def retested_point(
     compare: Compare,
     out: Path,
     episodes: Path,
+    factor: float,
     *,
     progress: bool = False,
 ) -> LadderPoint:
-    """The learning curves' largest point tested on renders with ``cfg.floor_test_samples``.
+    """The learning curves' largest point tested on renders with ``factor`` x the samples.
 
     The test episodes are rendered again (resumable) into ``out/tests-<f>x``
     from their plans in ``episodes`` with the samples times the factor at full
@@ -430,9 +432,6 @@ def retested_point(
     from mincam_render.data.render_job import render_dataset
     from mincam_render.data.render_job.rescale import rescaled_request
 
-    factor = cfg.floor_test_samples
-    if factor is None:
-        raise ValueError("retested_point: the study has no floor_test_samples")
     n = cfg.ladder[-1]
     comparison = cfg.comparison(n, cfg.ladder_designs)
     tests = out / f"tests-{factor:g}x"
@@ -582,8 +581,8 @@ def run(
     """
     from mincam_render.data.render_job import package_versions
 
-    if cfg.floor_test_samples is not None and "ladder" not in sections:
-        raise ValueError("floor_test_samples retests the ladder's largest point: run 'ladder'")
+    if cfg.floor_test_factors and "ladder" not in sections:
+        raise ValueError("floor_test_factors retest the ladder's largest point: run 'ladder'")
     out = Path(out)
     episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
 
@@ -613,10 +612,11 @@ def run(
         result = replace(result, recipes=recipes, chosen_recipe=chosen)
     if "ladder" in sections:
         ladder, doublings = learning_curves(cfg, compare, out, seconds)
-        floors, retested = floor_checks(cfg, ladder[-1]), None
-        if cfg.floor_test_samples is not None:
-            retested = retested_point(cfg, compare, out, episodes, progress=progress)
-            floors += floor_checks(cfg, retested, cfg.floor_test_samples)
+        floors, retested = floor_checks(cfg, ladder[-1]), {}
+        for factor in cfg.floor_test_factors:
+            point = retested_point(cfg, compare, out, episodes, factor, progress=progress)
+            retested[f"{factor:g}x"] = point
+            floors += floor_checks(cfg, point, factor)
         result = replace(result, ladder=ladder, doublings=doublings, floors=floors,
                          retested=retested)  # fmt: skip
     if "references" in sections:
