@@ -21,7 +21,8 @@ seeds, no gain augmentation) trained *and* tested at each level; every level
 against the reference (16x): accepted when every design's test RMSE moves by
 less than a quarter of its 95 % half-width; each level's render error against
 the label signal on the test episodes and its autocorrelation at lags of one
-frame and one window.
+frame and one window (measured against the reference, or against a test level
+with more samples where there is one: then the reference's own noise too).
 ``render`` renders the levels' episodes first (``WORK/<prefix>-<level>``, one episode
 per acquisition of ``--lock``; the check's episodes of the plan are copied from
 ``--one-x`` when given, which is only read). ``plans``: each family's plan
@@ -73,10 +74,12 @@ test episodes alone)::
 
 and the workspace trained and tested at 4x (16 training episodes; ``WORK/ws-1x``
 and ``WORK/ws-4x`` linked to the 32-episode check's, so only the 4x training
-and validation episodes render)::
+and validation episodes render), both levels' runs also tested on 16x renders
+of the test episodes (a test level: render noise in the 4x test data, and the
+4x level's own noise against 16x)::
 
     python benchmarks/bench_task_fidelity.py --work /work/tf38-16 --key workspace-16 \
-        --sections render,check --levels 1x,4x --cross 1x:4x \
+        --sections render,check --levels 1x,4x --cross 1x:4x,4x:16x,1x:16x \
         --seeds 3 --replicate-seeds 3 --episodes 16,4,10 --lock /tmp/mincam-cpu.lock
 
 Writes ``benchmarks/results/task_fidelity.json`` (per family: label-signal RMS,

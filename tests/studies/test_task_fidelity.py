@@ -243,6 +243,24 @@ def test_noise_is_taken_against_the_reference_or_the_plans_against_the_second(
     assert seen["sec"] == [tmp_path / estimate / n for n in names]
 
 
+@pytest.mark.parametrize(("level", "estimate"), [("4x", "1x"), ("1x", "1x"), ("0.25x", "1x")])
+def test_a_test_level_above_the_reference_measures_every_levels_noise(
+    tmp_path, monkeypatch, level, estimate
+):
+    cfg = _three_levels(tmp_path, "4x", "1x")
+    above = SampleLevel(name="16x", factor=16, episodes=tmp_path / "16x", max_depth=16)
+    frames = SampleLevel(name="64x-frame-seeds", factor=64, episodes=tmp_path / "64x",
+                         difference_seeds=DifferenceSeeds.FRAME)  # fmt: skip
+    cfg = dataclasses.replace(cfg, test_levels=(above, frames))
+    seen = _noise_arguments(monkeypatch, cfg, level)  # the reference's too, against 16x
+    names = cfg.noise_episodes
+    assert seen["ref"] == ([tmp_path / "16x" / n for n in names], 16, "16x")
+    assert seen["sec"] == [tmp_path / estimate / n for n in names]
+    below = dataclasses.replace(above, name="2x", factor=2, episodes=tmp_path / "2x")
+    cfg = dataclasses.replace(cfg, test_levels=(below,))  # below the reference: not used
+    assert _noise_arguments(monkeypatch, cfg, "1x")["ref"][2] == "4x"
+
+
 @pytest.mark.parametrize(("reference", "second"), [("4x", "1x"), ("1x", None)])
 def test_a_reference_has_no_noise_of_its_own_to_measure(tmp_path, monkeypatch, reference, second):
     cfg = _three_levels(tmp_path, reference, second)

@@ -488,10 +488,27 @@ def run(
     )
 
 
-def _noise(cfg: TaskFidelityConfig, level: SampleLevel) -> NoiseFigures | None:
-    """The level's render error on the noise episodes against the reference.
+def noise_reference(cfg: TaskFidelityConfig) -> SampleLevel:
+    """What render noise is measured against: the check's reference, or a test level above it.
 
-    The reference has none of its own (None), unless it is the plan (a reduced
+    A test level with more samples than the reference (a seed per window, as
+    the plan's) has the test episodes the noise is measured on, so the noise of
+    every trained level, the reference's included, is taken against the one of
+    those with the most samples.
+    """
+    ref = cfg.level(cfg.reference)
+    above = [
+        lv
+        for lv in cfg.test_levels
+        if lv.difference_seeds is cfg.plan.difference_seeds and lv.factor > ref.factor
+    ]
+    return max(above, key=lambda lv: lv.factor) if above else ref
+
+
+def _noise(cfg: TaskFidelityConfig, level: SampleLevel) -> NoiseFigures | None:
+    """The level's render error on the noise episodes against :func:`noise_reference`.
+
+    That reference has none of its own (None), unless it is the plan (a reduced
     check without a level above it): then the plan is measured against the
     second reference, a cheaper level, its share of the difference's power
     taken by samples (:func:`.noise.noise_figures`). The label signal's second
@@ -499,8 +516,8 @@ def _noise(cfg: TaskFidelityConfig, level: SampleLevel) -> NoiseFigures | None:
     level is the second reference: the two renders' noises are independent, so
     their covariance leaves them out.
     """
-    ref = cfg.level(cfg.reference)
-    if level.name == cfg.reference:
+    ref = noise_reference(cfg)
+    if level.name == ref.name:
         if not level.planned or cfg.second_reference is None:
             return None
         ref = cfg.level(cfg.second_reference)
