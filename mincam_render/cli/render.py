@@ -133,6 +133,12 @@ _REQUEST_OPTIONS = [
         "family's, chosen by the task-level check).",
     ),
     click.option(
+        "--samples-factor", type=FiniteFloat(1e-4, 1e4), default=_default("samples_factor"),
+        help="Render the plan at this many times its samples of frames and backgrounds, at "
+        "full path depth (16): the task-fidelity check's level of that factor "
+        "(docs/fidelity.md says which factor a family's task needs at which size).",
+    ),
+    click.option(
         "--difference-seeds", type=click.Choice([s.value for s in DifferenceSeeds]),
         default=_default("difference_seeds"),
         help="With --differential: the movers' change shares one seed per background "

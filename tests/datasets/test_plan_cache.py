@@ -124,10 +124,11 @@ def test_a_plan_of_another_variant_is_measured_again_and_said(own_cache, caplog)
 
 
 def test_requests_without_the_later_fields_keep_their_format_4_identity():
-    # datasets rendered before error_scale, signal_target_error and
-    # difference_seeds existed resume: those fields stay out while None
+    # datasets rendered before error_scale, signal_target_error, difference_seeds
+    # and samples_factor existed resume: those fields stay out while None
     identity = AUTO.identity({})
-    assert not {"error_scale", "signal_target_error", "difference_seeds"} & set(identity)
+    later = {"error_scale", "signal_target_error", "difference_seeds", "samples_factor"}
+    assert not later & set(identity)
     given = dataclasses.replace(AUTO, error_scale="signal", difference_seeds="frame").identity({})
     assert given["error_scale"] == "signal" and given["difference_seeds"] == "frame"
 

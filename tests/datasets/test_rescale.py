@@ -13,6 +13,7 @@ from mincam_render.data.render_job import render_dataset
 from mincam_render.data.render_job.rescale import (
     FULL_PATH_DEPTH,
     rescaled_request,
+    resolved_request,
     same_scene,
     scaled_samples,
 )
@@ -72,3 +73,31 @@ def test_another_family_missing_or_unfinished_renders_are_refused(
     write_manifest(cut, {**read_manifest(cut), "complete": False})
     with pytest.raises(ValueError, match="unfinished"):
         same_scene(differential_dataset, cut)
+
+
+def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_dataset, tmp_path):
+    asked = dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=2)
+    resolved = resolved_request(asked)
+    assert resolved == rescaled_request(TINY_DIFFERENTIAL, differential_dataset, 2)
+    assert resolved_request(TINY_DIFFERENTIAL) is TINY_DIFFERENTIAL  # no factor: as asked
+    render_dataset(asked, tmp_path / "2x", workers=0)
+    job = read_manifest(tmp_path / "2x")["job"]["render"]
+    plan = read_manifest(differential_dataset)["job"]["render"]
+    assert (job["spp"], job["background"]["spp"]) == (
+        2 * plan["spp"],
+        2 * plan["background"]["spp"],
+    )
+    assert job["max_depth"] == FULL_PATH_DEPTH
+    # the check's own request of that level finds the dataset finished: the same identity
+    again = render_dataset(resolved, tmp_path / "2x", workers=0)
+    assert again.shards_rendered == [] and again.shards_kept == [0, 1, 2]
+    framed = resolved_request(
+        dataclasses.replace(asked, difference_seeds=DifferenceSeeds.FRAME)
+    )  # a per-frame seed asked for is kept
+    assert framed.difference_seeds is DifferenceSeeds.FRAME
+
+
+@pytest.mark.parametrize("factor", [0, -2, float("nan"), 1e5])
+def test_a_samples_factor_must_be_positive_and_finite(factor):
+    with pytest.raises(ValueError, match="samples_factor"):
+        dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=factor)

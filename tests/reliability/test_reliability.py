@@ -308,6 +308,7 @@ _OPTIONS = {
         "--mask-res",
         "--dtype",
         "--target-error",
+        "--samples-factor",
         "--dtype-error",
         "--workers",
     ],

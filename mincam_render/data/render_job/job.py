@@ -30,6 +30,7 @@ from mincam_render.data.render_job.executors import (
 )
 from mincam_render.data.render_job.manifest import _append_log, _check_shards, _open_or_plan
 from mincam_render.data.render_job.request import RenderRequest
+from mincam_render.data.render_job.rescale import resolved_request
 from mincam_render.data.render_job.shards import render_shard
 from mincam_render.data.writer_lock import exclusive_writer
 
@@ -67,7 +68,8 @@ def render_dataset(
     """Render (or finish) the dataset of ``request`` into directory ``out``.
 
     Args:
-        request: what to render.
+        request: what to render (its ``samples_factor`` applied first:
+            :func:`~.rescale.resolved_request`).
         out: dataset directory; created, or resumed if it holds the same request.
         workers: local worker processes (>= 1), 0 to render in this process, or None to
             choose by job size: the first shard renders in this process, and a pool of
@@ -95,6 +97,7 @@ def render_dataset(
         ValueError: invalid arguments.
     """
     _check_executor_args(workers, shards_per_worker)
+    request = resolved_request(request, use_plan_cache=use_plan_cache, progress=progress)
     with exclusive_writer(out, "render") as out:
         t_start = time.perf_counter()
         manifest, kept, repaired, todo = _prepare(request, out, use_plan_cache, progress, limits)

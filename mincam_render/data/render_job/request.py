@@ -13,7 +13,7 @@ from mincam_render.render.differential import DifferenceSeeds
 from mincam_render.render.fidelity import Fidelity
 
 #: Fields added after dataset format 4: left out of the identity while None.
-_LATER_FIELDS = ("error_scale", "signal_target_error", "difference_seeds")
+_LATER_FIELDS = ("error_scale", "signal_target_error", "difference_seeds", "samples_factor")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,6 +58,10 @@ class RenderRequest:
         difference_seeds: which frames share the seed of the movers' change
             (:class:`~mincam_render.render.differential.DifferenceSeeds`), or None:
             the planner's default.
+        samples_factor: render the plan of this request without it at this many
+            times its samples of frames and backgrounds, at full path depth (the
+            task-fidelity check's level of that factor, the same datasets:
+            :func:`~mincam_render.data.render_job.rescale.resolved_request`); None: the plan.
     """
 
     family: str
@@ -83,6 +87,7 @@ class RenderRequest:
     background_spp: int | None = None
     shared_difference: bool | None = None
     difference_seeds: DifferenceSeeds | None = None
+    samples_factor: float | None = None
 
     def __post_init__(self) -> None:
         def bad(name: str, allowed: str) -> ValueError:
@@ -120,6 +125,10 @@ class RenderRequest:
                 object.__setattr__(self, name, kind(value))
         if self.signal_target_error is not None:
             check_number("RenderRequest.signal_target_error", self.signal_target_error, 1e-6, 100.0)
+        if self.samples_factor is not None:
+            check_number(
+                "RenderRequest.samples_factor", self.samples_factor, 0.0, 1e4, lo_open=True
+            )
         for name, lo, hi in (
             ("target_error", 1e-6, 1.0),
             ("dtype_error_bound", 1e-9, 1.0),

@@ -4,8 +4,11 @@ Fidelity studies render the episodes a user renders (auto fidelity, a plan per
 episode) again with more or fewer samples: :func:`rescaled_request` keeps
 everything that fixes the scene (family, overrides, seed, frames, splits) and
 replaces the fidelity with the plan's samples times a factor, at an explicit
-path depth and difference seeds. :data:`SCENE_FIELDS` are the request fields
-that must agree for two renders to be of the same scene.
+path depth and difference seeds. A user asks for the same with
+``RenderRequest.samples_factor`` (``render --samples-factor 4``), which
+:func:`resolved_request` turns into that explicit request before a render
+starts. :data:`SCENE_FIELDS` are the request fields that must agree for two
+renders to be of the same scene.
 """
 
 from __future__ import annotations
@@ -46,12 +49,46 @@ def rescaled_request(
     """
     from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
     from mincam_render.data.render_job.planning import plan_render
-    from mincam_render.render.fidelity import Fidelity
 
     manifest = (
         read_manifest(rendered) if (rendered / MANIFEST_NAME).is_file() else plan_render(request)
     )
-    plan = manifest["job"]["render"]
+    return _scaled(request, manifest["job"]["render"], factor, max_depth, difference_seeds)
+
+
+def resolved_request(
+    request: RenderRequest, *, use_plan_cache: bool = True, progress: bool = False
+) -> RenderRequest:
+    """The explicit request ``request`` renders as: its ``samples_factor`` applied.
+
+    Without a factor, ``request`` itself. With one, the plan of the request
+    without it (measured, or from the plan cache unless ``use_plan_cache`` is
+    False) at that many times its samples of frames and backgrounds, at
+    :data:`FULL_PATH_DEPTH`, with the request's difference seeds (per window
+    unless it asks for per frame): the task-fidelity check's level of that
+    factor, so both render the same datasets.
+    """
+    from mincam_render.data.render_job.planning import plan_render
+
+    factor = request.samples_factor
+    if factor is None:
+        return request
+    base = dataclasses.replace(request, samples_factor=None)
+    manifest = plan_render(base, use_cache=use_plan_cache, progress=progress)
+    seeds = request.difference_seeds or DifferenceSeeds.WINDOW
+    return _scaled(base, manifest["job"]["render"], factor, FULL_PATH_DEPTH, seeds)
+
+
+def _scaled(
+    request: RenderRequest,
+    plan: dict,
+    factor: float,
+    max_depth: int | None,
+    difference_seeds: DifferenceSeeds,
+) -> RenderRequest:
+    """``request`` at full fidelity with the settings of ``plan`` (a manifest's ``job.render``)."""
+    from mincam_render.render.fidelity import Fidelity
+
     bg = plan["background"]  # the request's own fields stay where there is none
     frame_seeds = bg is not None and difference_seeds is DifferenceSeeds.FRAME
     return dataclasses.replace(
