@@ -95,6 +95,9 @@ def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_d
         dataclasses.replace(asked, difference_seeds=DifferenceSeeds.FRAME)
     )  # a per-frame seed asked for is kept
     assert framed.difference_seeds is DifferenceSeeds.FRAME
+    # the 2x dataset again at 2x (a study's retest): its plan's samples doubled, once
+    twice = rescaled_request(asked, tmp_path / "2x", 2)
+    assert (twice.spp, twice.samples_factor) == (4 * plan["spp"], None)
 
 
 @pytest.mark.parametrize("factor", [0, -2, float("nan"), 1e5])

@@ -86,7 +86,11 @@ def _scaled(
     max_depth: int | None,
     difference_seeds: DifferenceSeeds,
 ) -> RenderRequest:
-    """``request`` at full fidelity with the settings of ``plan`` (a manifest's ``job.render``)."""
+    """``request`` at full fidelity with the settings of ``plan`` (a manifest's ``job.render``).
+
+    The samples are ``plan``'s times ``factor``, whatever factor ``request`` asked
+    for: its own is already in ``plan`` when ``plan`` was rendered from it.
+    """
     from mincam_render.render.fidelity import Fidelity
 
     bg = plan["background"]  # the request's own fields stay where there is none
@@ -102,6 +106,7 @@ def _scaled(
         background_spp=request.background_spp if bg is None else scaled_samples(bg["spp"], factor),
         shared_difference=request.shared_difference if bg is None else bg["shared_difference"],
         difference_seeds=difference_seeds if frame_seeds else request.difference_seeds,
+        samples_factor=None,  # applied: the plan's samples are the settings now
     )
 
 
