@@ -157,8 +157,11 @@ def main() -> None:
         task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
     if args.test_episodes:
         task["episodes"] = replace(task["episodes"], test_episodes=args.test_episodes)
-    factors = tuple(float(f) for f in args.floor_test_factors.split(",") if f.strip())
-    cfg = DesignProtocolConfig(**task, floor_test_factors=factors)
+    try:
+        factors = tuple(float(f) for f in args.floor_test_factors.split(",") if f.strip())
+        cfg = DesignProtocolConfig(**task, floor_test_factors=factors)
+    except ValueError as e:
+        ap.error(f"--floor-test-factors {args.floor_test_factors!r}: {e}")
     key = args.key or args.task
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
     result = run(cfg, args.work, episodes_dir=args.episodes, sections=sections,

@@ -76,9 +76,10 @@ def test_another_family_missing_or_unfinished_renders_are_refused(
 
 
 def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_dataset, tmp_path):
-    asked = dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=2)
+    asked = dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=2)  # at its own depth, 3
     resolved = resolved_request(asked)
-    assert resolved == rescaled_request(TINY_DIFFERENTIAL, differential_dataset, 2)
+    depth = TINY_DIFFERENTIAL.max_depth
+    assert resolved == rescaled_request(TINY_DIFFERENTIAL, differential_dataset, 2, max_depth=depth)
     assert resolved_request(TINY_DIFFERENTIAL) is TINY_DIFFERENTIAL  # no factor: as asked
     render_dataset(asked, tmp_path / "2x", workers=0)
     job = read_manifest(tmp_path / "2x")["job"]["render"]
@@ -87,7 +88,7 @@ def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_d
         2 * plan["spp"],
         2 * plan["background"]["spp"],
     )
-    assert job["max_depth"] == FULL_PATH_DEPTH
+    assert job["max_depth"] == depth
     # the check's own request of that level finds the dataset finished: the same identity
     again = render_dataset(resolved, tmp_path / "2x", workers=0)
     assert again.shards_rendered == [] and again.shards_kept == [0, 1, 2]
@@ -96,7 +97,7 @@ def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_d
     )  # a per-frame seed asked for is kept
     assert framed.difference_seeds is DifferenceSeeds.FRAME
     # the 2x dataset again at 2x (a study's retest): its plan's samples doubled, once
-    twice = rescaled_request(asked, tmp_path / "2x", 2)
+    twice = rescaled_request(asked, tmp_path / "2x", 2, max_depth=depth)
     assert (twice.spp, twice.samples_factor) == (4 * plan["spp"], None)
 
 
@@ -104,3 +105,23 @@ def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_d
 def test_a_samples_factor_must_be_positive_and_finite(factor):
     with pytest.raises(ValueError, match="samples_factor"):
         dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=factor)
+
+
+def test_a_factor_renders_at_full_depth_unless_the_request_names_one(monkeypatch):
+    from mincam_render.data.render_job import planning
+
+    plan = {"spp": 3, "max_depth": 5, "shared_render": False, "dtype": "float16",
+            "background": {"spp": 10, "shared_difference": True}}  # fmt: skip
+    monkeypatch.setattr(planning, "plan_render", lambda r, **kw: {"job": {"render": plan}})
+    unnamed = dataclasses.replace(TINY_DIFFERENTIAL, max_depth=None, samples_factor=4)
+    out = resolved_request(unnamed)
+    assert (out.spp, out.background_spp, out.max_depth) == (12, 40, FULL_PATH_DEPTH)
+    assert out.samples_factor is None and out.fidelity is Fidelity.FULL
+    assert resolved_request(dataclasses.replace(unnamed, max_depth=7)).max_depth == 7
+
+
+def test_planning_refuses_an_unresolved_samples_factor():
+    from mincam_render.data.render_job.planning import plan_render
+
+    with pytest.raises(ValueError, match="resolved_request"):
+        plan_render(dataclasses.replace(TINY_DIFFERENTIAL, samples_factor=2))

@@ -234,11 +234,16 @@ def test_configuration_is_validated():
         DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))
     floors = (Floor(design="mincam-2px", baseline="baseline-8x8"),)
     for factors in ((1,), (4, 1.0)):
-        with pytest.raises(ValueError, match="other than 1"):
+        with pytest.raises(ValueError, match="a factor other than 1"):
             DesignProtocolConfig(floors=floors, floor_test_factors=factors)
-    with pytest.raises(ValueError, match="distinct"):
-        DesignProtocolConfig(floors=floors, floor_test_factors=(4, 16, 4.0))
-    with pytest.raises(ValueError, match="give floors"):
+    for factors in ((4, 16, 4.0), (4, 4.0000001)):  # one name, one folder: tests-4x
+        with pytest.raises(ValueError, match=r"distinct factors \(\['4x'"):
+            DesignProtocolConfig(floors=floors, floor_test_factors=factors)
+    with pytest.raises(ValueError, match="give floors to read"):
         DesignProtocolConfig(floor_test_factors=(4,))
+    with pytest.raises(ValueError, match="need a sequence"):
+        DesignProtocolConfig(floors=floors, floor_test_factors=4)
     with pytest.raises(ValueError, match="floor_test_factors"):
         DesignProtocolConfig(floors=floors, floor_test_factors=(4, -4))
+    given = DesignProtocolConfig(floors=floors, floor_test_factors=[4, 16])
+    assert given.floor_test_factors == (4.0, 16.0)

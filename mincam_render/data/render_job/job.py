@@ -97,7 +97,9 @@ def render_dataset(
         ValueError: invalid arguments.
     """
     _check_executor_args(workers, shards_per_worker)
-    request = resolved_request(request, use_plan_cache=use_plan_cache, progress=progress)
+    # a resumed render finds its base plan kept (else measured again: the same plan)
+    started = (Path(out) / ds.MANIFEST_NAME).is_file()
+    request = resolved_request(request, use_plan_cache=use_plan_cache or started, progress=progress)
     with exclusive_writer(out, "render") as out:
         t_start = time.perf_counter()
         manifest, kept, repaired, todo = _prepare(request, out, use_plan_cache, progress, limits)

@@ -118,6 +118,11 @@ def plan_render(
     from mincam_render.render import backend
     from mincam_render.scenes.registry import family_reference
 
+    if request.samples_factor is not None:
+        raise ValueError(
+            "plan_render: a request with samples_factor renders as another request; "
+            "plan rescale.resolved_request(request) instead"
+        )
     backend.use_variant()
     family, description, rebuild = _describe_family(request)
     identity = request.identity(description)

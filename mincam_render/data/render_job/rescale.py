@@ -50,9 +50,10 @@ def rescaled_request(
     from mincam_render.data.dataset import MANIFEST_NAME, read_manifest
     from mincam_render.data.render_job.planning import plan_render
 
-    manifest = (
-        read_manifest(rendered) if (rendered / MANIFEST_NAME).is_file() else plan_render(request)
-    )
+    if (rendered / MANIFEST_NAME).is_file():
+        manifest = read_manifest(rendered)
+    else:
+        manifest = plan_render(resolved_request(request))
     return _scaled(request, manifest["job"]["render"], factor, max_depth, difference_seeds)
 
 
@@ -63,10 +64,11 @@ def resolved_request(
 
     Without a factor, ``request`` itself. With one, the plan of the request
     without it (measured, or from the plan cache unless ``use_plan_cache`` is
-    False) at that many times its samples of frames and backgrounds, at
-    :data:`FULL_PATH_DEPTH`, with the request's difference seeds (per window
-    unless it asks for per frame): the task-fidelity check's level of that
-    factor, so both render the same datasets.
+    False) at that many times its samples of frames and backgrounds, at the
+    request's path depth if it names one, else :data:`FULL_PATH_DEPTH`, with
+    the request's difference seeds (per window unless it asks for per frame).
+    With neither named, this is the task-fidelity check's level of that factor:
+    both render the same datasets.
     """
     from mincam_render.data.render_job.planning import plan_render
 
@@ -76,7 +78,8 @@ def resolved_request(
     base = dataclasses.replace(request, samples_factor=None)
     manifest = plan_render(base, use_cache=use_plan_cache, progress=progress)
     seeds = request.difference_seeds or DifferenceSeeds.WINDOW
-    return _scaled(base, manifest["job"]["render"], factor, FULL_PATH_DEPTH, seeds)
+    depth = FULL_PATH_DEPTH if request.max_depth is None else request.max_depth
+    return _scaled(base, manifest["job"]["render"], factor, depth, seeds)
 
 
 def _scaled(

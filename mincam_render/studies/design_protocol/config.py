@@ -126,8 +126,9 @@ class DesignProtocolConfig:
         floor_test_factors: the floors are also read on the test episodes
             rendered again at each of these multiples of the plan's samples, at
             full path depth (the task-fidelity check's level of that factor), by
-            the same runs: the figures with less render noise in the test data,
-            nearer what a deployed camera reads. Empty: on the plan's tests alone.
+            the same runs: with factors above 1, the figures with less render
+            noise in the test data, nearer what a deployed camera reads. Empty:
+            on the plan's tests alone.
     """
 
     episodes: ComparisonConfig = field(
@@ -148,14 +149,7 @@ class DesignProtocolConfig:
     floor_test_factors: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        factors = self.floor_test_factors
-        for factor in factors:
-            check_number("floor_test_factors", factor, 0, 1e4, lo_open=True)
-        if factors and (1 in factors or not self.floors or len(set(factors)) < len(factors)):
-            raise ValueError(
-                f"floor_test_factors {factors}: give floors and distinct factors other than 1 "
-                "(the plan's tests are read anyway)"
-            )
+        self._check_floor_test_factors()
         if not self.ladder or list(self.ladder) != sorted(set(self.ladder)):
             raise ValueError(f"ladder {self.ladder}: need increasing episode counts")
         for n in (*self.ladder, self.recipe_episodes, self.reference_episodes,
@@ -177,6 +171,25 @@ class DesignProtocolConfig:
                     f"floor {f.design} against {f.baseline}: both must be ladder designs "
                     f"({sorted(ladder_names)})"
                 )
+
+    def _check_floor_test_factors(self) -> None:
+        """Positive, distinct (as the ``Fx`` their renders are named by), not 1, with floors."""
+        factors = self.floor_test_factors
+        if isinstance(factors, str) or not isinstance(factors, tuple | list):
+            raise ValueError(f"floor_test_factors {factors!r}: need a sequence, e.g. (4, 16)")
+        for factor in factors:
+            check_number("floor_test_factors", factor, 0, 1e4, lo_open=True)
+        object.__setattr__(self, "floor_test_factors", tuple(float(f) for f in factors))
+        names = [f"{f:g}x" for f in factors]
+        if factors and not self.floors:
+            raise ValueError(f"floor_test_factors {factors}: give floors to read on those tests")
+        if "1x" in names:
+            raise ValueError(
+                f"floor_test_factors {factors}: a factor other than 1 (the plan's tests are "
+                "read anyway)"
+            )
+        if len(set(names)) < len(names):
+            raise ValueError(f"floor_test_factors {factors}: distinct factors ({names})")
 
     def comparison(
         self, train_episodes: int, designs: tuple[Design, ...], **changes: Any

@@ -119,7 +119,7 @@ def _ladder_lines(result: DesignProtocolResult) -> list[str]:
         ]
         for p in result.ladder
     ]
-    for level, p in result.retested.items():  # the largest point's runs on cleaner tests
+    for level, p in result.retested.items():  # the largest point's runs on tests rendered again
         rows.append(
             [f"{p.episodes}, tested at {level} samples", str(p.frames), "",
              *(f"{_interval(f.error, f.ci95)} {f.state}" for f in p.designs.values()),

@@ -11,8 +11,9 @@ on better renders does not settle it):
 1. **Figures per level** (:func:`level_figures`): each design's test figure
    with its 95 % interval over seeds and test episodes, render seconds per
    frame (the Pareto in task units), and the level's render error against the
-   reference beside the label signal (:mod:`.noise`), with its autocorrelation
-   at lags of one frame and one background window.
+   reference (or a test level above it: :func:`noise_reference`) beside the
+   label signal (:mod:`.noise`), with its autocorrelation at lags of one frame
+   and one background window.
 2. **Acceptance** (:func:`acceptance`): a level is *accepted* against the
    reference when every design's figure moves by less than ``acceptance_share``
    of the half-width of its own 95 % interval; the paired difference on the
@@ -491,16 +492,18 @@ def run(
 def noise_reference(cfg: TaskFidelityConfig) -> SampleLevel:
     """What render noise is measured against: the check's reference, or a test level above it.
 
-    A test level with more samples than the reference (a seed per window, as
-    the plan's) has the test episodes the noise is measured on, so the noise of
-    every trained level, the reference's included, is taken against the one of
-    those with the most samples.
+    A test level with more samples than the reference, its seeds and path depth
+    otherwise the reference's, has the test episodes the noise is measured on,
+    so the noise of every trained level, the reference's included, is taken
+    against the one of those with the most samples.
     """
     ref = cfg.level(cfg.reference)
     above = [
         lv
         for lv in cfg.test_levels
-        if lv.difference_seeds is cfg.plan.difference_seeds and lv.factor > ref.factor
+        if lv.difference_seeds is ref.difference_seeds
+        and lv.max_depth == ref.max_depth
+        and lv.factor > ref.factor
     ]
     return max(above, key=lambda lv: lv.factor) if above else ref
 
