@@ -261,7 +261,7 @@ def test_robust_options_are_the_perturbation_record_with_its_defaults():
 @pytest.mark.parametrize(
     ("names", "args", "config", "count"),
     [
-        (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 21),
+        (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 22),
         (("train",), [], TrainConfig, 12),
         (("sweep",), [], TrainConfig, 11),
         (("prune",), ["--run", "r"], TrainConfig, 11),
