@@ -5,7 +5,7 @@ Usage::
     python benchmarks/bench_design_protocol.py --task workspace --work /data/protocol-ws \\
         [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
-        [--floor-test-factors 4,16]
+        [--floor-test-factors 4,16] [--samples-factor 4]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -26,7 +26,10 @@ detectors, episodes of 3,000 independent frames, 4 x 1,000 validation and 6 x
 again at F (and G) times the plan's samples and full path depth (``WORK/tests-Fx``,
 resumable; the task-fidelity check's level ``Fx`` renders the same datasets), by
 the runs of the largest ladder point: the floors with less render noise in the
-test data. The workspace floors as kept in ``workspace-10test`` (the 16x tests
+test data. ``--samples-factor F`` renders (or reads) every episode at F times
+the plan's samples, full path depth (``render --samples-factor F``: the
+task-fidelity check's level ``Fx``); the floor test factors still count from the
+plan. The workspace floors as kept in ``workspace-10test`` (the 16x tests
 hard-linked from the task-fidelity check's ``ws-16x``, resumed as finished)::
 
     python benchmarks/bench_design_protocol.py --task workspace --work /work/protocol-ws10 \
@@ -139,6 +142,13 @@ def main() -> None:
         "--test-episodes", type=int, default=None, help="test episodes (default: the task's)"
     )
     ap.add_argument(
+        "--samples-factor",
+        type=float,
+        default=None,
+        help="render the episodes at this multiple of the plan's samples (render "
+        "--samples-factor; default: the plan's)",
+    )
+    ap.add_argument(
         "--floor-test-factors",
         default="",
         help="also read the floors on tests rendered at these multiples of the plan's "
@@ -157,6 +167,11 @@ def main() -> None:
         task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
     if args.test_episodes:
         task["episodes"] = replace(task["episodes"], test_episodes=args.test_episodes)
+    if args.samples_factor is not None:
+        if not args.samples_factor > 0:
+            ap.error(f"--samples-factor {args.samples_factor}: need a positive multiple")
+        fidelity = {**task["episodes"].fidelity, "samples_factor": args.samples_factor}
+        task["episodes"] = replace(task["episodes"], fidelity=fidelity)
     try:
         factors = tuple(float(f) for f in args.floor_test_factors.split(",") if f.strip())
         cfg = DesignProtocolConfig(**task, floor_test_factors=factors)

@@ -18,7 +18,7 @@ from mincam_render.studies.design_protocol import (
     run,
     write_report,
 )
-from mincam_render.studies.design_protocol.study import LadderPoint, floor_checks
+from mincam_render.studies.design_protocol.study import LadderPoint, floor_checks, retest_requests
 
 QUICK = {"spp": 2, "max_depth": 0, "shared_render": False, "differential": False}
 CFG = DesignProtocolConfig(
@@ -119,6 +119,20 @@ def test_floors_are_paired_on_the_largest_training_set(study):
         else FloorVerdict.UNDECIDED
     )  # fmt: skip
     assert check.verdict is expected
+
+
+def test_retest_factors_count_from_the_plan_when_the_episodes_render_at_a_multiple(tmp_path):
+    import dataclasses
+
+    at_2x = dataclasses.replace(CFG.episodes, fidelity={**QUICK, "samples_factor": 2})
+    cfg = dataclasses.replace(CFG, episodes=at_2x, floor_test_factors=(8,))
+    assert cfg.episodes_factor == 2.0 and CFG.episodes_factor == 1.0
+    plain, scaled = retest_requests(CFG, tmp_path, 8), retest_requests(cfg, tmp_path, 8)
+    assert list(scaled) == ["test-0", "test-1"] == list(plain)
+    for name, request in scaled.items():  # 8 x the plan's 2 spp, whatever the episodes' own
+        assert request.spp == plain[name].spp == 16
+        assert request.max_depth == 16 and request.samples_factor is None
+        assert request.seed == plain[name].seed
 
 
 def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study):
@@ -234,8 +248,12 @@ def test_configuration_is_validated():
         DesignProtocolConfig(floors=(Floor(design="mincam-4px", baseline="baseline-8x8"),))
     floors = (Floor(design="mincam-2px", baseline="baseline-8x8"),)
     for factors in ((1,), (4, 1.0)):
-        with pytest.raises(ValueError, match="a factor other than 1"):
+        with pytest.raises(ValueError, match=r"other than the episodes' own \(1x"):
             DesignProtocolConfig(floors=floors, floor_test_factors=factors)
+    at_4x = ComparisonConfig(fidelity={"samples_factor": 4})
+    with pytest.raises(ValueError, match=r"other than the episodes' own \(4x"):
+        DesignProtocolConfig(episodes=at_4x, floors=floors, floor_test_factors=(16, 4))
+    assert DesignProtocolConfig(episodes=at_4x, floors=floors, floor_test_factors=(1, 16))
     for factors in ((4, 16, 4.0), (4, 4.0000001)):  # one name, one folder: tests-4x
         with pytest.raises(ValueError, match=r"distinct factors \(\['4x'"):
             DesignProtocolConfig(floors=floors, floor_test_factors=factors)

@@ -126,9 +126,10 @@ class DesignProtocolConfig:
         floor_test_factors: the floors are also read on the test episodes
             rendered again at each of these multiples of the plan's samples, at
             full path depth (the task-fidelity check's level of that factor), by
-            the same runs: with factors above 1, the figures with less render
-            noise in the test data, nearer what a deployed camera reads. Empty:
-            on the plan's tests alone.
+            the same runs: with factors above the episodes' own
+            (:attr:`episodes_factor`), the figures with less render noise in the
+            test data, nearer what a deployed camera reads. Empty: on the
+            episodes' own tests alone.
     """
 
     episodes: ComparisonConfig = field(
@@ -172,8 +173,13 @@ class DesignProtocolConfig:
                     f"({sorted(ladder_names)})"
                 )
 
+    @property
+    def episodes_factor(self) -> float:
+        """The multiple of the plan's samples the episodes render at (their ``samples_factor``)."""
+        return float(self.episodes.fidelity.get("samples_factor") or 1.0)
+
     def _check_floor_test_factors(self) -> None:
-        """Positive, distinct (as the ``Fx`` their renders are named by), not 1, with floors."""
+        """Positive, distinct (as their renders' ``Fx``), not the episodes' own, with floors."""
         factors = self.floor_test_factors
         if isinstance(factors, str) or not isinstance(factors, tuple | list):
             raise ValueError(f"floor_test_factors {factors!r}: need a sequence, e.g. (4, 16)")
@@ -183,10 +189,11 @@ class DesignProtocolConfig:
         names = [f"{f:g}x" for f in factors]
         if factors and not self.floors:
             raise ValueError(f"floor_test_factors {factors}: give floors to read on those tests")
-        if "1x" in names:
+        own = f"{self.episodes_factor:g}x"
+        if own in names:
             raise ValueError(
-                f"floor_test_factors {factors}: a factor other than 1 (the plan's tests are "
-                "read anyway)"
+                f"floor_test_factors {factors}: a factor other than the episodes' own "
+                f"({own}: their tests are read anyway)"
             )
         if len(set(names)) < len(names):
             raise ValueError(f"floor_test_factors {factors}: distinct factors ({names})")

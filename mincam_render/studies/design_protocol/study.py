@@ -38,7 +38,7 @@ import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from typing import Protocol as Interface
 
 import numpy as np
@@ -57,6 +57,9 @@ from mincam_render.studies.comparison.result import ComparisonResult
 from mincam_render.studies.comparison.runs import copy_runs_afresh
 from mincam_render.studies.comparison.study import Design
 from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
+
+if TYPE_CHECKING:
+    from mincam_render.data.render_job.request import RenderRequest
 
 
 class Compare(Interface):
@@ -423,26 +426,44 @@ def retested_point(
     """The learning curves' largest point tested on renders with ``factor`` x the samples.
 
     The test episodes are rendered again (resumable) into ``out/tests-<f>x``
-    from their plans in ``episodes`` with the samples times the factor at full
-    path depth (:func:`~mincam_render.data.render_job.rescale.rescaled_request`);
-    the point's runs are copied afresh into
+    (:func:`retest_requests`); the point's runs are copied afresh into
     ``out/ladder/episodes-<n>-tests-<f>x`` (nothing is trained again; the
     ladder's runs are left as they are) and tested there.
     """
     from mincam_render.data.render_job import render_dataset
-    from mincam_render.data.render_job.rescale import rescaled_request
 
     n = cfg.ladder[-1]
     comparison = cfg.comparison(n, cfg.ladder_designs)
     tests = out / f"tests-{factor:g}x"
-    for name, request in comparison_study.episode_requests(comparison).items():
-        if name.startswith("test-"):
-            again = rescaled_request(request, episodes / name, factor)
-            render_dataset(again, tests / name, workers=2, progress=progress)
+    for name, again in retest_requests(cfg, episodes, factor).items():
+        render_dataset(again, tests / name, workers=2, progress=progress)
     ladder = out / "ladder" / f"episodes-{n}"
     here = ladder.with_name(f"{ladder.name}-tests-{factor:g}x")
     copy_runs_afresh(ladder / "runs", here / "runs")
     return _ladder_point(cfg, n, compare(comparison, here, tests), 0.0)
+
+
+def retest_requests(
+    cfg: DesignProtocolConfig, episodes: Path, factor: float
+) -> dict[str, RenderRequest]:
+    """The test episodes' requests at ``factor`` x the plan's samples, full path depth.
+
+    Each is the episode's own request (rendered in ``episodes``, or planned
+    now) rescaled by ``factor`` over the episodes' own
+    :attr:`~DesignProtocolConfig.episodes_factor`
+    (:func:`~mincam_render.data.render_job.rescale.rescaled_request`), so the
+    factor counts from the plan also when the episodes render at a multiple of
+    it: episodes at 4x retested at 16 are the task-fidelity check's ``16x``.
+    """
+    from mincam_render.data.render_job.rescale import rescaled_request
+
+    relative = factor / cfg.episodes_factor
+    requests = comparison_study.episode_requests(cfg.comparison(cfg.ladder[-1], cfg.ladder_designs))
+    return {
+        name: rescaled_request(request, episodes / name, relative)
+        for name, request in requests.items()
+        if name.startswith("test-")
+    }
 
 
 def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> list[Restarts]:
