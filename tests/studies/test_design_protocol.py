@@ -227,8 +227,26 @@ def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | the plan's |" in text
     assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | 2x samples |" in text
     assert "| 2, tested at 2x samples | 80 |  |" in text
+    assert "rendered at" not in text  # the plan's episodes
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
+
+
+def test_the_report_says_at_which_samples_the_episodes_were_rendered(study):
+    import dataclasses
+
+    from mincam_render.studies.design_protocol.report import markdown
+
+    _, result = study
+    config = json.loads(json.dumps(result.config))
+    config["episodes"]["fidelity"]["samples_factor"] = 4.0
+    at_4x = dataclasses.replace(
+        result, config=config, floors=[dataclasses.replace(result.floors[0], test_factor=4.0)]
+    )
+    text = markdown(at_4x)
+    assert "Every episode rendered at 4x the plan's samples." in text
+    assert "| mincam-2px - baseline-2x2 < 0.05 | 2 | 4x samples |" in text
+    assert "the plan's |" not in text
 
 
 def test_configuration_is_validated():

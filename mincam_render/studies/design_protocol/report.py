@@ -40,6 +40,9 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
 def markdown(result: DesignProtocolResult) -> str:
     """Every section as Markdown tables (validation and test beside each other)."""
     lines = [f"# Design protocol: {result.task} ({result.error_name})", ""]
+    factor = result.config["episodes"]["fidelity"].get("samples_factor")
+    if factor is not None:
+        lines += [f"Every episode rendered at {factor:g}x the plan's samples.", ""]
     lines += _floor_lines(result)
     lines += _protocol_lines(result) + _recipe_lines(result) + _ladder_lines(result)
     lines += _reference_lines(result) + _oracle_lines(result) + _restart_lines(result)

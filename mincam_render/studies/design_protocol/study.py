@@ -633,7 +633,7 @@ def run(
         result = replace(result, recipes=recipes, chosen_recipe=chosen)
     if "ladder" in sections:
         ladder, doublings = learning_curves(cfg, compare, out, seconds)
-        floors, retested = floor_checks(cfg, ladder[-1]), {}
+        floors, retested = floor_checks(cfg, ladder[-1], cfg.episodes_factor), {}
         for factor in cfg.floor_test_factors:
             point = retested_point(cfg, compare, out, episodes, factor, progress=progress)
             retested[f"{factor:g}x"] = point
