@@ -6,6 +6,7 @@ Usage::
         [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
         [--floor-test-factors 4,16] [--samples-factor 4]
+        [--reference-episodes 32] [--reference-pixels 8]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -142,6 +143,17 @@ def main() -> None:
         "--test-episodes", type=int, default=None, help="test episodes (default: the task's)"
     )
     ap.add_argument(
+        "--reference-episodes",
+        type=int,
+        default=None,
+        help="training episodes of the references section (default: the config's, 8)",
+    )
+    ap.add_argument(
+        "--reference-pixels",
+        default=None,
+        help="pixel counts of the references section, e.g. 8 (default: 2,8)",
+    )
+    ap.add_argument(
         "--samples-factor",
         type=float,
         default=None,
@@ -167,6 +179,13 @@ def main() -> None:
         task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
     if args.test_episodes:
         task["episodes"] = replace(task["episodes"], test_episodes=args.test_episodes)
+    if args.reference_episodes is not None:
+        task["reference_episodes"] = args.reference_episodes
+    if args.reference_pixels:
+        try:
+            task["reference_pixels"] = tuple(int(k) for k in args.reference_pixels.split(","))
+        except ValueError:
+            ap.error(f"--reference-pixels {args.reference_pixels!r}: pixel counts, e.g. 2,8")
     if args.samples_factor is not None:
         if not args.samples_factor > 0:
             ap.error(f"--samples-factor {args.samples_factor}: need a positive multiple")
@@ -174,9 +193,12 @@ def main() -> None:
         task["episodes"] = replace(task["episodes"], fidelity=fidelity)
     try:
         factors = tuple(float(f) for f in args.floor_test_factors.split(",") if f.strip())
+    except ValueError:
+        ap.error(f"--floor-test-factors {args.floor_test_factors!r}: numbers, e.g. 4,16")
+    try:
         cfg = DesignProtocolConfig(**task, floor_test_factors=factors)
     except ValueError as e:
-        ap.error(f"--floor-test-factors {args.floor_test_factors!r}: {e}")
+        ap.error(str(e))
     key = args.key or args.task
     sections = [s.strip() for s in args.sections.split(",") if s.strip()]
     result = run(cfg, args.work, episodes_dir=args.episodes, sections=sections,
