@@ -271,7 +271,8 @@ def test_configuration_is_validated():
     at_4x = ComparisonConfig(fidelity={"samples_factor": 4})
     with pytest.raises(ValueError, match=r"other than the episodes' own \(4x"):
         DesignProtocolConfig(episodes=at_4x, floors=floors, floor_test_factors=(16, 4))
-    assert DesignProtocolConfig(episodes=at_4x, floors=floors, floor_test_factors=(1, 16))
+    plan_and_16x = DesignProtocolConfig(episodes=at_4x, floors=floors, floor_test_factors=(1, 16))
+    assert plan_and_16x.floor_test_factors == (1.0, 16.0) and plan_and_16x.episodes_factor == 4.0
     for factors in ((4, 16, 4.0), (4, 4.0000001)):  # one name, one folder: tests-4x
         with pytest.raises(ValueError, match=r"distinct factors \(\['4x'"):
             DesignProtocolConfig(floors=floors, floor_test_factors=factors)

@@ -453,7 +453,9 @@ def retest_requests(
     :attr:`~DesignProtocolConfig.episodes_factor`
     (:func:`~mincam_render.data.render_job.rescale.rescaled_request`), so the
     factor counts from the plan also when the episodes render at a multiple of
-    it: episodes at 4x retested at 16 are the task-fidelity check's ``16x``.
+    it: episodes at 4x retested at 16 are the task-fidelity check's ``16x``
+    (the same samples whenever the episodes' samples times the ratio are whole,
+    as for any whole factors; otherwise they may differ by a rounding).
     """
     from mincam_render.data.render_job.rescale import rescaled_request
 
