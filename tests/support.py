@@ -202,6 +202,11 @@ RUN_KINDS = {
         {"pixels": 2, "config": replace(RUN_CONFIG, perturbation=PerturbationModel())},
     ),
     "privacy": (False, {"pixels": 2, "config": replace(RUN_CONFIG, privacy_weight=1.0)}),
+    "head-24": (False, {"pixels": 2, "config": replace(RUN_CONFIG, head_hidden=24)}),
+    "baseline-head-24": (
+        False,
+        {"baseline_grid": (2, 2), "config": replace(RUN_CONFIG, head_hidden=24)},
+    ),
 }
 
 

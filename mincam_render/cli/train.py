@@ -106,6 +106,11 @@ _RECIPE_OPTIONS = {
         "Inference network: mlp (the paper's stacked history) or tcn (causal temporal "
         "convolutions over the history); prune keeps the run's.",
     ),
+    "head_hidden": (
+        "--head-hidden",
+        click.IntRange(1, 4096),
+        "Units of each of the head's two hidden layers; prune keeps the run's.",
+    ),
     "seed": ("--seed", click.IntRange(0), None),
     "privacy_weight": (
         "--privacy-weight",

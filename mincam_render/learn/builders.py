@@ -17,7 +17,7 @@ import torch
 from mincam_render.core.labels import LabelKind
 from mincam_render.learn.models import BaselineCamera, CountLoss, Head, MincamCamera, Model
 from mincam_render.learn.temporal_head import TemporalConvHead
-from mincam_render.learn.train_config import HeadKind, ModelKind
+from mincam_render.learn.train_config import HIDDEN_UNITS, HeadKind, ModelKind
 from mincam_render.learn.training_data import TrainingData
 
 #: The paper's loss for COUNT labels by scene family (``TrainingData.source["family"]``):
@@ -62,12 +62,14 @@ def build_head(
     count_classes: dict[str, int] | None = None,
     seed: int = 0,
     kind: HeadKind = HeadKind.MLP,
+    hidden: int = HIDDEN_UNITS,
 ) -> Head:
     """A head of ``kind`` for ``data``'s labels (targets standardised by its statistics).
 
     ``in_features`` is pixels x time steps (``max(history - 1, 1)`` steps after
-    forward differencing). Its initial weights come from ``seed``; torch's
-    global RNG (used by ``nn.Linear``) is restored afterwards.
+    forward differencing); ``hidden`` the width of its two hidden layers. Its
+    initial weights come from ``seed``; torch's global RNG (used by
+    ``nn.Linear``) is restored afterwards.
     """
     mean, std = data.target_stats()
     steps = max(data.history - 1, 1)
@@ -83,6 +85,7 @@ def build_head(
                 target_mean=mean,
                 target_std=std,
                 count_classes=count_classes,
+                hidden=hidden,
             )
         return Head(
             in_features,
@@ -90,12 +93,18 @@ def build_head(
             target_mean=mean,
             target_std=std,
             count_classes=count_classes,
+            hidden=hidden,
         )
 
 
 def head_kind(head: Head) -> HeadKind:
     """The :class:`HeadKind` of a built head."""
     return HeadKind.TCN if isinstance(head, TemporalConvHead) else HeadKind.MLP
+
+
+def hidden_width(head: Head) -> int:
+    """The width of a built head's hidden layers."""
+    return int(head.out.in_features)
 
 
 def build_mincam(
@@ -107,6 +116,7 @@ def build_mincam(
     count_loss: CountLoss | None = None,
     seed: int = 0,
     head: HeadKind = HeadKind.MLP,
+    head_hidden: int = HIDDEN_UNITS,
     mask_block: int = 1,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
@@ -116,8 +126,8 @@ def build_mincam(
     error: reusing a detector's transport for a second mask must be asked for
     with an explicit ``detectors`` list.
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
-    ``head`` chooses the inference network; ``mask_block`` the masks' block size
-    in texels (:class:`MincamCamera`).
+    ``head`` chooses the inference network and ``head_hidden`` its width;
+    ``mask_block`` the masks' block size in texels (:class:`MincamCamera`).
     """
     k_data = data.transport.shape[1]
     if detectors is None:
@@ -140,6 +150,7 @@ def build_mincam(
         count_classes=count_classes_for(data, count_loss),
         seed=seed,
         kind=head,
+        hidden=head_hidden,
     )
     return MincamCamera(
         data.camera,
@@ -159,11 +170,12 @@ def build_baseline(
     count_loss: CountLoss | None = None,
     seed: int = 0,
     head: HeadKind = HeadKind.MLP,
+    head_hidden: int = HIDDEN_UNITS,
 ) -> BaselineCamera:
     """A baseline camera of ``grid`` box pixels for ``data``'s task (exposure from ``data``).
 
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
-    ``head`` chooses the inference network.
+    ``head`` chooses the inference network and ``head_hidden`` its width.
     """
     net = build_head(
         data,
@@ -171,6 +183,7 @@ def build_baseline(
         count_classes=count_classes_for(data, count_loss),
         seed=seed,
         kind=head,
+        hidden=head_hidden,
     )
     return BaselineCamera(
         grid,
@@ -197,13 +210,15 @@ class ModelRecord(TypedDict, total=False):
     exposure_w: float
     count_classes: dict[str, int]
     head: str
+    hidden: int
 
 
 def describe_model(model: Model) -> ModelRecord:
     """A JSON-ready description of a model (kind, pixels, options).
 
     ``count_classes`` appears only for classified counts, ``head`` only for a
-    head other than the paper's MLP and ``mask_block`` only above 1, so
+    head other than the paper's MLP, ``hidden`` only for a width other than the
+    paper's and ``mask_block`` only above 1, so
     descriptions (and the resume check against checkpoints) of the paper's
     models are unchanged.
     """
@@ -230,4 +245,6 @@ def describe_model(model: Model) -> ModelRecord:
         desc["count_classes"] = dict(model.head.count_classes)
     if head_kind(model.head) is not HeadKind.MLP:
         desc["head"] = head_kind(model.head).value
+    if hidden_width(model.head) != HIDDEN_UNITS:
+        desc["hidden"] = hidden_width(model.head)
     return desc

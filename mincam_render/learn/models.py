@@ -55,7 +55,7 @@ from torch.nn import functional as F
 
 from mincam_render.core.checks import check_int
 from mincam_render.core.labels import LabelKind, LabelSpec
-from mincam_render.learn.train_config import CountLoss
+from mincam_render.learn.train_config import HIDDEN_UNITS, CountLoss
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.optics.fabrication_fused import fused_fabricated_transmittance
 from mincam_render.optics.maskplane import (
@@ -73,8 +73,7 @@ log = logging.getLogger(__name__)
 
 #: The paper's mask initialisation: transmittance ~ U(0.08, 0.12) (Sec. 5).
 INIT_TRANSMITTANCE = (0.08, 0.12)
-#: Head width and activation slope (paper Sec. 5).
-HIDDEN_UNITS = 128
+#: The head's activation slope (paper Sec. 5; its width: HIDDEN_UNITS).
 LEAKY_SLOPE = 0.1
 #: Training keeps mask logits in [-MAX_LOGIT, MAX_LOGIT]. At |logit| = 8 the
 #: transmittance is (hi - lo) * sigmoid(-8) ~ 2e-4 from its printable limit (below

@@ -9,7 +9,7 @@ import torch
 
 from mincam_render.core.seeds import stream_seed
 from mincam_render.core.strict_json import JsonObject
-from mincam_render.learn.builders import build_head, head_kind
+from mincam_render.learn.builders import build_head, head_kind, hidden_width
 from mincam_render.learn.evaluation import Evaluation, evaluate, even_indices, predict
 from mincam_render.learn.loop import train_model
 from mincam_render.learn.models import MincamCamera, task_loss
@@ -139,6 +139,7 @@ def _pruned_camera(
         count_classes=model.head.count_classes,
         seed=stream_seed(config.seed, "prune/head", len(keep)),
         kind=head_kind(model.head),
+        hidden=hidden_width(model.head),
     )
     nxt = MincamCamera(
         model.camera,

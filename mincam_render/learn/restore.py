@@ -34,7 +34,7 @@ from mincam_render.data.dataset import LabelSpecRecord
 from mincam_render.learn.builders import ModelRecord, build_head
 from mincam_render.learn.checkpoint import load_checkpoint
 from mincam_render.learn.models import BaselineCamera, MincamCamera, Model
-from mincam_render.learn.train_config import HeadKind, ModelKind
+from mincam_render.learn.train_config import HIDDEN_UNITS, HeadKind, ModelKind
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
 
@@ -159,8 +159,8 @@ def open_run(run_dir: str | os.PathLike, *, allow_unfinished: bool = False) -> T
 def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     """The trained camera of ``run``, to be measured on ``data`` (in evaluation mode).
 
-    Built from the run's own description (kind, detectors or grid, head kind,
-    count classes, history, sensor model, camera or exposure) and loaded with its
+    Built from the run's own description (kind, detectors or grid, head kind
+    and width, count classes, history, sensor model, camera or exposure) and loaded with its
     best state, strictly but for a privacy adversary's.
 
     Raises:
@@ -175,11 +175,16 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
         )
     steps = max(desc["history"] - 1, 1)
     kind = HeadKind(desc.get("head", HeadKind.MLP.value))
+    hidden = int(desc.get("hidden", HIDDEN_UNITS))
     model: Model
     if run.kind is ModelKind.MINCAM:
         camera = _run_camera(run, data)
         head = build_head(
-            data, len(desc["detectors"]) * steps, count_classes=desc.get("count_classes"), kind=kind
+            data,
+            len(desc["detectors"]) * steps,
+            count_classes=desc.get("count_classes"),
+            kind=kind,
+            hidden=hidden,
         )
         model = MincamCamera(
             camera,
@@ -192,7 +197,11 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     else:
         grid = (int(desc["grid"][0]), int(desc["grid"][1]))
         head = build_head(
-            data, grid[0] * grid[1] * steps, count_classes=desc.get("count_classes"), kind=kind
+            data,
+            grid[0] * grid[1] * steps,
+            count_classes=desc.get("count_classes"),
+            kind=kind,
+            hidden=hidden,
         )
         model = BaselineCamera(grid, head, exposure_w=desc["exposure_w"], history=desc["history"])
     state = {k: v for k, v in run.state.items() if not k.startswith(ADVERSARY_PREFIX)}

@@ -28,7 +28,7 @@ from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import MincamCamera, Model
 from mincam_render.learn.reference_masks import set_reference_masks
 from mincam_render.learn.restore import FINISHED_MARK, ModelKind, RunRecord, open_run
-from mincam_render.learn.train_config import HeadKind, MaskReference, TrainConfig
+from mincam_render.learn.train_config import HIDDEN_UNITS, HeadKind, MaskReference, TrainConfig
 from mincam_render.learn.training_data import TrainingData
 from mincam_render.optics.camera import FreeformCamera
 
@@ -203,7 +203,12 @@ def _build_model(
                 "a baseline camera has none"
             )
         return build_baseline(
-            train, baseline_grid, count_loss=config.count_loss, seed=config.seed, head=config.head
+            train,
+            baseline_grid,
+            count_loss=config.count_loss,
+            seed=config.seed,
+            head=config.head,
+            head_hidden=config.head_hidden,
         )
     model = build_mincam(
         train,
@@ -212,6 +217,7 @@ def _build_model(
         count_loss=config.count_loss,
         seed=config.seed,
         head=config.head,
+        head_hidden=config.head_hidden,
         mask_block=config.mask_block,
     )
     if config.privacy_weight > 0:
@@ -248,6 +254,8 @@ def _frozen_mask_camera(
         sensor_model=sensor_model,
         count_loss=config.count_loss,
         seed=config.seed,
+        head=config.head,
+        head_hidden=config.head_hidden,
     )
     with torch.no_grad():
         model.logits.copy_(run.state["logits"])
@@ -311,7 +319,8 @@ def _run_metrics(
 def config_record(config: TrainConfig) -> JsonObject:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
-    ``head`` appears only when not the paper's MLP, ``perturbation`` (in its
+    ``head`` appears only when not the paper's MLP, ``head_hidden`` only when not
+    the paper's width, ``perturbation`` (in its
     record's units, :meth:`~mincam_render.optics.perturbation.PerturbationModel.to_record`)
     and ``robust_validation_draws`` only when training is robust, ``privacy_weight``
     and the masks' priors and the transport noise only when not 0, ``mask_block``
@@ -330,6 +339,8 @@ def config_record(config: TrainConfig) -> JsonObject:
         record["perturbation"] = config.perturbation.to_record()
     if not config.privacy_weight:
         del record["privacy_weight"]
+    if config.head_hidden == HIDDEN_UNITS:
+        del record["head_hidden"]
     if config.head is HeadKind.MLP:
         del record["head"]
     else:

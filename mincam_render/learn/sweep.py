@@ -176,6 +176,7 @@ def _sweep_jobs(
                     count_loss=config.count_loss,
                     seed=config.seed,
                     head=config.head,
+                    head_hidden=config.head_hidden,
                 ),
             )
         )
@@ -191,6 +192,7 @@ def _sweep_jobs(
                     count_loss=config.count_loss,
                     seed=config.seed,
                     head=config.head,
+                    head_hidden=config.head_hidden,
                 ),
             )
         )

@@ -23,7 +23,8 @@ from torch import nn
 from torch.nn import functional as F
 
 from mincam_render.core.labels import LabelSpec
-from mincam_render.learn.models import HIDDEN_UNITS, LEAKY_SLOPE, Head, InputNorm
+from mincam_render.learn.models import LEAKY_SLOPE, Head, InputNorm
+from mincam_render.learn.train_config import HIDDEN_UNITS
 
 #: Channels of every convolution and its kernel length (time steps).
 TCN_CHANNELS = 32

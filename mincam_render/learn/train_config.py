@@ -28,6 +28,10 @@ class ModelKind(enum.StrEnum):
     BASELINE = "baseline"
 
 
+#: Width of the head's two hidden layers (paper Sec. 5).
+HIDDEN_UNITS = 128
+
+
 class HeadKind(enum.Enum):
     """The inference network behind the pixels.
 
@@ -89,6 +93,9 @@ class TrainConfig:
             data's scene family (:data:`PAPER_COUNT_LOSS`). Used where this module
             builds the models (:func:`sweep`, :func:`train_run`).
         head: the inference network (:class:`HeadKind`); the paper's is ``MLP``.
+        head_hidden: units of each of the head's two hidden layers (the
+            paper's :data:`HIDDEN_UNITS`; the design protocol's ``head-512``
+            recipe tries a wider head).
         seed: seed of batches, noise and initialisation.
         torch_threads: intra-op threads while training (restored afterwards). The
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
@@ -136,6 +143,7 @@ class TrainConfig:
     max_eval_samples: int = 2048
     count_loss: CountLoss | None = None
     head: HeadKind = HeadKind.MLP
+    head_hidden: int = HIDDEN_UNITS
     seed: int = 0
     torch_threads: int | None = 1
     perturbation: PerturbationModel | None = None
@@ -158,6 +166,7 @@ class TrainConfig:
             ("mask_block", 1),
         ):
             check_int(f"TrainConfig.{name}", getattr(self, name), lo)
+        check_int("TrainConfig.head_hidden", self.head_hidden, 1, 4096)
         for name in ("lr_decay", "lr"):  # lr None: learning_rate_for the input count
             if getattr(self, name) is not None:
                 check_number(

@@ -1,7 +1,8 @@
 """The commands that read a run: every kind they take works, the others are one line.
 
 ``export-masks``, ``prune`` and ``report robustness`` on minimalist runs trained
-nominally, with a temporal-convolution head, robustly and with the privacy term;
+nominally, with a temporal-convolution head, robustly, with the privacy term and
+with a head of another width;
 a baseline run refused by each; unfinished runs refused unless allowed (then
 marked); exports that replace their folder whole; names kept inside ``--out``;
 a run resumed through another spelling of its paths.
@@ -28,6 +29,7 @@ KINDS = {
     "tcn": ["--head", "tcn"],
     "robust": ["--robust"],
     "privacy": ["--privacy-weight", "1"],
+    "head-24": ["--head-hidden", "24"],
 }
 MINCAM_KINDS = [k for k in KINDS if k != "baseline"]
 

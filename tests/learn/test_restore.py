@@ -16,7 +16,7 @@ from mincam_render.studies.robustness.study import robustness_curves
 
 CFG = RUN_CONFIG
 KINDS = RUN_KINDS
-MINCAM_KINDS = [k for k in KINDS if k != "baseline"]
+MINCAM_KINDS = [k for k in KINDS if not k.startswith("baseline")]
 _splits = run_splits
 
 
@@ -43,6 +43,17 @@ def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs_of_eac
     cfg = RobustnessConfig(levels=(0.0, 1.0), draws=2)
     curves = robustness_curves(model, {"test": test}, cfg, name=kind)
     assert curves.nominal_error > 0 and "mix" in curves.curves
+
+
+@pytest.mark.parametrize("kind", ["head-24", "baseline-head-24"])
+def test_a_head_of_another_width_is_recorded_and_restored_at_that_width(runs_of_each_kind, kind):
+    run_dir, _, test = runs_of_each_kind[kind]
+    run = tr.open_run(run_dir)
+    assert run.record["model"]["hidden"] == 24 and run.record["config"]["head_hidden"] == 24
+    assert tr.restore_model(run, test).head.out.in_features == 24
+    # the paper's width is left out of run.json: runs from before the option resume
+    paper = tr.open_run(runs_of_each_kind[{"head-24": "mincam"}.get(kind, "baseline")][0])
+    assert "hidden" not in paper.record["model"] and "head_hidden" not in paper.record["config"]
 
 
 def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs_of_each_kind):

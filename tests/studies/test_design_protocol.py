@@ -15,6 +15,7 @@ from mincam_render.studies.design_protocol import (
     Floor,
     FloorVerdict,
     RecipeVariant,
+    recipes_named,
     run,
     write_report,
 )
@@ -284,3 +285,15 @@ def test_configuration_is_validated():
         DesignProtocolConfig(floors=floors, floor_test_factors=(4, -4))
     given = DesignProtocolConfig(floors=floors, floor_test_factors=[4, 16])
     assert given.floor_test_factors == (4.0, 16.0)
+
+
+def test_recipes_are_chosen_by_name_after_the_base():
+    chosen = recipes_named(["head-512", "tv-0.3"])
+    assert [r.name for r in chosen] == ["base", "head-512", "tv-0.3"]
+    assert chosen[1].apply(TrainConfig()).head_hidden == 512
+    assert [r.name for r in recipes_named(["base"])] == ["base"]
+    for names in (["head-1024"], ["tv-0.3", "tv-0.3"]):
+        with pytest.raises(ValueError, match="at most once"):
+            recipes_named(names)
+    with pytest.raises(ValueError, match="head_hidden"):
+        RecipeVariant(name="x", changes={"head_hidden": 0})

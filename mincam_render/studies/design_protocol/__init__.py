@@ -5,6 +5,7 @@ from mincam_render.studies.design_protocol.config import (
     Floor,
     RecipeVariant,
     default_recipes,
+    recipes_named,
 )
 from mincam_render.studies.design_protocol.report import write_report
 from mincam_render.studies.design_protocol.study import (
@@ -22,6 +23,7 @@ __all__ = [
     "FloorVerdict",
     "RecipeVariant",
     "default_recipes",
+    "recipes_named",
     "run",
     "write_report",
 ]

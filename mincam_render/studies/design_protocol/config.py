@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -83,7 +83,13 @@ def _field_value(value: Any) -> Any:
 
 
 def default_recipes() -> tuple[RecipeVariant, ...]:
-    """The variants of the issue's step 3: gain augmentation and priors against overfitting."""
+    """The variants of the issue's step 3: gain augmentation, priors, a wider head.
+
+    ``head-512`` (four times the paper's hidden width) was added after the
+    learning curves flattened for the freeform cameras (the 8-pixel floor's
+    limit, ``docs/design_protocol.md``): whether the head, not what the pixels
+    read, stops them.
+    """
     return (
         RecipeVariant(name="base"),
         RecipeVariant(name="gain-5", changes={"gain_range": (0.95, 1.05)}),
@@ -95,7 +101,22 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="noise-0.03", changes={"transport_noise": 0.03}),
         RecipeVariant(name="noise-0.1", changes={"transport_noise": 0.1}),
         RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
+        RecipeVariant(name="head-512", changes={"head_hidden": 512}),
     )
+
+
+def recipes_named(names: Sequence[str]) -> tuple[RecipeVariant, ...]:
+    """The base recipe and the variants of :func:`default_recipes` called ``names``, in order.
+
+    Raises:
+        ValueError: a name that is not a default variant's, or one given twice.
+    """
+    known = {r.name: r for r in default_recipes()}
+    unknown = [n for n in names if n not in known]
+    if unknown or len(set(names)) != len(names):
+        raise ValueError(f"recipes {list(names)}: give each of {sorted(known)} at most once")
+    base = default_recipes()[0]
+    return (base, *(known[n] for n in names if n != base.name))
 
 
 @dataclass(frozen=True, kw_only=True)
