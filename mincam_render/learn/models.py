@@ -173,7 +173,7 @@ class InputNorm(nn.BatchNorm1d):
 
 
 class Head(nn.Module):
-    """Inference network: input standardisation, 2 x ``hidden`` leaky-ReLU layers, outputs per label.
+    """Inference network: input standardisation, 2 x ``hidden`` leaky-ReLU layers, label outputs.
 
     Args:
         in_features: number of inputs (pixels x time steps).
