@@ -7,6 +7,7 @@ Usage::
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
         [--floor-test-factors 4,16] [--samples-factor 4]
         [--reference-episodes 32] [--reference-pixels 8]
+        [--recipes head-512] [--recipe-episodes 16]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,

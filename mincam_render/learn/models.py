@@ -173,7 +173,7 @@ class InputNorm(nn.BatchNorm1d):
 
 
 class Head(nn.Module):
-    """Inference network: input standardisation, 2 x 128 leaky-ReLU layers, one output per label.
+    """Inference network: input standardisation, 2 x ``hidden`` leaky-ReLU layers, label outputs.
 
     Args:
         in_features: number of inputs (pixels x time steps).
@@ -183,7 +183,7 @@ class Head(nn.Module):
         count_classes: ``{name: n}`` COUNT labels learned by cross-entropy over the
             counts ``0 .. n-1`` (n >= 2; ``n`` logits per element); the other
             COUNT labels are regressed (MSE). See :class:`CountLoss`.
-        hidden: hidden width.
+        hidden: hidden width (the paper's :data:`HIDDEN_UNITS`).
 
     Raises:
         ValueError: no labels, no inputs, or ``count_classes`` naming a label that

@@ -190,8 +190,9 @@ def set_reference_masks(
     ``frozen``: the masks stay fixed and only the head trains (the reference
     itself); False: training starts from them (end to end, initialised by the
     reference). ``DISTILLED`` first trains its teacher, a box-pixel camera at
-    the texel grid with ``config``'s recipe, into ``teacher_dir`` (resumable;
-    None: in memory).
+    the texel grid with the paper's head (its first layer is what is distilled)
+    and ``config``'s training recipe, into ``teacher_dir`` (resumable; None: in
+    memory).
     """
     from mincam_render.learn.builders import build_baseline
     from mincam_render.learn.loop import train_model

@@ -10,7 +10,8 @@ import pytest
 from support import RUN_CONFIG, RUN_KINDS, linear_task, run_splits
 
 from mincam_render.learn import train as tr
-from mincam_render.learn.runs import data_identity, describe_run
+from mincam_render.learn.prune import _pruned_camera
+from mincam_render.learn.runs import _frozen_mask_camera, data_identity, describe_run
 from mincam_render.studies.robustness.config import RobustnessConfig
 from mincam_render.studies.robustness.study import robustness_curves
 
@@ -54,6 +55,16 @@ def test_a_head_of_another_width_is_recorded_and_restored_at_that_width(runs_of_
     # the paper's width is left out of run.json: runs from before the option resume
     paper = tr.open_run(runs_of_each_kind[{"head-24": "mincam"}.get(kind, "baseline")][0])
     assert "hidden" not in paper.record["model"] and "head_hidden" not in paper.record["config"]
+
+
+def test_pruned_and_frozen_mask_cameras_keep_the_head_they_are_given(runs_of_each_kind):
+    run_dir, _, test = runs_of_each_kind["head-24"]
+    pruned = _pruned_camera(tr.restore_mincam(tr.open_run(run_dir), test, "prune"), test, [0], CFG)
+    assert pruned.head.out.in_features == 24 and pruned.num_pixels == 1
+    wide_tcn = replace(CFG, head=tr.HeadKind.TCN, head_hidden=40)
+    frozen = _frozen_mask_camera(test, runs_of_each_kind["mincam"][0], True, wide_tcn)
+    assert isinstance(frozen.head, tr.TemporalConvHead) and frozen.head.out.in_features == 40
+    assert not frozen.logits.requires_grad
 
 
 def test_a_baseline_run_is_refused_in_one_line_by_what_needs_masks(runs_of_each_kind):
