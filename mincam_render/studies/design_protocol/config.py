@@ -83,12 +83,14 @@ def _field_value(value: Any) -> Any:
 
 
 def default_recipes() -> tuple[RecipeVariant, ...]:
-    """The variants of the issue's step 3: gain augmentation, priors, a wider head.
+    """The variants of the issue's step 3: gain augmentation, priors, a wider head, a budget.
 
     ``head-512`` (four times the paper's hidden width) was added after the
     learning curves flattened for the freeform cameras (the 8-pixel floor's
     limit, ``docs/design_protocol.md``): whether the head, not what the pixels
-    read, stops them.
+    read, stops them. ``steps-30k`` (three times the base's step budget; the
+    issue's "longer training") was added after the patches box cameras ended
+    budget-limited at 10,000 steps: whether the floors' baselines were cut short.
     """
     return (
         RecipeVariant(name="base"),
@@ -102,6 +104,7 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="noise-0.1", changes={"transport_noise": 0.1}),
         RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
         RecipeVariant(name="head-512", changes={"head_hidden": 512}),
+        RecipeVariant(name="steps-30k", changes={"max_steps": 30000}),
     )
 
 
