@@ -202,23 +202,13 @@ def _build_model(
                 f"privacy_weight = {config.privacy_weight}: the privacy term trains masks; "
                 "a baseline camera has none"
             )
-        return build_baseline(
-            train,
-            baseline_grid,
-            count_loss=config.count_loss,
-            seed=config.seed,
-            head=config.head,
-            head_hidden=config.head_hidden,
-        )
+        return build_baseline(train, baseline_grid, **config.head_options())
     model = build_mincam(
         train,
         pixels,
         sensor_model=sensor_model,
-        count_loss=config.count_loss,
-        seed=config.seed,
-        head=config.head,
-        head_hidden=config.head_hidden,
         mask_block=config.mask_block,
+        **config.head_options(),
     )
     if config.privacy_weight > 0:
         attach_adversary(model, seed=config.seed)
@@ -252,10 +242,7 @@ def _frozen_mask_camera(
         train,
         detectors=run.record["model"]["detectors"],
         sensor_model=sensor_model,
-        count_loss=config.count_loss,
-        seed=config.seed,
-        head=config.head,
-        head_hidden=config.head_hidden,
+        **config.head_options(),
     )
     with torch.no_grad():
         model.logits.copy_(run.state["logits"])

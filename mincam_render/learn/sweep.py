@@ -169,15 +169,7 @@ def _sweep_jobs(
         jobs.append(
             (
                 f"mincam_{k}px",
-                functools.partial(
-                    build_mincam,
-                    train,
-                    k,
-                    count_loss=config.count_loss,
-                    seed=config.seed,
-                    head=config.head,
-                    head_hidden=config.head_hidden,
-                ),
+                functools.partial(build_mincam, train, k, **config.head_options()),
             )
         )
     for g in baseline_grids:
@@ -185,15 +177,7 @@ def _sweep_jobs(
         jobs.append(
             (
                 f"baseline_{grid[0]}x{grid[1]}",
-                functools.partial(
-                    build_baseline,
-                    train,
-                    grid,
-                    count_loss=config.count_loss,
-                    seed=config.seed,
-                    head=config.head,
-                    head_hidden=config.head_hidden,
-                ),
+                functools.partial(build_baseline, train, grid, **config.head_options()),
             )
         )
     return jobs

@@ -206,3 +206,15 @@ class TrainConfig:
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
+
+    def head_options(self) -> dict[str, object]:
+        """The keywords of ``learn.builders.build_mincam`` and ``build_baseline`` it sets.
+
+        How counts are learned, the seed, and the head's kind and width (the recipe's).
+        """
+        return {
+            "count_loss": self.count_loss,
+            "seed": self.seed,
+            "head": self.head,
+            "head_hidden": self.head_hidden,
+        }

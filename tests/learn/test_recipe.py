@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -111,6 +113,24 @@ def test_default_recipe_leaves_run_records_unchanged():
     record = config_record(tr.TrainConfig())
     assert not {"mask_tv_weight", "mask_logit_decay", "transport_noise", "mask_block"} & set(record)
     assert config_record(tr.TrainConfig(mask_block=2))["mask_block"] == 2
+
+
+def test_sweep_cameras_get_the_recipes_head_and_seed():
+    from mincam_render.learn.builders import hidden_width
+    from mincam_render.learn.sweep import _sweep_jobs
+
+    data = linear_task(n=64)
+    config = tr.TrainConfig(head_hidden=24, seed=3)
+    jobs = dict(_sweep_jobs(data, [2], ["2x2"], config))
+    assert sorted(jobs) == ["baseline_2x2", "mincam_2px"]
+    for name, build in jobs.items():
+        model = build()
+        assert hidden_width(model.head) == 24, name
+        again = dict(_sweep_jobs(data, [2], ["2x2"], config))[name]()
+        other = dict(_sweep_jobs(data, [2], ["2x2"], replace(config, seed=4)))[name]()
+        first = next(model.head.parameters())
+        assert torch.equal(first, next(again.head.parameters())), name
+        assert not torch.equal(first, next(other.head.parameters())), name
 
 
 def test_pooled_validation_is_the_sample_weighted_pool_of_the_episodes():

@@ -37,6 +37,7 @@ CFG = DesignProtocolConfig(
     task="count",
     ladder=(1, 2),
     ladder_designs=(Design(pixels=2), Design(grid=(2, 2))),
+    recipe_episodes=2,
     recipes=(
         RecipeVariant(name="base"),
         RecipeVariant(name="tv", changes={"mask_tv_weight": 0.1}, minimalist_only=True),
@@ -78,7 +79,8 @@ def test_every_section_reports_the_designs_it_ran(study):
         + [f"mincam-2px-{r}{t}" for r in ("pca", "pls", "distilled") for t in ("", "-tuned")]
     )
     assert "mincam-2px" not in ref.versus_end_to_end
-    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 2)
+    # the base recipe on 2 episodes is the ladder's point: its runs count once
+    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1)
     labels = [r.label for r in result.protocol]
     assert labels == ["count"]
     (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
@@ -103,6 +105,13 @@ def test_the_figures_are_the_comparisons_on_disk(study):
     assert {e for e in metrics["episodes"] if not e.startswith("train")} == {
         "val-0", "val-1", "test-0", "test-1"
     }  # fmt: skip
+
+
+def test_the_base_recipe_on_a_ladder_point_is_that_point(study):
+    out, result = study
+    assert result.recipes[0].designs == result.ladder[1].designs
+    assert not (out / "recipes" / "base").exists()
+    assert (out / "recipes" / "tv" / "metrics.json").is_file()  # a variant: its own runs
 
 
 def test_floors_are_paired_on_the_largest_training_set(study):

@@ -56,7 +56,11 @@ from mincam_render.studies.comparison.figures import DesignFigure, Paired
 from mincam_render.studies.comparison.result import ComparisonResult
 from mincam_render.studies.comparison.runs import copy_runs_afresh
 from mincam_render.studies.comparison.study import Design
-from mincam_render.studies.design_protocol.config import DesignProtocolConfig, Floor
+from mincam_render.studies.design_protocol.config import (
+    DesignProtocolConfig,
+    Floor,
+    RecipeVariant,
+)
 
 if TYPE_CHECKING:
     from mincam_render.data.render_job.request import RenderRequest
@@ -283,20 +287,24 @@ def recipe_table(
 ) -> tuple[list[RecipeRow], dict[str, str]]:
     """Every recipe variant on the validation and test episodes (section 2).
 
+    Runs are kept in ``out/recipes/<variant>``, but a variant that trains what
+    the learning curves' point of ``recipe_episodes`` trains (the base, when
+    that count is on the ladder) is that point's comparison (:func:`ladder_dir`):
+    trained once for both sections.
+
     Returns:
         ``(rows, chosen)``: ``chosen[design]`` is the recipe validation picks:
         among the variants lower than the base on the validation episodes (the
         paired interval below 0), the one with the lowest validation error; the
         base where no variant is.
     """
-    base_cfg = cfg.episodes.train
     rows: list[RecipeRow] = []
     for variant in cfg.recipes:
-        designs = tuple(d for d in cfg.ladder_designs if d.is_mincam or not variant.minimalist_only)
-        result = compare(
-            cfg.comparison(cfg.recipe_episodes, designs, train=variant.apply(base_cfg)),
-            out / "recipes" / variant.name,
-        )
+        designs = _recipe_designs(cfg, variant)
+        where = out / "recipes" / variant.name
+        if _is_ladder_point(cfg, variant):
+            where = ladder_dir(out, cfg.recipe_episodes)  # trained once for both sections
+        result = compare(_recipe_comparison(cfg, variant), where)
         block = result.block(cfg.task)
         figures = {d.name: block.figure(d.name) for d in designs}
         base = rows[0].designs if rows else figures
@@ -312,6 +320,30 @@ def recipe_table(
             )
         )
     return rows, {d.name: _chosen(rows, d.name) for d in cfg.ladder_designs}
+
+
+def _recipe_designs(cfg: DesignProtocolConfig, variant: RecipeVariant) -> tuple[Design, ...]:
+    """The designs ``variant`` is tried on (a mask-only change: the minimalist ones)."""
+    return tuple(d for d in cfg.ladder_designs if d.is_mincam or not variant.minimalist_only)
+
+
+def _recipe_comparison(cfg: DesignProtocolConfig, variant: RecipeVariant) -> ComparisonConfig:
+    """What ``variant`` trains on the recipes' episodes."""
+    train = variant.apply(cfg.episodes.train)
+    return cfg.comparison(cfg.recipe_episodes, _recipe_designs(cfg, variant), train=train)
+
+
+def _is_ladder_point(cfg: DesignProtocolConfig, variant: RecipeVariant) -> bool:
+    """Whether ``variant`` trains what the learning curves' point of ``recipe_episodes`` does."""
+    n = cfg.recipe_episodes
+    return n in cfg.ladder and _recipe_comparison(cfg, variant) == cfg.comparison(
+        n, cfg.ladder_designs
+    )
+
+
+def ladder_dir(out: Path, n: int) -> Path:
+    """The comparison of the learning curves' point of ``n`` training episodes."""
+    return out / "ladder" / f"episodes-{n}"
 
 
 def _paired_validation(a: DesignFigure, b: DesignFigure) -> Paired:
@@ -347,7 +379,7 @@ def learning_curves(
     """
     points = []
     for n in cfg.ladder:
-        result = compare(cfg.comparison(n, cfg.ladder_designs), out / "ladder" / f"episodes-{n}")
+        result = compare(cfg.comparison(n, cfg.ladder_designs), ladder_dir(out, n))
         points.append(_ladder_point(cfg, n, result, render_seconds(n)))
     doublings = [
         Doubling(
@@ -437,7 +469,7 @@ def retested_point(
     tests = out / f"tests-{factor:g}x"
     for name, again in retest_requests(cfg, episodes, factor).items():
         render_dataset(again, tests / name, workers=2, progress=progress)
-    ladder = out / "ladder" / f"episodes-{n}"
+    ladder = ladder_dir(out, n)
     here = ladder.with_name(f"{ladder.name}-tests-{factor:g}x")
     copy_runs_afresh(ladder / "runs", here / "runs")
     return _ladder_point(cfg, n, compare(comparison, here, tests), 0.0)
@@ -648,8 +680,12 @@ def run(
         result = replace(result, oracle=oracle_point(cfg, compare, out))
     if "restarts" in sections:
         result = replace(result, restarts=restart_table(cfg, compare, out))
-    figures = [f for r in result.recipes for f in r.designs.values()]
-    figures += [f for p in result.ladder for f in p.designs.values()]
+    figures = [f for p in result.ladder for f in p.designs.values()]
+    # a recipe row that is a ladder point (its runs) counts once
+    ran = result.recipes and cfg.recipes
+    for row, variant in zip(result.recipes, ran, strict=True):
+        if not (result.ladder and _is_ladder_point(cfg, variant)):
+            figures += row.designs.values()
     selection = selection_agreement(figures) if figures else None
     return replace(result, error_name=error_names.get("task", ""), selection=selection)
 
