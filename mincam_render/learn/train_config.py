@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import TypedDict
 
 from mincam_render.core.checks import check_int, check_number
 from mincam_render.optics.perturbation import PerturbationModel
@@ -65,6 +66,15 @@ class MaskReference(enum.Enum):
     PCA = "pca"
     PLS = "pls"
     DISTILLED = "distilled"
+
+
+class HeadOptions(TypedDict):
+    """The builders' keywords a recipe sets (:meth:`TrainConfig.head_options`)."""
+
+    count_loss: CountLoss | None
+    seed: int
+    head: HeadKind
+    head_hidden: int
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -207,7 +217,7 @@ class TrainConfig:
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")
 
-    def head_options(self) -> dict[str, object]:
+    def head_options(self) -> HeadOptions:
         """The keywords of ``learn.builders.build_mincam`` and ``build_baseline`` it sets.
 
         How counts are learned, the seed, and the head's kind and width (the recipe's).

@@ -681,8 +681,7 @@ def run(
     if "restarts" in sections:
         result = replace(result, restarts=restart_table(cfg, compare, out))
     figures = [f for p in result.ladder for f in p.designs.values()]
-    # a recipe row that is a ladder point (its runs) counts once
-    ran = result.recipes and cfg.recipes
+    ran = cfg.recipes[: len(result.recipes)]  # a recipe row that is a ladder point counts once
     for row, variant in zip(result.recipes, ran, strict=True):
         if not (result.ladder and _is_ladder_point(cfg, variant)):
             figures += row.designs.values()
