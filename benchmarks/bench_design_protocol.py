@@ -132,6 +132,8 @@ TASKS: dict[str, dict[str, Any]] = {
         "episodes": replace(PATCHES_EPISODES, family=str(SCENES / "patches_narrow.toml")),
         "task": "count",
         "ladder": (1, 2, 4, 8, 16),
+        # the wide patches' floor, added after the ladder to 8 episodes tied there
+        "floors": (Floor(design="mincam-8px", baseline="baseline-32x32"),),
     },
 }
 
