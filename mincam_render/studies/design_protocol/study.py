@@ -506,16 +506,17 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
     Each minimalist design of the ladder is trained with ``seeds x restarts``
     seeds; group ``g`` (runs ``g R .. g R + R - 1``) keeps its run with the
     lowest error pooled over the validation episodes, so there are as many
-    kept cameras as plain seeds, each costing ``R`` runs.
+    kept cameras as plain seeds, each costing ``R`` runs. The first ``seeds``
+    runs are the ladder point's (copied from it where it has finished them).
     """
     from dataclasses import replace as _replace
 
     seeds, r = cfg.episodes.seeds, cfg.restarts
     designs = tuple(d for d in cfg.ladder_designs if d.is_mincam)
     n = cfg.ladder[-1]
-    result = compare(
-        _replace(cfg.comparison(n, designs), seeds=seeds * r), out / "restarts" / f"episodes-{n}"
-    )
+    folder = out / "restarts" / f"episodes-{n}"
+    _reuse_ladder_runs(ladder_dir(out, n), folder, designs, seeds)
+    result = compare(_replace(cfg.comparison(n, designs), seeds=seeds * r), folder)
     block = result.block(cfg.task)
     rows = []
     for d in designs:
@@ -549,6 +550,26 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
             )
         )
     return rows
+
+
+def _reuse_ladder_runs(ladder: Path, folder: Path, designs: Sequence[Design], seeds: int) -> None:
+    """Copy the ladder point's finished runs of the first ``seeds`` into ``folder``'s runs.
+
+    A design's run ``i`` trains with the same seed in any comparison of the same
+    episodes and recipe, so the restarts' first seeds are the ladder's runs:
+    copied, they resume as finished instead of training again. Runs already in
+    ``folder`` are kept.
+    """
+    import shutil
+
+    from mincam_render.learn.restore import run_finished
+
+    for d in designs:
+        for i in range(seeds):
+            for src in (ladder / "runs").rglob(f"{d.name}-seed{i}"):
+                dst = folder / "runs" / src.relative_to(ladder / "runs")
+                if run_finished(src) and not dst.exists():
+                    shutil.copytree(src, dst)
 
 
 def _with_errors(
