@@ -28,3 +28,20 @@ def test_a_bad_request_is_one_usage_error_and_nothing_is_written(args, expect, t
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
     assert len(errors) == 1 and expect in errors[0], res.stderr
     assert not work.exists() and not out.exists()
+
+
+def test_every_task_of_the_bench_is_a_valid_protocol(monkeypatch):
+    import importlib.util
+
+    from mincam_render.studies.design_protocol import DesignProtocolConfig
+
+    monkeypatch.syspath_prepend(str(BENCH.parent))
+    spec = importlib.util.spec_from_file_location("bench_design_protocol", BENCH)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    for name, task in bench.TASKS.items():
+        cfg = DesignProtocolConfig(**task)
+        assert cfg.task, name
+        assert {f.design for f in cfg.floors} <= {d.name for d in cfg.ladder_designs}
+    traffic = DesignProtocolConfig(**bench.TASKS["traffic"])
+    assert traffic.episodes.fps == 30.0 and traffic.references == (bench.MaskReference.PCA,)
