@@ -84,6 +84,18 @@ PATCHES_EPISODES = ComparisonConfig(
     test_frames=1000,
     train=BASE_RECIPE,
 )
+#: The lighting study's episodes: the toggling room at 30 fps, 3,600 frames (2
+#: minutes) a training episode, 4 x 1,800 validation and 6 x 1,800 test frames.
+LIGHTING_EPISODES = ComparisonConfig(
+    family=str(SCENES / "lighting_toggling.toml"),
+    fps=30.0,
+    train_frames=3600,
+    val_episodes=4,
+    val_frames=1800,
+    test_episodes=6,
+    test_frames=1800,
+    train=BASE_RECIPE,
+)
 #: Episodes and task of each study (``DesignProtocolConfig`` fields).
 TASKS: dict[str, dict[str, Any]] = {
     "workspace": {
@@ -98,16 +110,7 @@ TASKS: dict[str, dict[str, Any]] = {
         ),
     },
     "lighting": {
-        "episodes": ComparisonConfig(
-            family=str(SCENES / "lighting_toggling.toml"),
-            fps=30.0,
-            train_frames=3600,
-            val_episodes=4,
-            val_frames=1800,
-            test_episodes=6,
-            test_frames=1800,
-            train=BASE_RECIPE,
-        ),
+        "episodes": LIGHTING_EPISODES,
         "task": "lights",
         # the issue's floor: 8 freeform pixels within 2 points of accuracy of 64 box pixels
         "floors": (Floor(design="mincam-8px", baseline="baseline-8x8", margin=0.02),),
@@ -142,16 +145,7 @@ TASKS: dict[str, dict[str, Any]] = {
     # 4 mph intervals, so 6 of 60 s here); baselines of the paper's aspect; no floor
     # (the issue names none: nothing separated in the traffic studies)
     "traffic": {
-        "episodes": ComparisonConfig(
-            family="traffic",
-            fps=30.0,
-            train_frames=3600,
-            val_episodes=4,
-            val_frames=1800,
-            test_episodes=6,
-            test_frames=1800,
-            train=BASE_RECIPE,
-        ),
+        "episodes": replace(LIGHTING_EPISODES, family="traffic"),
         "task": "mean speed",
         "ladder": (1, 2, 4, 8),
         "ladder_designs": (
