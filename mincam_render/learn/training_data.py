@@ -90,13 +90,19 @@ class TrainingData:
         if self.scales is not None and np.shape(self.scales) != (n,):
             raise ValueError(f"scales has shape {np.shape(self.scales)}; expected ({n},)")
         if self.window_starts is not None:
+            self.window_starts = np.asarray(self.window_starts)
             self._check_window_starts(n)
 
     def _check_window_starts(self, n: int) -> None:
-        """Refuse window starts that are not ints whose windows lie within the ``n`` frames."""
+        """Refuse window starts that are not increasing ints with windows in the ``n`` frames."""
         starts = np.asarray(self.window_starts)
         if starts.ndim != 1 or not len(starts) or starts.dtype.kind not in "iu":
-            raise ValueError(f"window_starts: need a non-empty 1-d integer array, got {starts!r}")
+            raise ValueError(
+                f"window_starts: need a non-empty 1-d integer array (a window or more), "
+                f"got {starts!r}"
+            )
+        if np.any(np.diff(starts) <= 0):
+            raise ValueError("window_starts: need increasing frames (samples in time order)")
         if starts.min() < 0 or starts.max() + self.history > n:
             raise ValueError(
                 f"window_starts span [{starts.min()}, {starts.max()}]: windows of "
@@ -154,6 +160,18 @@ class TrainingData:
         if self.window_starts is not None:
             return len(self.window_starts)
         return len(self.transport) - self.history + 1
+
+    def sample_labels(self) -> dict[str, np.ndarray]:
+        """``{name: [sample, size]}``: every sample's labels (a window's at its last frame)."""
+        if self.window_starts is None:
+            return {k: v[self.history - 1 :] for k, v in self.labels.items()}
+        last = np.asarray(self.window_starts) + (self.history - 1)
+        return {k: v[last] for k, v in self.labels.items()}
+
+    @property
+    def one_sequence(self) -> bool:
+        """Whether the samples are consecutive in time (not episodes joined with their windows)."""
+        return self.window_starts is None or bool(np.all(np.diff(self.window_starts) == 1))
 
     def _first_frames(self, index: torch.Tensor) -> torch.Tensor:
         """The first stored frame of each sample ``index`` (torch long)."""
@@ -385,7 +403,7 @@ class TrainingData:
         so every frame is gathered (and later measured) once per batch.
 
         Args:
-            index: ``[b]`` first frame of each sample (torch long).
+            index: ``[b]`` samples (torch long, in ``[0, len(self))``).
             buffer: gather the frames into this reused float32 buffer (the
                 batch's transport is then valid until the buffer's next use);
                 None: a new tensor.

@@ -363,6 +363,7 @@ def test_joined_temporal_episodes_keep_every_window_inside_one_episode():
         np.testing.assert_array_equal(stacked[sample].numpy(), part.frames_np(n - 3, n))
     truth = np.concatenate([p.labels["count"][2:] for p in (a, b, c)])
     np.testing.assert_array_equal(labels["count"].numpy(), truth)
+    np.testing.assert_array_equal(joined.sample_labels()["count"], truth)
     in_place = joined.sample_all_frames(torch.arange(len(joined)))  # measured in place
     np.testing.assert_array_equal(in_place.transport[in_place.windows].numpy(), stacked.numpy())
     # joined again, and cut: the windows stay within their episodes and the range
@@ -370,10 +371,18 @@ def test_joined_temporal_episodes_keep_every_window_inside_one_episode():
     assert again.window_starts.tolist()[-8:] == list(range(22, 30))
     cut = joined.subset(5, 16)
     assert cut.window_starts.tolist() == [0, 1, 2, 5, 6, 7, 8]  # b's window at 14 ends at 17
+    assert a.one_sequence and not joined.one_sequence and joined.subset(0, 10).one_sequence
     with pytest.raises(ValueError, match="window_starts"):
         replace(joined, window_starts=np.array([20]))
+    with pytest.raises(ValueError, match="increasing"):
+        replace(joined, window_starts=[3, 1])
+    assert replace(joined, window_starts=[0, 1]).subset(1, 22).window_starts.tolist() == [0]
     cfg = tr.TrainConfig(max_steps=10, batch_size=4, eval_every=5)  # trains on the windows
-    assert tr.train_model(tr.build_mincam(joined, 2), joined, a, cfg).steps == 10
+    model = tr.build_mincam(joined, 2)
+    assert tr.train_model(model, joined, a, cfg).steps == 10
+    assert tr.evaluate(model, a).samples == len(a)
+    with pytest.raises(ValueError, match="not one time series"):  # the median filter
+        tr.evaluate(model, joined)
 
 
 def test_more_pixels_than_rendered_detectors_is_an_error_unless_asked_for():
