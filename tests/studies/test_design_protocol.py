@@ -179,6 +179,12 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
     )  # fmt: skip
 
 
+def test_an_oracle_of_a_family_without_a_background_is_refused_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match="oracle: family 'patches' renders no background"):
+        run(CFG, tmp_path / "out", sections=("ladder", "oracle"))
+    assert not (tmp_path / "out").exists()
+
+
 def test_floors_on_re_rendered_tests_need_the_ladder(tmp_path):
     with pytest.raises(ValueError, match="run 'ladder'"):
         run(CFG, tmp_path / "study", sections=("recipes",))
