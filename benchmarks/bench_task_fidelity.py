@@ -4,7 +4,7 @@ Usage::
 
     python benchmarks/bench_task_fidelity.py --work /data/fidelity \
         [--sections render,check,plans] [--levels 1x,0.25x,4x,16x] [--lock /tmp/mincam-cpu.lock]
-        [--one-x /data/episodes/ws8] [--family workspace|lighting|patches]
+        [--one-x /data/episodes/ws8] [--family workspace|lighting|patches|traffic]
         [--families workspace,lighting,patches,traffic]
         [--seeds 8] [--replicate-seeds 8] [--episodes 2,4,3] [--key workspace-32]
         [--cross 0.25x:1x,1x:0.25x,1x:4x]
@@ -13,7 +13,8 @@ Usage::
 training episodes of 1,200 frames at 2 fps, 4 validation and 3 test episodes of
 600 frames, the people count; lighting: the toggling room at 30 fps, episodes of
 3,600 and 1,800 frames, the five lights; patches: 16 detectors, 3,000 and 1,000
-independent frames, the count) at every
+independent frames, the count; traffic: the street at 30 fps, episodes of
+3,600 and 1,800 frames, the mean speed of both directions) at every
 level of :data:`LEVELS` (samples of frames and backgrounds times a factor, path
 depth 16; per-window or per-frame seeds of ``X - C``), count-only cameras
 (mincam 2 and 8 px, baselines 8x8 and 32x32, 8 seeds and a replicate of 8 other
@@ -164,6 +165,17 @@ CHECKED: dict[str, tuple[str, dict[str, Any]]] = {
             "val_frames": 1000,
             "test_frames": 1000,
             "tasks": ("count",),
+        },
+    ),
+    "traffic": (
+        "traffic",
+        {
+            "family": "traffic",
+            "fps": 30.0,
+            "train_frames": 3600,
+            "val_frames": 1800,
+            "test_frames": 1800,
+            "tasks": ("mean speed",),
         },
     ),
 }

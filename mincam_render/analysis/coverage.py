@@ -300,10 +300,7 @@ def study_coverage(splits: Mapping[str, TrainingData], train: str = "train") -> 
     Samples are what a model sees: a temporal split's labels at the last
     frame of each window.
     """
-    cov = {
-        name: label_coverage({k: v[d.history - 1 :] for k, v in d.labels.items()}, d.label_specs)
-        for name, d in splits.items()
-    }
+    cov = {name: label_coverage(d.sample_labels(), d.label_specs) for name, d in splits.items()}
     warnings = coverage_warnings(cov, train)
     for w in warnings:
         log.warning("label coverage: %s", w)

@@ -60,7 +60,8 @@ episode_options = apply_options([
                  "episodes (transport is linear in it: no new render)."),
     click.option("--train-episodes", type=click.IntRange(1, 100),
                  default=C.train_episodes, show_default=True,
-                 help="Training episodes (other scene seeds; temporal tasks: 1)."),
+                 help="Training episodes (other scene seeds; a temporal task's windows "
+                 "stay within one)."),
     click.option("--train-frames", type=click.IntRange(30), default=C.train_frames,
                  show_default=True,
                  help="Frames of each training episode (at --fps)."),

@@ -444,7 +444,16 @@ def metrics(
     labels (:func:`zero_where_true_below`); every label's figures
     (:class:`LabelMetrics`, with its ``median_filter_frames``: 1 = not filtered
     at this frame rate) and the :func:`headline`.
+
+    Raises:
+        ValueError: ``data`` joins episodes with their windows (its samples are
+            not one time series for the median filter: evaluate each episode).
     """
+    if not data.one_sequence:
+        raise ValueError(
+            "metrics: the samples of joined temporal episodes are not one time series (the "
+            "median filter runs over time); evaluate each episode on its own"
+        )
     post = postprocess(pred, data.label_specs, data.fps)
     y = {s.name: np.asarray(lab[s.name], np.float64) for s in data.label_specs}
     scored = zero_where_true_below(post, y, data.label_specs)

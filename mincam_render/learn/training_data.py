@@ -53,6 +53,9 @@ class TrainingData:
             chooses (a dataset's path, checksum, split and range; a render's family,
             seed and frames; concatenated episodes' sources; what a transform did).
         scales: ``[frame]`` factor from ``transport`` to watts; None: already watts.
+        window_starts: ``[sample]`` first frame of each sample, for temporal
+            episodes joined by :meth:`concat` (no window crosses an episode's
+            end); None: every window of ``history`` consecutive frames.
 
     """
 
@@ -64,6 +67,7 @@ class TrainingData:
     history: int = 1
     source: JsonObject = field(default_factory=dict)
     scales: np.ndarray | None = None
+    window_starts: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.transport.ndim != 4:
@@ -85,10 +89,29 @@ class TrainingData:
             raise ValueError(f"history = {self.history}: need 1 <= history <= frames ({n})")
         if self.scales is not None and np.shape(self.scales) != (n,):
             raise ValueError(f"scales has shape {np.shape(self.scales)}; expected ({n},)")
+        if self.window_starts is not None:
+            self.window_starts = np.asarray(self.window_starts)
+            self._check_window_starts(n)
+
+    def _check_window_starts(self, n: int) -> None:
+        """Refuse window starts that are not increasing ints with windows in the ``n`` frames."""
+        starts = np.asarray(self.window_starts)
+        if starts.ndim != 1 or not len(starts) or starts.dtype.kind not in "iu":
+            raise ValueError(
+                f"window_starts: need a non-empty 1-d integer array (a window or more), "
+                f"got {starts!r}"
+            )
+        if np.any(np.diff(starts) <= 0):
+            raise ValueError("window_starts: need increasing frames (samples in time order)")
+        if starts.min() < 0 or starts.max() + self.history > n:
+            raise ValueError(
+                f"window_starts span [{starts.min()}, {starts.max()}]: windows of "
+                f"{self.history} frames must start in [0, {n - self.history}]"
+            )
 
     def __getstate__(self) -> dict:
         # torch views of a memory map are rebuilt where the data is unpickled
-        return {k: v for k, v in self.__dict__.items() if k != "_torch"}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_torch", "_starts")}
 
     def _tensors(self) -> tuple[torch.Tensor, torch.Tensor | None, dict[str, torch.Tensor]]:
         """Torch tensors of the stored frames, scales and labels, made once.
@@ -133,8 +156,32 @@ class TrainingData:
         return self.frames_w(torch.arange(start, min(stop, len(self.transport)))).numpy()
 
     def __len__(self) -> int:
-        """Number of samples (frames with a full history)."""
+        """Number of samples (windows of ``history`` frames within one episode)."""
+        if self.window_starts is not None:
+            return len(self.window_starts)
         return len(self.transport) - self.history + 1
+
+    def sample_labels(self) -> dict[str, np.ndarray]:
+        """``{name: [sample, size]}``: every sample's labels (a window's at its last frame)."""
+        if self.window_starts is None:
+            return {k: v[self.history - 1 :] for k, v in self.labels.items()}
+        last = np.asarray(self.window_starts) + (self.history - 1)
+        return {k: v[last] for k, v in self.labels.items()}
+
+    @property
+    def one_sequence(self) -> bool:
+        """Whether the samples are consecutive in time (not episodes joined with their windows)."""
+        return self.window_starts is None or bool(np.all(np.diff(self.window_starts) == 1))
+
+    def _first_frames(self, index: torch.Tensor) -> torch.Tensor:
+        """The first stored frame of each sample ``index`` (torch long)."""
+        if self.window_starts is None:
+            return index
+        starts = self.__dict__.get("_starts")
+        if starts is None:
+            starts = torch.from_numpy(np.asarray(self.window_starts, np.int64).copy())
+            self.__dict__["_starts"] = starts
+        return starts.index_select(0, index)
 
     @classmethod
     def from_dataset(cls, ds: Any, split: str) -> TrainingData:
@@ -211,29 +258,27 @@ class TrainingData:
 
     @classmethod
     def concat(cls, parts: Sequence[TrainingData]) -> TrainingData:
-        """Several static episodes as one training set (a copy of their stored frames).
+        """Several episodes as one training set (a copy of their stored frames).
+
+        Temporal episodes (``history > 1``) keep their windows: a sample's
+        frames all come from one episode (``window_starts``).
 
         Raises:
-            ValueError: no parts, temporal data (windows would cross episode
-                boundaries), or parts of other cameras, labels, frame rates or storage.
+            ValueError: no parts, or parts of other cameras, labels, frame rates,
+                histories or storage.
         """
         if not parts:
             raise ValueError("concat: no episodes given")
         first = parts[0]
         if len(parts) == 1:
             return first
-        if any(p.history != 1 for p in parts):
-            raise ValueError(
-                "concat: temporal data (history > 1) would get windows across episode "
-                "boundaries; train on one episode (--train-episodes 1)"
-            )
         for p in parts[1:]:
-            same = (p.camera, p.label_specs, p.fps, p.transport.dtype, p.scales is None)
-            if same != (first.camera, first.label_specs, first.fps, first.transport.dtype,
-                        first.scales is None):  # fmt: skip
+            same = (p.camera, p.label_specs, p.fps, p.history, p.transport.dtype, p.scales is None)
+            if same != (first.camera, first.label_specs, first.fps, first.history,
+                        first.transport.dtype, first.scales is None):  # fmt: skip
                 raise ValueError(
                     f"concat: episode {p.source} differs from {first.source} in camera, labels, "
-                    "frame rate or storage"
+                    "frame rate, history or storage"
                 )
         return replace(
             first,
@@ -241,6 +286,7 @@ class TrainingData:
             labels={k: np.concatenate([p.labels[k] for p in parts]) for k in first.labels},
             scales=None if first.scales is None else np.concatenate([p.scales for p in parts]),
             source={"episodes": [p.source for p in parts]},
+            window_starts=_joined_window_starts(parts),
         )
 
     def with_labels(self, names: Sequence[str]) -> TrainingData:
@@ -261,14 +307,21 @@ class TrainingData:
         return data
 
     def subset(self, start: int, stop: int, name: str = "") -> TrainingData:
-        """Frames ``[start, stop)`` as a new split (contiguous in time)."""
+        """Frames ``[start, stop)`` as a new split (contiguous in time).
+
+        Joined temporal episodes keep the windows that lie within the range.
+        """
         src = dict(self.source, split=name or self.source.get("split", ""), range=[start, stop])
+        starts = self.window_starts
+        if starts is not None:
+            starts = starts[(starts >= start) & (starts + self.history <= stop)] - start
         return replace(
             self,
             transport=self.transport[start:stop],
             labels={k: v[start:stop] for k, v in self.labels.items()},
             source=src,
             scales=None if self.scales is None else self.scales[start:stop],
+            window_starts=starts,
         )
 
     def with_static_part(self, static_w: np.ndarray, replacement_w: np.ndarray) -> TrainingData:
@@ -350,13 +403,14 @@ class TrainingData:
         so every frame is gathered (and later measured) once per batch.
 
         Args:
-            index: ``[b]`` first frame of each sample (torch long).
+            index: ``[b]`` samples (torch long, in ``[0, len(self))``).
             buffer: gather the frames into this reused float32 buffer (the
                 batch's transport is then valid until the buffer's next use);
                 None: a new tensor.
 
         """
         stored, scales, labels = self._tensors()
+        index = self._first_frames(index)
         last = index if self.history == 1 else index + (self.history - 1)
         y = {k: v.index_select(0, last) for k, v in labels.items()}
         windows = None
@@ -378,6 +432,7 @@ class TrainingData:
         stored, scales, labels = self._tensors()
         if stored.dtype != torch.float32 or self.history == 1:
             return self.sample(index)
+        index = self._first_frames(index)
         y = {k: v.index_select(0, index + (self.history - 1)) for k, v in labels.items()}
         windows = index[:, None] + torch.arange(self.history)
         return Batch(stored, windows, y, scales)
@@ -551,3 +606,15 @@ def training_splits(
     data = TrainingData.render(fam, range(frames), spp=spp, seed=seed, progress=True)
     train, val, test = data.split(IN_MEMORY_SPLITS)
     return train, val, test
+
+
+def _joined_window_starts(parts: Sequence[TrainingData]) -> np.ndarray | None:
+    """The first frame of every window of ``parts`` joined end to end (None: static parts)."""
+    if parts[0].history == 1:
+        return None
+    starts, offset = [], 0
+    for p in parts:
+        own = np.arange(len(p)) if p.window_starts is None else np.asarray(p.window_starts)
+        starts.append(own.astype(np.int64) + offset)
+        offset += len(p.transport)
+    return np.concatenate(starts)

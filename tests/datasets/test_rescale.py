@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import shutil
 
 import pytest
@@ -92,6 +93,10 @@ def test_a_samples_factor_renders_the_checks_level_of_that_factor(differential_d
     # the check's own request of that level finds the dataset finished: the same identity
     again = render_dataset(resolved, tmp_path / "2x", workers=0)
     assert again.shards_rendered == [] and again.shards_kept == [0, 1, 2]
+    # the render log says how each run was asked (the manifest holds the settings)
+    log = (tmp_path / "2x" / "render_log.jsonl").read_text().splitlines()
+    starts = [e for e in map(json.loads, log) if e["event"] == "start"]
+    assert [e["samples_factor"] for e in starts] == [2.0, None]
     framed = resolved_request(
         dataclasses.replace(asked, difference_seeds=DifferenceSeeds.FRAME)
     )  # a per-frame seed asked for is kept

@@ -332,21 +332,57 @@ def test_training_from_float16_dataset_learns(float16_dataset):
     assert len(losses) == 4 and all(b < a for a, b in zip(losses, losses[1:], strict=False))
 
 
-def test_concat_joins_static_episodes_and_refuses_temporal_or_mismatched_ones():
+def test_concat_joins_static_episodes_and_refuses_mismatched_ones():
     a, b = linear_task(40, seed=1), linear_task(30, seed=2)
     both = tr.TrainingData.concat([a, b])
     assert len(both) == 70
     np.testing.assert_array_equal(both.frames_np(40, 70), b.frames_np(0, 30))
     np.testing.assert_array_equal(both.labels["count"][:40], a.labels["count"])
     assert both.source == {"episodes": [a.source, b.source]}
+    assert both.window_starts is None  # static: every frame is a sample
     temporal = replace(a, history=3)
     assert tr.TrainingData.concat([temporal]) is temporal  # one episode: nothing to join
-    with pytest.raises(ValueError, match="temporal"):
+    with pytest.raises(ValueError, match="history"):
         tr.TrainingData.concat([temporal, b])
     with pytest.raises(ValueError, match="differs"):
         tr.TrainingData.concat([a, replace(b, fps=10.0)])
     with pytest.raises(ValueError, match="no episodes"):
         tr.TrainingData.concat([])
+
+
+def test_joined_temporal_episodes_keep_every_window_inside_one_episode():
+    a, b, c = (replace(linear_task(n, seed=n), history=3) for n in (10, 7, 5))
+    joined = tr.TrainingData.concat([a, b, c])
+    # 8 + 5 + 3 windows; none starts in an episode's last two frames
+    assert len(joined) == len(a) + len(b) + len(c) == 16
+    assert joined.window_starts.tolist() == [*range(8), *range(10, 15), *range(17, 20)]
+    stacked, labels = joined.batch(np.arange(len(joined)))  # [sample, history, K, R, C]
+    np.testing.assert_array_equal(stacked[8].numpy(), b.frames_np(0, 3))  # b's first window
+    for part, sample in ((a, 7), (b, 12), (c, 15)):  # each episode's last window
+        n = len(part.transport)
+        np.testing.assert_array_equal(stacked[sample].numpy(), part.frames_np(n - 3, n))
+    truth = np.concatenate([p.labels["count"][2:] for p in (a, b, c)])
+    np.testing.assert_array_equal(labels["count"].numpy(), truth)
+    np.testing.assert_array_equal(joined.sample_labels()["count"], truth)
+    in_place = joined.sample_all_frames(torch.arange(len(joined)))  # measured in place
+    np.testing.assert_array_equal(in_place.transport[in_place.windows].numpy(), stacked.numpy())
+    # joined again, and cut: the windows stay within their episodes and the range
+    again = tr.TrainingData.concat([joined, a])
+    assert again.window_starts.tolist()[-8:] == list(range(22, 30))
+    cut = joined.subset(5, 16)
+    assert cut.window_starts.tolist() == [0, 1, 2, 5, 6, 7, 8]  # b's window at 14 ends at 17
+    assert a.one_sequence and not joined.one_sequence and joined.subset(0, 10).one_sequence
+    with pytest.raises(ValueError, match="window_starts"):
+        replace(joined, window_starts=np.array([20]))
+    with pytest.raises(ValueError, match="increasing"):
+        replace(joined, window_starts=[3, 1])
+    assert replace(joined, window_starts=[0, 1]).subset(1, 22).window_starts.tolist() == [0]
+    cfg = tr.TrainConfig(max_steps=10, batch_size=4, eval_every=5)  # trains on the windows
+    model = tr.build_mincam(joined, 2)
+    assert tr.train_model(model, joined, a, cfg).steps == 10
+    assert tr.evaluate(model, a).samples == len(a)
+    with pytest.raises(ValueError, match="not one time series"):  # the median filter
+        tr.evaluate(model, joined)
 
 
 def test_more_pixels_than_rendered_detectors_is_an_error_unless_asked_for():

@@ -88,6 +88,12 @@ def test_every_section_reports_the_designs_it_ran(study):
     picks = restarts.chosen.runs
     assert picks[0] in (0, 1) and picks[1] in (2, 3)
     assert len(restarts.plain.per_seed) == 2 and restarts.train_s_per_camera[1] > 0
+    # the plain seeds are the ladder point's runs, copied, not trained again
+    assert restarts.plain.per_seed == result.ladder[-1].designs["mincam-2px"].per_seed
+    for i in range(2):
+        ladder, again = (out / f / "runs" / f"mincam-2px-seed{i}" / "metrics.json"
+                         for f in ("ladder/episodes-2", "restarts/episodes-2"))  # fmt: skip
+        assert again.read_bytes() == ladder.read_bytes()  # the same training wall time too
 
 
 def test_the_figures_are_the_comparisons_on_disk(study):
@@ -171,6 +177,12 @@ def test_floors_are_read_again_by_the_same_runs_on_tests_with_more_samples(study
         again["designs"]["mincam-2px"]["error"]["mean"]
         - again["designs"]["baseline-2x2"]["error"]["mean"], abs=1e-9
     )  # fmt: skip
+
+
+def test_an_oracle_of_a_family_without_a_background_is_refused_before_any_work(tmp_path):
+    with pytest.raises(ValueError, match="oracle: family 'patches' renders no background"):
+        run(CFG, tmp_path / "out", sections=("ladder", "oracle"))
+    assert not (tmp_path / "out").exists()
 
 
 def test_floors_on_re_rendered_tests_need_the_ladder(tmp_path):

@@ -28,3 +28,41 @@ def test_a_bad_request_is_one_usage_error_and_nothing_is_written(args, expect, t
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
     assert len(errors) == 1 and expect in errors[0], res.stderr
     assert not work.exists() and not out.exists()
+
+
+def _bench(name: str, monkeypatch):
+    import importlib.util
+
+    monkeypatch.syspath_prepend(str(BENCH.parent))
+    spec = importlib.util.spec_from_file_location(name, BENCH.parent / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _tasks_of(comparison) -> dict:
+    from mincam_render.core.labels import label_tasks
+    from mincam_render.scenes.registry import load_family
+
+    family = load_family(comparison.family, seed=0, num_frames=30, overrides=comparison.overrides)
+    return label_tasks(family.labels)
+
+
+def test_every_task_of_the_bench_is_a_protocol_of_its_familys_task(monkeypatch):
+    from mincam_render.studies.design_protocol import DesignProtocolConfig
+
+    bench = _bench("bench_design_protocol", monkeypatch)
+    for name, task in bench.TASKS.items():
+        cfg = DesignProtocolConfig(**task)
+        assert cfg.task in _tasks_of(cfg.episodes), name
+    traffic = DesignProtocolConfig(**bench.TASKS["traffic"])
+    assert traffic.episodes.fps == 30.0 and traffic.references == (bench.MaskReference.PCA,)
+
+
+def test_every_family_of_the_fidelity_check_checks_one_of_its_tasks(monkeypatch, tmp_path):
+    fidelity = _bench("bench_task_fidelity", monkeypatch)
+    for family in fidelity.CHECKED:
+        cfg = fidelity.config(tmp_path, ["4x"], family=family)
+        tasks = cfg.comparison.tasks
+        assert tasks and set(tasks) <= set(_tasks_of(cfg.comparison)), family
+        assert [lv.name for lv in cfg.levels] == ["1x", "4x"] and cfg.reference == "4x"

@@ -99,12 +99,13 @@ def render_dataset(
     _check_executor_args(workers, shards_per_worker)
     # a resumed render finds its base plan kept (else measured again: the same plan)
     started = (Path(out) / ds.MANIFEST_NAME).is_file()
+    factor = request.samples_factor
     request = resolved_request(request, use_plan_cache=use_plan_cache or started, progress=progress)
     with exclusive_writer(out, "render") as out:
         t_start = time.perf_counter()
         manifest, kept, repaired, todo = _prepare(request, out, use_plan_cache, progress, limits)
         backgrounds_of = _shard_backgrounds(out, manifest, progress) if todo else (lambda i: None)
-        _log_start(out, kept, repaired, todo, workers, ray_address)
+        _log_start(out, kept, repaired, todo, workers, ray_address, factor)
         finish = _ShardWriter(out, manifest, kept, progress and bool(todo))
         try:
             _run_shards(finish, todo, backgrounds_of, workers, ray_address, shards_per_worker)
@@ -168,8 +169,15 @@ def _log_start(
     todo: list[int],
     workers: int | None,
     ray_address: str | None,
+    samples_factor: float | None,
 ) -> None:
-    """Log the start of the shard renders: what is kept, repaired and to do, and where."""
+    """Log the start of the shard renders: what is kept, repaired and to do, and where.
+
+    ``samples_factor``: the multiple of a plan's samples the request asked for
+    (``render --samples-factor``), None if it gave its settings. It is not in
+    the manifest, whose request holds the resolved settings: the same dataset
+    either way.
+    """
     _append_log(
         out,
         {
@@ -181,6 +189,7 @@ def _log_start(
             "todo": todo,
             "workers": workers,
             "ray": ray_address,
+            "samples_factor": samples_factor,
         },
     )
 

@@ -157,7 +157,7 @@ class ComparisonConfig:
         light_scale: every emitter's radiance times this factor (> 0), applied to
             the rendered episodes (transport is linear in it), so light levels
             share one render.
-        train_episodes: training episodes (static tasks; a temporal task trains on one).
+        train_episodes: training episodes (a temporal task's windows stay within one).
         train_frames: frames of each training episode.
         val_episodes: validation episodes (other scene seeds), pooled for early
             stopping and for choosing the kept run: one episode is a poor guide

@@ -313,9 +313,12 @@ def train_runs(
 
 
 def _finished(task: RunTask, runs_dir: Path) -> bool:
-    """Whether the run's ``metrics.json`` (and its tested camera's, in the ablation) exists."""
-    run_dir = runs_dir / task.name
-    tested = run_dir if task.design.sensor_model else run_dir / _HEAD_RUN
+    return design_run_finished(runs_dir / task.name, task.design)
+
+
+def design_run_finished(run_dir: Path, design: Design) -> bool:
+    """Whether ``design``'s run in ``run_dir`` (and its tested camera, in the ablation) ended."""
+    tested = run_dir if design.sensor_model else run_dir / _HEAD_RUN
     return run_finished(run_dir) and run_finished(tested)
 
 

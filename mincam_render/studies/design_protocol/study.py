@@ -430,6 +430,23 @@ def floor_checks(
     return checks
 
 
+def _check_oracle(episodes: ComparisonConfig) -> None:
+    """Refuse, before any work, an oracle of a family with no background to know exactly.
+
+    Raises:
+        ValueError: the family renders no differential background (patches, traffic).
+    """
+    from mincam_render.render.capabilities import DifferentialBackground
+    from mincam_render.scenes.registry import load_family
+
+    family = load_family(episodes.family, seed=0, num_frames=30, overrides=episodes.overrides)
+    if not isinstance(family, DifferentialBackground):
+        raise ValueError(
+            f"oracle: family {family.name!r} renders no background apart from its movers "
+            "(no differential background); leave 'oracle' out of the sections"
+        )
+
+
 def oracle_point(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> LadderPoint:
     """The ladder's designs on the most episodes, with the background known exactly (oracle).
 
@@ -506,16 +523,17 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
     Each minimalist design of the ladder is trained with ``seeds x restarts``
     seeds; group ``g`` (runs ``g R .. g R + R - 1``) keeps its run with the
     lowest error pooled over the validation episodes, so there are as many
-    kept cameras as plain seeds, each costing ``R`` runs.
+    kept cameras as plain seeds, each costing ``R`` runs. The first ``seeds``
+    runs are the ladder point's (copied from it where it has finished them).
     """
     from dataclasses import replace as _replace
 
     seeds, r = cfg.episodes.seeds, cfg.restarts
     designs = tuple(d for d in cfg.ladder_designs if d.is_mincam)
     n = cfg.ladder[-1]
-    result = compare(
-        _replace(cfg.comparison(n, designs), seeds=seeds * r), out / "restarts" / f"episodes-{n}"
-    )
+    folder = out / "restarts" / f"episodes-{n}"
+    _reuse_ladder_runs(ladder_dir(out, n), folder, cfg.task, designs, seeds)
+    result = compare(_replace(cfg.comparison(n, designs), seeds=seeds * r), folder)
     block = result.block(cfg.task)
     rows = []
     for d in designs:
@@ -549,6 +567,35 @@ def restart_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> lis
             )
         )
     return rows
+
+
+def _reuse_ladder_runs(
+    ladder: Path, folder: Path, task: str, designs: Sequence[Design], seeds: int
+) -> None:
+    """Copy the ladder point's finished runs of the first ``seeds`` into ``folder``'s runs.
+
+    A design's run ``i`` trains with the same seed in any comparison of the same
+    episodes and recipe, so the restarts' first seeds are the ladder's runs:
+    copied, they resume as finished instead of training again (a run of other
+    data or recipe would be refused there, not reused). Runs already in
+    ``folder`` are kept; a copy is complete or absent (copied beside, then
+    renamed).
+    """
+    import os
+    import shutil
+
+    from mincam_render.studies.comparison.runs import design_run_finished
+
+    for d in designs:
+        for i in range(seeds):
+            for name in (f"{d.name}-seed{i}", f"{task}/{d.name}-seed{i}"):  # one task or several
+                src, dst = ladder / "runs" / name, folder / "runs" / name
+                if dst.exists() or not design_run_finished(src, d):
+                    continue
+                partial = dst.with_name(dst.name + ".copying")
+                shutil.rmtree(partial, ignore_errors=True)
+                shutil.copytree(src, partial)
+                os.replace(partial, dst)
 
 
 def _with_errors(
@@ -638,6 +685,8 @@ def run(
 
     if cfg.floor_test_factors and "ladder" not in sections:
         raise ValueError("floor_test_factors retest the ladder's largest point: run 'ladder'")
+    if "oracle" in sections:
+        _check_oracle(cfg.episodes)
     out = Path(out)
     episodes = Path(episodes_dir) if episodes_dir is not None else out / "episodes"
 
