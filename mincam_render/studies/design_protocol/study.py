@@ -439,7 +439,7 @@ def _check_oracle(episodes: ComparisonConfig) -> None:
     from mincam_render.render.capabilities import DifferentialBackground
     from mincam_render.scenes.registry import load_family
 
-    family = load_family(episodes.family, seed=0, num_frames=30, overrides=episodes.overrides)
+    family = load_family(episodes.family, seed=0, num_frames=30, overrides=dict(episodes.overrides))
     if not isinstance(family, DifferentialBackground):
         raise ValueError(
             f"oracle: family {family.name!r} renders no background apart from its movers "
