@@ -207,6 +207,10 @@ RUN_KINDS = {
         False,
         {"baseline_grid": (2, 2), "config": replace(RUN_CONFIG, head_hidden=24)},
     ),
+    "baseline-linear-2": (
+        False,
+        {"baseline_grid": (2, 2), "config": replace(RUN_CONFIG, head_bottleneck=2)},
+    ),
 }
 
 

@@ -63,19 +63,29 @@ def build_head(
     seed: int = 0,
     kind: HeadKind = HeadKind.MLP,
     hidden: int = HIDDEN_UNITS,
+    bottleneck: int = 0,
 ) -> Head:
     """A head of ``kind`` for ``data``'s labels (targets standardised by its statistics).
 
     ``in_features`` is pixels x time steps (``max(history - 1, 1)`` steps after
-    forward differencing); ``hidden`` the width of its two hidden layers. Its
-    initial weights come from ``seed``; torch's global RNG (used by
-    ``nn.Linear``) is restored afterwards.
+    forward differencing); ``hidden`` the width of its two hidden layers;
+    ``bottleneck`` the linear combinations of the inputs they read (an MLP's
+    option, :class:`Head`; 0: none). Its initial weights come from ``seed``;
+    torch's global RNG (used by ``nn.Linear``) is restored afterwards.
+
+    Raises:
+        ValueError: a bottleneck for a temporal convolution head.
     """
     mean, std = data.target_stats()
     steps = max(data.history - 1, 1)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         if HeadKind(kind) is HeadKind.TCN:
+            if bottleneck:
+                raise ValueError(
+                    f"bottleneck = {bottleneck}: the temporal convolution head has none; "
+                    "use the MLP head"
+                )
             if in_features % steps:
                 raise ValueError(f"in_features = {in_features} is not pixels x {steps} steps")
             return TemporalConvHead(
@@ -94,6 +104,7 @@ def build_head(
             target_std=std,
             count_classes=count_classes,
             hidden=hidden,
+            bottleneck=bottleneck,
         )
 
 
@@ -117,6 +128,7 @@ def build_mincam(
     seed: int = 0,
     head: HeadKind = HeadKind.MLP,
     head_hidden: int = HIDDEN_UNITS,
+    head_bottleneck: int = 0,
     mask_block: int = 1,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
@@ -126,7 +138,8 @@ def build_mincam(
     error: reusing a detector's transport for a second mask must be asked for
     with an explicit ``detectors`` list.
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
-    ``head`` chooses the inference network and ``head_hidden`` its width;
+    ``head`` chooses the inference network, ``head_hidden`` its width and
+    ``head_bottleneck`` its linear bottleneck (:class:`Head`);
     ``mask_block`` the masks' block size in texels (:class:`MincamCamera`).
     """
     k_data = data.transport.shape[1]
@@ -151,6 +164,7 @@ def build_mincam(
         seed=seed,
         kind=head,
         hidden=head_hidden,
+        bottleneck=head_bottleneck,
     )
     return MincamCamera(
         data.camera,
@@ -171,11 +185,14 @@ def build_baseline(
     seed: int = 0,
     head: HeadKind = HeadKind.MLP,
     head_hidden: int = HIDDEN_UNITS,
+    head_bottleneck: int = 0,
 ) -> BaselineCamera:
     """A baseline camera of ``grid`` box pixels for ``data``'s task (exposure from ``data``).
 
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
-    ``head`` chooses the inference network and ``head_hidden`` its width.
+    ``head`` chooses the inference network, ``head_hidden`` its width and
+    ``head_bottleneck`` its linear bottleneck (:class:`Head`: ``K`` unconstrained
+    linear measurements of the box pixels).
     """
     net = build_head(
         data,
@@ -184,6 +201,7 @@ def build_baseline(
         seed=seed,
         kind=head,
         hidden=head_hidden,
+        bottleneck=head_bottleneck,
     )
     return BaselineCamera(
         grid,
@@ -211,6 +229,7 @@ class ModelRecord(TypedDict, total=False):
     count_classes: dict[str, int]
     head: str
     hidden: int
+    bottleneck: int
 
 
 def describe_model(model: Model) -> ModelRecord:
@@ -218,7 +237,7 @@ def describe_model(model: Model) -> ModelRecord:
 
     ``count_classes`` appears only for classified counts, ``head`` only for a
     head other than the paper's MLP, ``hidden`` only for a width other than the
-    paper's and ``mask_block`` only above 1, so
+    paper's, ``bottleneck`` and ``mask_block`` only above 0 and 1, so
     descriptions (and the resume check against checkpoints) of the paper's
     models are unchanged.
     """
@@ -247,4 +266,6 @@ def describe_model(model: Model) -> ModelRecord:
         desc["head"] = head_kind(model.head).value
     if hidden_width(model.head) != HIDDEN_UNITS:
         desc["hidden"] = hidden_width(model.head)
+    if model.head.bottleneck:
+        desc["bottleneck"] = model.head.bottleneck
     return desc

@@ -175,6 +175,14 @@ class InputNorm(nn.BatchNorm1d):
 class Head(nn.Module):
     """Inference network: input standardisation, 2 x ``hidden`` leaky-ReLU layers, label outputs.
 
+    With a ``bottleneck`` of ``K``, the standardised inputs first pass through
+    ``K`` learned linear combinations (signed, no bias), standardised again, so
+    that the hidden layers see ``K`` numbers, as they do behind ``K`` freeform
+    pixels. A box camera with such a head is ``K`` unconstrained linear
+    measurements of its pixels: no printable range, no sign, no photodiode. The
+    design protocol uses it to ask whether ``K`` linear measurements of the view
+    can hold what its box pixels hold (``docs/design_protocol.md``).
+
     Args:
         in_features: number of inputs (pixels x time steps).
         label_specs: the task's labels; one output group of ``spec.size`` each.
@@ -184,10 +192,13 @@ class Head(nn.Module):
             counts ``0 .. n-1`` (n >= 2; ``n`` logits per element); the other
             COUNT labels are regressed (MSE). See :class:`CountLoss`.
         hidden: hidden width (the paper's :data:`HIDDEN_UNITS`).
+        bottleneck: linear combinations of the inputs the hidden layers read
+            (``K`` above); 0, the paper's head: the inputs themselves.
 
     Raises:
-        ValueError: no labels, no inputs, or ``count_classes`` naming a label that
-            is not a COUNT label or giving fewer than 2 classes.
+        ValueError: no labels, no inputs, a negative bottleneck, or
+            ``count_classes`` naming a label that is not a COUNT label or giving
+            fewer than 2 classes.
 
     """
 
@@ -200,8 +211,10 @@ class Head(nn.Module):
         target_std: Mapping[str, np.ndarray] | None = None,
         count_classes: Mapping[str, int] | None = None,
         hidden: int = HIDDEN_UNITS,
+        bottleneck: int = 0,
     ) -> None:
         super().__init__()
+        check_int("bottleneck", bottleneck, 0)
         if in_features < 1:
             raise ValueError(f"in_features = {in_features}: need at least 1 input")
         self.label_specs = tuple(label_specs)
@@ -219,8 +232,13 @@ class Head(nn.Module):
         # Non-affine batch norm: the head sees unit-scale inputs whatever the mask
         # brightness or the scene's light level; it rescales, so SNR is untouched.
         self.input_norm = InputNorm(in_features)
+        self.readout: nn.Module = nn.Identity()
+        if bottleneck:
+            self.readout = nn.Sequential(
+                nn.Linear(in_features, bottleneck, bias=False), InputNorm(bottleneck)
+            )
         self.body = nn.Sequential(
-            nn.Linear(in_features, hidden),
+            nn.Linear(bottleneck or in_features, hidden),
             nn.LeakyReLU(LEAKY_SLOPE),
             nn.Linear(hidden, hidden),
             nn.LeakyReLU(LEAKY_SLOPE),
@@ -240,7 +258,19 @@ class Head(nn.Module):
     @property
     def in_features(self) -> int:
         """Number of inputs."""
-        return cast(nn.Linear, self.body[0]).in_features
+        return int(self.input_norm.num_features)
+
+    @property
+    def bottleneck(self) -> int:
+        """Linear combinations of the inputs the hidden layers read; 0: none."""
+        return 0 if isinstance(self.readout, nn.Identity) else int(self.first_layer.out_features)
+
+    @property
+    def first_layer(self) -> nn.Linear:
+        """The linear layer that reads the standardised inputs (the bottleneck's, if any)."""
+        if isinstance(self.readout, nn.Identity):
+            return cast(nn.Linear, self.body[0])
+        return cast(nn.Linear, cast(nn.Sequential, self.readout)[0])
 
     @property
     def fan_in(self) -> int:
@@ -272,7 +302,7 @@ class Head(nn.Module):
 
     def features(self, x: torch.Tensor) -> torch.Tensor:
         """Hidden features ``[batch, hidden]`` of inputs ``x[batch, in_features]``."""
-        return self.body(self.input_norm(x))
+        return self.body(self.readout(self.input_norm(x)))
 
     def input_running_mean(self) -> torch.Tensor:
         """``[in_features]`` running mean of every input (what pruning holds a pixel at)."""

@@ -140,6 +140,7 @@ def _pruned_camera(
         seed=stream_seed(config.seed, "prune/head", len(keep)),
         kind=head_kind(model.head),
         hidden=hidden_width(model.head),
+        bottleneck=model.head.bottleneck,
     )
     nxt = MincamCamera(
         model.camera,

@@ -117,7 +117,7 @@ def distilled_directions(teacher: BaselineCamera, x: np.ndarray, k: int) -> np.n
         ``k`` eigenvectors of ``W Σ W^T`` (module docstring).
     """
     head = teacher.head
-    first = head.body[0]
+    first = head.first_layer
     var = head.input_norm.running_var
     if not isinstance(first, torch.nn.Linear) or var is None:
         raise ValueError("distillation needs a teacher with the paper's MLP head")

@@ -159,9 +159,10 @@ def open_run(run_dir: str | os.PathLike, *, allow_unfinished: bool = False) -> T
 def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     """The trained camera of ``run``, to be measured on ``data`` (in evaluation mode).
 
-    Built from the run's own description (kind, detectors or grid, head kind
-    and width, count classes, history, sensor model, camera or exposure) and loaded with its
-    best state, strictly but for a privacy adversary's.
+    Built from the run's own description (kind, detectors or grid, head kind,
+    width and bottleneck, count classes, history, sensor model, camera or
+    exposure) and loaded with its best state, strictly but for a privacy
+    adversary's.
 
     Raises:
         ValueError: ``data`` does not fit the run (history, mask resolution,
@@ -176,6 +177,7 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     steps = max(desc["history"] - 1, 1)
     kind = HeadKind(desc.get("head", HeadKind.MLP.value))
     hidden = int(desc.get("hidden", HIDDEN_UNITS))
+    bottleneck = int(desc.get("bottleneck", 0))
     model: Model
     if run.kind is ModelKind.MINCAM:
         camera = _run_camera(run, data)
@@ -185,6 +187,7 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
             count_classes=desc.get("count_classes"),
             kind=kind,
             hidden=hidden,
+            bottleneck=bottleneck,
         )
         model = MincamCamera(
             camera,
@@ -202,6 +205,7 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
             count_classes=desc.get("count_classes"),
             kind=kind,
             hidden=hidden,
+            bottleneck=bottleneck,
         )
         model = BaselineCamera(grid, head, exposure_w=desc["exposure_w"], history=desc["history"])
     state = {k: v for k, v in run.state.items() if not k.startswith(ADVERSARY_PREFIX)}

@@ -307,7 +307,7 @@ def config_record(config: TrainConfig) -> JsonObject:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
     ``head`` appears only when not the paper's MLP, ``head_hidden`` only when not
-    the paper's width, ``perturbation`` (in its
+    the paper's width, ``head_bottleneck`` only when not 0, ``perturbation`` (in its
     record's units, :meth:`~mincam_render.optics.perturbation.PerturbationModel.to_record`)
     and ``robust_validation_draws`` only when training is robust, ``privacy_weight``
     and the masks' priors and the transport noise only when not 0, ``mask_block``
@@ -328,6 +328,8 @@ def config_record(config: TrainConfig) -> JsonObject:
         del record["privacy_weight"]
     if config.head_hidden == HIDDEN_UNITS:
         del record["head_hidden"]
+    if not config.head_bottleneck:
+        del record["head_bottleneck"]
     if config.head is HeadKind.MLP:
         del record["head"]
     else:

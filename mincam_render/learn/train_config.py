@@ -75,6 +75,7 @@ class HeadOptions(TypedDict):
     seed: int
     head: HeadKind
     head_hidden: int
+    head_bottleneck: int
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -106,6 +107,12 @@ class TrainConfig:
         head_hidden: units of each of the head's two hidden layers (the
             paper's :data:`HIDDEN_UNITS`; the design protocol's ``head-512``
             recipe tries a wider head).
+        head_bottleneck: the head's hidden layers read this many learned,
+            unconstrained linear combinations of the camera's pixels
+            (:class:`~mincam_render.learn.models.Head`); 0, the paper's head:
+            the pixels themselves. A diagnostic: a box camera so trained is that
+            many linear measurements of its pixels with no printability limit
+            (the design protocol's ``linear-8`` recipe).
         seed: seed of batches, noise and initialisation.
         torch_threads: intra-op threads while training (restored afterwards). The
             head is tiny, and torch's spinning worker threads next to Dr.Jit's pool
@@ -154,6 +161,7 @@ class TrainConfig:
     count_loss: CountLoss | None = None
     head: HeadKind = HeadKind.MLP
     head_hidden: int = HIDDEN_UNITS
+    head_bottleneck: int = 0
     seed: int = 0
     torch_threads: int | None = 1
     perturbation: PerturbationModel | None = None
@@ -177,6 +185,7 @@ class TrainConfig:
         ):
             check_int(f"TrainConfig.{name}", getattr(self, name), lo)
         check_int("TrainConfig.head_hidden", self.head_hidden, 1, 4096)
+        check_int("TrainConfig.head_bottleneck", self.head_bottleneck, 0, 4096)
         for name in ("lr_decay", "lr"):  # lr None: learning_rate_for the input count
             if getattr(self, name) is not None:
                 check_number(
@@ -220,11 +229,13 @@ class TrainConfig:
     def head_options(self) -> HeadOptions:
         """The keywords of ``learn.builders.build_mincam`` and ``build_baseline`` it sets.
 
-        How counts are learned, the seed, and the head's kind and width (the recipe's).
+        How counts are learned, the seed, and the head's kind, width and
+        bottleneck (the recipe's).
         """
         return {
             "count_loss": self.count_loss,
             "seed": self.seed,
             "head": self.head,
             "head_hidden": self.head_hidden,
+            "head_bottleneck": self.head_bottleneck,
         }

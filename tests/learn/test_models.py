@@ -63,6 +63,31 @@ def test_head_input_count_is_checked():
         MincamCamera(_camera(3), Head(4, SPECS))
 
 
+def test_a_bottleneck_head_reads_its_inputs_through_k_linear_combinations(rng):
+    head = Head(6, SPECS, bottleneck=2)
+    assert head.bottleneck == 2 and head.in_features == 6 and head.fan_in == 6
+    x = torch.from_numpy(rng.normal(size=(64, 6)).astype(np.float32))
+    head(x)  # training mode: the input norms learn their running statistics
+    head.eval()
+    # a change of the standardised inputs in the null space of the K combinations
+    # leaves every output unchanged; one along a combination does not
+    w = head.first_layer.weight.detach().double().numpy()  # [2, 6]
+    null = np.linalg.svd(w)[2][2:]  # [4, 6], orthogonal to both combinations
+    std = torch.sqrt(head.input_norm.running_var + head.input_norm.eps)
+    along = torch.from_numpy(null[0]).float() * std
+    moved = {k: v.detach() for k, v in head(x + 3 * along).items()}
+    for name, value in head(x).items():
+        torch.testing.assert_close(moved[name], value.detach(), atol=2e-5, rtol=1e-4)
+    across = torch.from_numpy(w[0]).float() * std
+    assert not torch.allclose(head(x + 3 * across)["count"], head(x)["count"])
+    # the paper's head has no bottleneck and the state it always had
+    plain = Head(6, SPECS)
+    assert plain.bottleneck == 0 and plain.first_layer is plain.body[0]
+    assert not any(k.startswith("readout") for k in plain.state_dict())
+    with pytest.raises(ValueError, match="bottleneck"):
+        Head(6, SPECS, bottleneck=-1)
+
+
 def test_temporal_features_are_forward_differences():
     x = torch.arange(12.0).reshape(1, 4, 3) ** 2
     f = temporal_features(x)

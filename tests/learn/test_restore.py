@@ -57,6 +57,19 @@ def test_a_head_of_another_width_is_recorded_and_restored_at_that_width(runs_of_
     assert "hidden" not in paper.record["model"] and "head_hidden" not in paper.record["config"]
 
 
+def test_a_linear_bottleneck_is_recorded_and_restored(runs_of_each_kind):
+    run_dir, metrics, test = runs_of_each_kind["baseline-linear-2"]
+    run = tr.open_run(run_dir)
+    assert run.record["model"]["bottleneck"] == 2 and run.record["config"]["head_bottleneck"] == 2
+    model = tr.restore_model(run, test)
+    assert model.head.bottleneck == 2 and model.head.first_layer.weight.shape == (2, 4)
+    assert tr.evaluate(model, test).error == pytest.approx(metrics.test.error)
+    # no bottleneck is left out of run.json: runs from before the option resume
+    paper = tr.open_run(runs_of_each_kind["baseline"][0])
+    assert "bottleneck" not in paper.record["model"]
+    assert "head_bottleneck" not in paper.record["config"]
+
+
 def test_pruned_and_frozen_mask_cameras_keep_the_head_they_are_given(runs_of_each_kind):
     run_dir, _, test = runs_of_each_kind["head-24"]
     pruned = _pruned_camera(tr.restore_mincam(tr.open_run(run_dir), test, "prune"), test, [0], CFG)

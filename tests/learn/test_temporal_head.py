@@ -113,3 +113,13 @@ def test_the_default_learning_rate_follows_the_first_layers_fan_in():
     tcn = tr.build_optimizer(tr.build_mincam(data, 2, head="tcn"), cfg).param_groups[0]["lr"]
     assert mlp == pytest.approx(tr.learning_rate_for(2 * 11))
     assert tcn == pytest.approx(tr.learning_rate_for(2 * 3))
+
+
+def test_a_bottleneck_is_refused_for_the_convolution_head():
+    from mincam_render.learn.builders import build_head
+
+    data = temporal_task(40)
+    steps = data.history - 1
+    with pytest.raises(ValueError, match="bottleneck = 2: the temporal convolution head"):
+        build_head(data, 2 * steps, kind=tr.HeadKind.TCN, bottleneck=2)
+    assert build_head(data, 2 * steps, kind=tr.HeadKind.MLP, bottleneck=2).bottleneck == 2

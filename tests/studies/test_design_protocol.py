@@ -19,7 +19,13 @@ from mincam_render.studies.design_protocol import (
     run,
     write_report,
 )
-from mincam_render.studies.design_protocol.study import LadderPoint, floor_checks, retest_requests
+from mincam_render.studies.design_protocol.study import (
+    LadderPoint,
+    RecipeRow,
+    chosen_recipes,
+    floor_checks,
+    retest_requests,
+)
 
 QUICK = {"spp": 2, "max_depth": 0, "shared_render": False, "differential": False}
 CFG = DesignProtocolConfig(
@@ -41,6 +47,7 @@ CFG = DesignProtocolConfig(
     recipes=(
         RecipeVariant(name="base"),
         RecipeVariant(name="tv", changes={"mask_tv_weight": 0.1}, minimalist_only=True),
+        RecipeVariant(name="linear", changes={"head_bottleneck": 1}, baselines_only=True),
     ),
     reference_episodes=1,
     reference_pixels=(2,),
@@ -68,8 +75,9 @@ def test_every_section_reports_the_designs_it_ran(study):
         ("mincam-2px", (1, 2)),
         ("baseline-2x2", (1, 2)),
     ]
-    assert [r.variant for r in result.recipes] == ["base", "tv"]
+    assert [r.variant for r in result.recipes] == ["base", "tv", "linear"]
     assert set(result.recipes[1].designs) == {"mincam-2px"}  # a mask prior: masks only
+    assert set(result.recipes[2].designs) == {"baseline-2x2"}  # a diagnostic of box cameras
     assert result.recipes[0].versus_base["mincam-2px"].mean == 0.0
     assert set(result.chosen_recipe) == {"mincam-2px", "baseline-2x2"}
     assert result.chosen_recipe["baseline-2x2"] == "base"
@@ -80,7 +88,7 @@ def test_every_section_reports_the_designs_it_ran(study):
     )
     assert "mincam-2px" not in ref.versus_end_to_end
     # the base recipe on 2 episodes is the ladder's point: its runs count once
-    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1)
+    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 1)
     labels = [r.label for r in result.protocol]
     assert labels == ["count"]
     (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
@@ -308,6 +316,28 @@ def test_configuration_is_validated():
     assert given.floor_test_factors == (4.0, 16.0)
 
 
+def test_validation_picks_the_lowest_better_recipe_but_never_a_diagnostic():
+    from types import SimpleNamespace
+
+    from mincam_render.studies.comparison.figures import Paired
+
+    def row(variant, val_error, lower):
+        ci = (-0.2, -0.1) if lower else (-0.1, 0.1)
+        paired = Paired("a", "b", sum(ci) / 2, ci, "")
+        return RecipeRow(
+            variant=variant,
+            changes={},
+            designs={"baseline-2x2": SimpleNamespace(val_error=val_error)},
+            versus_base={},
+            versus_base_validation={"baseline-2x2": paired},
+        )
+
+    rows = [row("base", 1.0, False), row("tv", 0.9, True), row("linear", 0.5, True)]
+    assert chosen_recipes(CFG, rows)["baseline-2x2"] == "tv"  # "linear" is a diagnostic
+    assert chosen_recipes(CFG, rows[:1] + rows[2:])["baseline-2x2"] == "base"
+    assert chosen_recipes(CFG, rows[:2])["baseline-2x2"] == "tv"
+
+
 def test_recipes_are_chosen_by_name_after_the_base():
     chosen = recipes_named(["head-512", "tv-0.3"])
     assert [r.name for r in chosen] == ["base", "head-512", "tv-0.3"]
@@ -318,3 +348,7 @@ def test_recipes_are_chosen_by_name_after_the_base():
             recipes_named(names)
     with pytest.raises(ValueError, match="head_hidden"):
         RecipeVariant(name="x", changes={"head_hidden": 0})
+    with pytest.raises(ValueError, match="not both"):
+        RecipeVariant(name="x", minimalist_only=True, baselines_only=True)
+    linear = recipes_named(["linear-8"])[1]
+    assert linear.baselines_only and linear.apply(TrainConfig()).head_bottleneck == 8

@@ -57,17 +57,22 @@ class RecipeVariant:
             replaced (JSON-ready values; tuples as lists are accepted).
         minimalist_only: the change acts on masks only (priors, block masks):
             tried on the minimalist designs alone.
+        baselines_only: the change is a diagnostic of the box cameras (a linear
+            bottleneck): tried on the baselines alone.
     """
 
     name: str
     changes: Mapping[str, Any] = field(default_factory=dict)
     minimalist_only: bool = False
+    baselines_only: bool = False
 
     def __post_init__(self) -> None:
         known = {f.name for f in fields(TrainConfig)}
         unknown = sorted(set(self.changes) - known)
         if unknown or not self.name:
             raise ValueError(f"recipe {self.name!r}: unknown TrainConfig fields {unknown}")
+        if self.minimalist_only and self.baselines_only:
+            raise ValueError(f"recipe {self.name!r}: minimalist_only or baselines_only, not both")
         self.apply(TrainConfig())  # validated now, not after hours of training
 
     def apply(self, base: TrainConfig) -> TrainConfig:
@@ -105,6 +110,8 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
         RecipeVariant(name="head-512", changes={"head_hidden": 512}),
         RecipeVariant(name="steps-30k", changes={"max_steps": 30000}),
+        RecipeVariant(name="linear-2", changes={"head_bottleneck": 2}, baselines_only=True),
+        RecipeVariant(name="linear-8", changes={"head_bottleneck": 8}, baselines_only=True),
     )
 
 

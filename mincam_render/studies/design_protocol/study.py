@@ -296,7 +296,7 @@ def recipe_table(
         ``(rows, chosen)``: ``chosen[design]`` is the recipe validation picks:
         among the variants lower than the base on the validation episodes (the
         paired interval below 0), the one with the lowest validation error; the
-        base where no variant is.
+        base where no variant is. A diagnostic (``baselines_only``) is never picked.
     """
     rows: list[RecipeRow] = []
     for variant in cfg.recipes:
@@ -319,11 +319,23 @@ def recipe_table(
                 },
             )
         )
-    return rows, {d.name: _chosen(rows, d.name) for d in cfg.ladder_designs}
+    return rows, chosen_recipes(cfg, rows)
+
+
+def chosen_recipes(cfg: DesignProtocolConfig, rows: Sequence[RecipeRow]) -> dict[str, str]:
+    """``{design: variant}`` validation picks from ``rows`` (:func:`recipe_table`).
+
+    A diagnostic (``baselines_only``) is no recipe and never picked.
+    """
+    diagnostics = {v.name for v in cfg.recipes if v.baselines_only}
+    candidates = [r for r in rows if r.variant not in diagnostics]
+    return {d.name: _chosen(candidates, d.name) for d in cfg.ladder_designs}
 
 
 def _recipe_designs(cfg: DesignProtocolConfig, variant: RecipeVariant) -> tuple[Design, ...]:
     """The designs ``variant`` is tried on (a mask-only change: the minimalist ones)."""
+    if variant.baselines_only:
+        return tuple(d for d in cfg.ladder_designs if not d.is_mincam)
     return tuple(d for d in cfg.ladder_designs if d.is_mincam or not variant.minimalist_only)
 
 
