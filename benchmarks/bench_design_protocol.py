@@ -7,7 +7,7 @@ Usage::
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
         [--floor-test-factors 4,16] [--samples-factor 4]
         [--reference-episodes 32] [--reference-pixels 8]
-        [--recipes head-512] [--recipe-episodes 16]
+        [--recipes head-512] [--recipe-episodes 16] [--pixels 2,4,8]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
 shared episodes (rendered into ``WORK/episodes`` when missing, one at a time,
@@ -25,7 +25,8 @@ detectors, episodes of 3,000 independent frames, 4 x 1,000 validation and 6 x
 traffic at 30 fps, episodes of 3,600 frames, 4 x 1,800 validation and 6 x 1,800
 test frames, the mean speed (no floor). Every comparison trains 3 seeds per design. ``--ladder`` and
 ``--test-episodes`` change those sizes for one run, whose entry ``--key`` names
-(so a re-scoring on more test episodes sits beside the task's full study).
+(so a re-scoring on more test episodes sits beside the task's full study);
+``--pixels`` the freeform designs of the learning curves (the box cameras stay).
 ``--floor-test-factors F,G`` also reads the floors on the test episodes rendered
 again at F (and G) times the plan's samples and full path depth (``WORK/tests-Fx``,
 resumable; the task-fidelity check's level ``Fx`` renders the same datasets), by
@@ -160,6 +161,18 @@ TASKS: dict[str, dict[str, Any]] = {
 }
 
 
+def _with_pixels(ap: argparse.ArgumentParser, task: dict[str, Any], pixels: str) -> tuple:
+    """The task's learning-curve designs with the freeform ones of ``--pixels`` (``2,4,8``)."""
+    try:
+        counts = [int(k) for k in pixels.split(",")]
+    except ValueError:
+        ap.error(f"--pixels {pixels!r}: pixel counts, e.g. 2,4,8")
+    if not counts or min(counts) < 1 or len(set(counts)) < len(counts):
+        ap.error(f"--pixels {pixels!r}: distinct counts of at least 1")
+    designs = task.get("ladder_designs", DesignProtocolConfig().ladder_designs)
+    return (*(Design(pixels=k) for k in counts), *(d for d in designs if not d.is_mincam))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--task", choices=sorted(TASKS), required=True)
@@ -171,6 +184,12 @@ def main() -> None:
         "--ladder",
         default=None,
         help="training-episode counts of the learning curves, e.g. 1,2,4,8 (default: the task's)",
+    )
+    ap.add_argument(
+        "--pixels",
+        default=None,
+        help="freeform pixel counts of the learning curves, e.g. 2,4,8 (default: the task's; "
+        "the box cameras stay the task's)",
     )
     ap.add_argument(
         "--test-episodes", type=int, default=None, help="test episodes (default: the task's)"
@@ -222,6 +241,8 @@ def main() -> None:
     task = dict(TASKS[args.task])
     if args.ladder:
         task["ladder"] = tuple(int(n) for n in args.ladder.split(","))
+    if args.pixels:
+        task["ladder_designs"] = _with_pixels(ap, task, args.pixels)
     if args.test_episodes:
         task["episodes"] = replace(task["episodes"], test_episodes=args.test_episodes)
     if args.reference_episodes is not None:

@@ -233,6 +233,8 @@ def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
         ("patches-narrow", "mincam-8px", "baseline-32x32", "− 32×32"),
         ("patches-narrow-16", "mincam-8px", "baseline-8x8", "mincam 8 px − 8×8"),
         ("patches-narrow-16", "mincam-2px", "baseline-8x8", "mincam 2 px − 8×8"),
+        ("patches-narrow-32", "mincam-8px", "baseline-8x8", "mincam 8 px − 8×8"),
+        ("patches-narrow-32", "mincam-2px", "baseline-8x8", "mincam 2 px − 8×8"),
     ],
 )
 def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a, b, quoted):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -260,6 +261,13 @@ def test_the_report_is_strict_json_tables_and_a_figure(study, tmp_path):
     assert "rendered at" not in text  # the plan's episodes
     assert paths["png"].stat().st_size > 10_000
     json.dumps(result.as_json(), allow_nan=False)
+    tables = [ln for ln in text.splitlines() if ln.startswith("|")]
+    assert "## Recipes" in text and any("\\|" in ln for ln in tables)
+    block_width = None
+    for ln in text.splitlines():  # every row of a table has its header's cells
+        cells = len(re.split(r"(?<!\\)\|", ln)) - 2 if ln.startswith("|") else None
+        block_width = (block_width or cells) if cells is not None else None
+        assert cells == block_width, ln
 
 
 def test_the_report_says_at_which_samples_the_episodes_were_rendered(study):

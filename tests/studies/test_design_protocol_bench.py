@@ -18,6 +18,9 @@ BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_design_proto
         (["--recipes", "tv-0.3,tv-0.3"], "at most once"),
         (["--samples-factor", "1e5"], "--samples-factor 100000.0: need a multiple in (0, 1e4]"),
         (["--recipe-episodes", "0"], "training episodes"),
+        (["--pixels", "4,x"], "--pixels '4,x': pixel counts"),
+        (["--pixels", "4,4"], "distinct counts"),
+        (["--pixels", "2,4"], "floor mincam-8px against baseline-32x32: both must be ladder"),
     ],
 )
 def test_a_bad_request_is_one_usage_error_and_nothing_is_written(args, expect, tmp_path):
@@ -66,3 +69,18 @@ def test_every_family_of_the_fidelity_check_checks_one_of_its_tasks(monkeypatch,
         tasks = cfg.comparison.tasks
         assert tasks and set(tasks) <= set(_tasks_of(cfg.comparison)), family
         assert [lv.name for lv in cfg.levels] == ["1x", "4x"] and cfg.reference == "4x"
+
+
+def test_pixels_replace_the_freeform_designs_and_keep_the_box_cameras(monkeypatch):
+    import argparse
+
+    bench = _bench("bench_design_protocol", monkeypatch)
+    task = bench.TASKS["patches-narrow"]
+    designs = bench._with_pixels(argparse.ArgumentParser(), task, "2,4,8")
+    assert [d.name for d in designs] == [
+        "mincam-2px", "mincam-4px", "mincam-8px",
+        "baseline-2x2", "baseline-8x8", "baseline-32x32",
+    ]  # fmt: skip
+    traffic = bench._with_pixels(argparse.ArgumentParser(), bench.TASKS["traffic"], "4")
+    assert [d.name for d in traffic] == ["mincam-4px", "baseline-2x4", "baseline-8x14",
+                                         "baseline-16x28"]  # fmt: skip

@@ -23,9 +23,14 @@ def write_report(result: DesignProtocolResult, out: str | Path, *, stem: str) ->
     return paths
 
 
-def _cell(f: DesignFigure) -> str:
+#: The separator of two figures inside one markdown table cell (an escaped bar).
+IN_CELL = " \\| "
+
+
+def _cell(f: DesignFigure, sep: str = " | ") -> str:
+    """Validation error ``sep`` test error [95 % CI] (two cells, or one with :data:`IN_CELL`)."""
     val = "" if f.val_error is None else f"{f.val_error:.3f}"
-    return f"{val} | {f.error:.3f} [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}]"
+    return f"{val}{sep}{f.error:.3f} [{f.ci95[0]:.3f}, {f.ci95[1]:.3f}]"
 
 
 def _interval(mean: float, ci95: tuple[float, float], sign: str = "") -> str:
@@ -93,14 +98,16 @@ def _recipe_lines(result: DesignProtocolResult) -> list[str]:
     if not result.recipes:
         return []
     names = list(result.recipes[0].designs)
-    header = ["variant", *(f"{n}: val \\| test \\| paired vs base" for n in names)]
+    header = ["variant", *(f"{n}: val \\| test; paired vs base" for n in names)]
     rows = []
     for r in result.recipes:
         cells = [r.variant]
         for n in names:
             f, p = r.designs.get(n), r.versus_base.get(n)
             cells.append(
-                "" if f is None or p is None else f"{_cell(f)}; {_interval(p.mean, p.ci95, '+')}"
+                ""
+                if f is None or p is None
+                else f"{_cell(f, IN_CELL)}; {_interval(p.mean, p.ci95, '+')}"
             )
         rows.append(cells)
     chosen = ", ".join(f"{d}: {v}" for d, v in result.chosen_recipe.items())
@@ -194,7 +201,12 @@ def _reference_lines(result: DesignProtocolResult) -> list[str]:
         for name, f in ref.designs.items():
             p = ref.versus_end_to_end.get(name)
             rows.append([name, _cell(f), p.statement if p else ""])
-        lines += [f"### {ref.pixels} px", "", *_table(["design", "val | test", "paired"], rows), ""]
+        lines += [
+            f"### {ref.pixels} px",
+            "",
+            *_table(["design", "val", "test", "paired"], rows),
+            "",
+        ]
     return lines
 
 
