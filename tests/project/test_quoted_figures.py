@@ -102,6 +102,30 @@ NOT_KEPT = {
         "episode errors by test_the_design_protocols_paired_differences_are_its_episode_errors",
     )
     | dict.fromkeys(
+        (
+            "−0.127 [−0.143, −0.112]",
+            "+0.016 [+0.004, +0.029]",
+            "−0.079 [−0.091, −0.065]",
+            "−0.063 [−0.078, −0.049]",
+        ),
+        "paired differences at the narrow ladder's 32 episodes, not stored: recomputed by "
+        "test_the_design_protocols_paired_differences_are_its_episode_errors",
+    )
+    | dict.fromkeys(
+        (
+            "−0.006 [−0.023, +0.013]",
+            "−0.013 [−0.024, −0.001]",
+            "+0.021 [+0.008, +0.038]",
+            "+0.123 [+0.109, +0.135]",
+            "−0.059 [−0.084, −0.034]",
+            "−0.208 [−0.227, −0.192]",
+            "+0.044 [+0.032, +0.060]",
+        ),
+        "a freeform design paired with a box camera read through K combinations (two rows "
+        "of the recipes table), not stored: recomputed by "
+        "test_the_linear_diagnostics_paired_differences_are_their_episode_errors",
+    )
+    | dict.fromkeys(
         ("1.407 [1.386, 1.425]", "1.399 [1.375, 1.420]"),
         "the patches mask learning-rate diagnostic (mincam 8 px alone, mask_lr 0.01 and 0.2, "
         "on the ladder's 16 episodes, 2026-12-06); a comparison run outside the bench, not kept",
@@ -235,6 +259,8 @@ def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
         ("patches-narrow-16", "mincam-2px", "baseline-8x8", "mincam 2 px − 8×8"),
         ("patches-narrow-32", "mincam-8px", "baseline-8x8", "mincam 8 px − 8×8"),
         ("patches-narrow-32", "mincam-2px", "baseline-8x8", "mincam 2 px − 8×8"),
+        ("patches-narrow-4px", "mincam-4px", "mincam-2px", "mincam 4 px − 2 px"),
+        ("patches-narrow-4px", "mincam-4px", "baseline-8x8", "mincam 4 px − 8×8"),
     ],
 )
 def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a, b, quoted):
@@ -246,6 +272,34 @@ def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a
     diff = paired_difference(*errors)
     figure = f"{diff.mean:+.3f} [{diff.low:+.3f}, {diff.high:+.3f}]"
     assert f"{quoted} {figure}".replace("−", "-") in doc, (entry, a, b, figure)
+
+
+@pytest.mark.parametrize(
+    ("entry", "a", "variant", "b"),
+    [
+        ("patches-linear", "mincam-8px", "linear-8", "baseline-32x32"),
+        ("patches-narrow-linear", "mincam-8px", "linear-8", "baseline-32x32"),
+        ("patches-linear", "mincam-2px", "linear-2", "baseline-32x32"),
+        ("patches-narrow-linear", "mincam-2px", "linear-2", "baseline-32x32"),
+        ("patches-linear", "mincam-8px", "linear-8", "baseline-8x8"),
+        ("patches-narrow-linear", "mincam-8px", "linear-8", "baseline-8x8"),
+        ("patches-narrow-4px", "mincam-4px", "linear-2", "baseline-32x32"),
+    ],
+)
+def test_the_linear_diagnostics_paired_differences_are_their_episode_errors(entry, a, variant, b):
+    """``a`` at the entry's largest ladder point (or its base recipe) against ``b`` read
+    through ``variant`` on the same episodes (the wide or narrow ``*-linear`` entry)."""
+    from mincam_render.analysis.statistics import EpisodeErrors, paired_difference
+
+    results = json.loads(_read(DESIGN_PROTOCOL))
+    linear = "patches-narrow-linear" if "narrow" in entry else "patches-linear"
+    rows = {r["variant"]: r for r in results[linear]["recipes"]}
+    first = results[entry]["ladder"][-1] if results[entry]["ladder"] else rows["base"]
+    pair = (first["designs"][a], rows[variant]["designs"][b])
+    diff = paired_difference(*(EpisodeErrors.from_dict(d["episode_errors"]) for d in pair))
+    figure = f"{diff.mean:+.3f} [{diff.low:+.3f}, {diff.high:+.3f}]"
+    doc = " ".join(_read(REPO / "docs" / "design_protocol.md").replace("−", "-").split())
+    assert figure in doc, (entry, a, variant, b, figure)
 
 
 # ---- the self-powered budget: energy.json's headline figures, as docs quote them ---------------

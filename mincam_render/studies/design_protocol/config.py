@@ -96,6 +96,13 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
     read, stops them. ``steps-30k`` (three times the base's step budget; the
     issue's "longer training") was added after the patches box cameras ended
     budget-limited at 10,000 steps: whether the floors' baselines were cut short.
+    ``linear-2`` and ``linear-8`` (the box cameras read through 2 or 8 learned
+    signed linear combinations of their pixels, ``TrainConfig.head_bottleneck``)
+    were added after the patches' 8-pixel floor was missed with the optimiser,
+    head and budget ruled out: whether any 2 or 8 linear measurements of the
+    view, printable or not, hold what the box pixels hold; ``linear-16`` after
+    they did not, beside 16 freeform pixels. Diagnostics, not recipes: they are
+    never chosen (``baselines_only``).
     """
     return (
         RecipeVariant(name="base"),
@@ -112,6 +119,7 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="steps-30k", changes={"max_steps": 30000}),
         RecipeVariant(name="linear-2", changes={"head_bottleneck": 2}, baselines_only=True),
         RecipeVariant(name="linear-8", changes={"head_bottleneck": 8}, baselines_only=True),
+        RecipeVariant(name="linear-16", changes={"head_bottleneck": 16}, baselines_only=True),
     )
 
 
