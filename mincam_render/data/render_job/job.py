@@ -28,7 +28,12 @@ from mincam_render.data.render_job.executors import (
     _run_processes,
     _run_ray,
 )
-from mincam_render.data.render_job.manifest import _append_log, _check_shards, _open_or_plan
+from mincam_render.data.render_job.manifest import (
+    _append_log,
+    _check_shards,
+    _open_or_plan,
+    warn_of_other_versions,
+)
 from mincam_render.data.render_job.request import RenderRequest
 from mincam_render.data.render_job.rescale import resolved_request
 from mincam_render.data.render_job.shards import render_shard
@@ -137,6 +142,7 @@ def _prepare(
         log.info("removed %s, left by a killed render", tmp)
     (out / ds.SHARD_DIR).mkdir(parents=True, exist_ok=True)
     kept, repaired, todo = _check_shards(out, manifest)
+    warn_of_other_versions(out, manifest, todo)
     return manifest, kept, repaired, todo
 
 

@@ -87,14 +87,26 @@ def _reopen(request: RenderRequest, out: Path) -> dict:
             f"({'; '.join(diffs[:3])}{' ...' if len(diffs) > 3 else ''}); "
             "render into another --out directory or delete this one"
         )
+    return manifest
+
+
+def warn_of_other_versions(out: Path, manifest: dict, shards: list[int]) -> None:
+    """Warn when ``shards`` of ``out`` are to be rendered with other package versions.
+
+    A finished dataset opened again renders nothing, so it is not warned about
+    (a protocol run opens tens of finished episodes).
+    """
     versions = package_versions()
-    if versions != manifest["versions"]:
+    if shards and versions != manifest["versions"]:
         log.warning(
-            "resuming a dataset started with other package versions %s (now %s)",
+            "resuming %s (%d of %d shards to render) with other package versions than it "
+            "was started with: %s (now %s)",
+            out,
+            len(shards),
+            manifest["num_shards"],
             manifest["versions"],
             versions,
         )
-    return manifest
 
 
 def _check_variant(out: Path, manifest: dict) -> None:
