@@ -65,6 +65,7 @@ from mincam_render.studies.design_protocol import (  # noqa: E402
     run,
     write_report,
 )
+from mincam_render.studies.design_protocol.config import LADDER_DESIGNS  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
@@ -161,7 +162,9 @@ TASKS: dict[str, dict[str, Any]] = {
 }
 
 
-def _with_pixels(ap: argparse.ArgumentParser, task: dict[str, Any], pixels: str) -> tuple:
+def _with_pixels(
+    ap: argparse.ArgumentParser, task: dict[str, Any], pixels: str
+) -> tuple[Design, ...]:
     """The task's learning-curve designs with the freeform ones of ``--pixels`` (``2,4,8``)."""
     try:
         counts = [int(k) for k in pixels.split(",")]
@@ -169,7 +172,7 @@ def _with_pixels(ap: argparse.ArgumentParser, task: dict[str, Any], pixels: str)
         ap.error(f"--pixels {pixels!r}: pixel counts, e.g. 2,4,8")
     if not counts or min(counts) < 1 or len(set(counts)) < len(counts):
         ap.error(f"--pixels {pixels!r}: distinct counts of at least 1")
-    designs = task.get("ladder_designs", DesignProtocolConfig().ladder_designs)
+    designs = task.get("ladder_designs", LADDER_DESIGNS)
     return (*(Design(pixels=k) for k in counts), *(d for d in designs if not d.is_mincam))
 
 

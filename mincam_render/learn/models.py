@@ -304,6 +304,12 @@ class Head(nn.Module):
         """Hidden features ``[batch, hidden]`` of inputs ``x[batch, in_features]``."""
         return self.body(self.readout(self.input_norm(x)))
 
+    def normalise_by_running_statistics(self, on: bool) -> None:
+        """Set every input norm's ``running_in_training`` (:class:`InputNorm`)."""
+        for norm in self.modules():
+            if isinstance(norm, InputNorm):
+                norm.running_in_training = on
+
     def input_running_mean(self) -> torch.Tensor:
         """``[in_features]`` running mean of every input (what pruning holds a pixel at)."""
         mean = self.input_norm.running_mean

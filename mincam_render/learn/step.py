@@ -17,13 +17,7 @@ import torch
 from mincam_render.core.seeds import stream_seed
 from mincam_render.learn.batches import DatasetBatches, RenderedBatches
 from mincam_render.learn.builders import learning_rate_for
-from mincam_render.learn.models import (
-    InputNorm,
-    MincamCamera,
-    Model,
-    task_loss,
-    temporal_features,
-)
+from mincam_render.learn.models import MincamCamera, Model, task_loss, temporal_features
 from mincam_render.learn.train_config import TrainConfig
 from mincam_render.learn.training_data import Batch
 from mincam_render.optics.perturbation import PerturbationDraw, PerturbationModel
@@ -136,9 +130,7 @@ def train_step(
     draw = batch_draw(model, perturbation, generator)
     if isinstance(model, MincamCamera):
         # one built camera per batch: its own statistics would calibrate it (InputNorm)
-        for norm in model.head.modules():
-            if isinstance(norm, InputNorm):
-                norm.running_in_training = draw is not None
+        model.head.normalise_by_running_statistics(draw is not None)
     adversary = getattr(model, "adversary", None)
     if adversary is None:  # any model with a forward (sim2real's measured heads too)
         out = model(**batch.inputs(), gain=gain, noise=True, generator=generator, draw=draw)
