@@ -124,7 +124,7 @@ _RECIPE_OPTIONS = {
         None,
         "Signed freeform pixels: each a pair of photodiodes behind two masks, read as "
         "the first minus the second (twice the photodiodes; the exported masks say "
-        "which pairs). Minimalist cameras only; prune refuses signed runs.",
+        "which pairs). Minimalist cameras of train and sweep; prune refuses signed runs.",
     ),
 }
 
@@ -465,6 +465,10 @@ def prune_cmd(
 
     try:
         config = TrainConfig(**recipe)
+        if config.signed_pixels:
+            raise InputError(
+                "--signed-pixels: prune keeps the run's pixels (and drops single ones)"
+            )
         run = open_run(run_dir, allow_unfinished=allow_unfinished)
         run.require(ModelKind.MINCAM, "prune")  # before the data are read
         train, val, test = training_splits(dataset, family, frames, spp, config.seed)

@@ -115,6 +115,11 @@ def test_a_signed_run_exports_its_pairs_reports_robustness_and_is_not_pruned(cli
     assert any((tmp_path / "r").rglob("robustness.json"))
     out = tmp_path / "p"
     _refused(_reader("prune", cli_runs["signed"], cli_runs["dataset"], out), "signed pairs", out)
+    prune_signed = [
+        *_reader("prune", cli_runs["mincam"], cli_runs["dataset"], out),
+        "--signed-pixels",
+    ]
+    _refused(prune_signed, "--signed-pixels: prune keeps the run's pixels", out)
 
 
 @pytest.mark.parametrize("command", READERS)
