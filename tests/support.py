@@ -211,6 +211,8 @@ RUN_KINDS = {
         False,
         {"baseline_grid": (2, 2), "config": replace(RUN_CONFIG, head_bottleneck=2)},
     ),
+    # one signed pixel: both detectors of the data, one output
+    "signed": (False, {"pixels": 1, "config": replace(RUN_CONFIG, signed_pixels=True)}),
 }
 
 

@@ -119,13 +119,22 @@ _RECIPE_OPTIONS = {
         "loss of a decoder reconstructing the scene from the pixels (docs/privacy.md); "
         "0: the task alone. Minimalist cameras of static tasks only.",
     ),
+    "signed_pixels": (
+        "--signed-pixels",
+        None,
+        "Signed freeform pixels: each a pair of photodiodes behind two masks, read as "
+        "the first minus the second (twice the photodiodes; the exported masks say "
+        "which pairs). Minimalist cameras of train and sweep; prune refuses signed runs.",
+    ),
 }
 
 
 def _recipe_option(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """The option filling ``TrainConfig.<name>``, with the field's default."""
+    """The option filling ``TrainConfig.<name>``, with the field's default (no type: a flag)."""
     flag, type_, help_text = _RECIPE_OPTIONS[name]
     default = field_default(TrainConfig, name)
+    if type_ is None:
+        return click.option(flag, name, is_flag=True, default=default, help=help_text)
     return click.option(
         flag, name, type=type_, default=default, show_default=default is not None, help=help_text
     )
@@ -345,6 +354,7 @@ def write_masks(run: TrainedRun, folder: Path, task: str, *, pdf: bool = True) -
         pdf=pdf,
         provenance={"run": str(run.path), "data": run.record["data"], "training": run.training},
         sheet_note="" if run.finished else f"UNFINISHED RUN ({run.training})",
+        signed=bool(run.record["model"].get("signed", False)),
     )
 
 
@@ -455,6 +465,10 @@ def prune_cmd(
 
     try:
         config = TrainConfig(**recipe)
+        if config.signed_pixels:
+            raise InputError(
+                "--signed-pixels: prune keeps the run's pixels (and drops single ones)"
+            )
         run = open_run(run_dir, allow_unfinished=allow_unfinished)
         run.require(ModelKind.MINCAM, "prune")  # before the data are read
         train, val, test = training_splits(dataset, family, frames, spp, config.seed)

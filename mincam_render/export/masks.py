@@ -14,7 +14,9 @@
   Gray level = transmittance (white = clear): a printer's own calibration
   curve (gray level -> film transmittance) must be applied by the user.
 * ``masks.json`` -- camera geometry in SI units, units, the printable range,
-  and the dataset/run that produced the masks.
+  the signed pairs (a signed camera's masks ``2j`` and ``2j + 1``: output ``j``
+  is the first photodiode's reading minus the second's; null otherwise), and
+  the dataset/run that produced the masks.
 """
 
 from __future__ import annotations
@@ -275,6 +277,7 @@ def export_masks(
     provenance: Mapping[str, Any] | None = None,
     pdf: bool = True,
     sheet_note: str = "",
+    signed: bool = False,
 ) -> MaskFiles:
     """Write the printable masks of a camera into ``out_dir``, whole.
 
@@ -294,19 +297,27 @@ def export_masks(
         pdf: also write ``print_sheet.pdf``.
         sheet_note: a warning printed in the print sheet's title line
             (``"UNFINISHED RUN (...)"``); none when empty.
+        signed: the masks are signed pairs (plus ``2j``, minus ``2j + 1``), said
+            in the sidecar and the print sheet's title.
 
     Returns:
         The paths of the files written (:class:`MaskFiles`).
 
     Raises:
-        ValueError: wrong shape or non-finite values; ``out_dir`` holds other files.
+        ValueError: wrong shape or non-finite values; an odd number of masks
+            signed; ``out_dir`` holds other files.
 
     """
     from mincam_render.data.folder_swap import swap_in_folder
 
     m = _checked_transmittance(transmittance)
+    if signed and m.shape[0] % 2:
+        raise ValueError(f"{m.shape[0]} masks signed: signed pixels are pairs of masks")
+    pairs = [[k, k + 1] for k in range(0, m.shape[0], 2)] if signed else None
     layout_cam = _layout_camera(camera, m.shape[0])
     title = f"mincam_render masks: {task}" if task else "mincam_render masks"
+    if signed:
+        title += " | signed pairs: output j = mask 2j - mask 2j+1"
     if sheet_note:
         title += f" | {sheet_note}"
     write = functools.partial(
@@ -314,7 +325,7 @@ def export_masks(
         m,
         layout_cam,
         title=title,
-        sidecar=functools.partial(_sidecar, task=task, provenance=provenance),
+        sidecar=functools.partial(_sidecar, task=task, provenance=provenance, pairs=pairs),
         pdf=pdf,
     )
     out = Path(out_dir)
@@ -430,9 +441,10 @@ def _sidecar(
     *,
     task: str,
     provenance: Mapping[str, Any] | None,
+    pairs: list[list[int]] | None,
     names: MaskFiles,
 ) -> JsonObject:
-    """``masks.json``'s content: geometry (SI units, sheet in mm), range, files, provenance."""
+    """``masks.json``: geometry (SI units, sheet in mm), range, pairs, files, provenance."""
     lo, hi = layout_cam.transmittance_range
     w, h, corners = sheet_layout(layout_cam)
     return {
@@ -450,6 +462,7 @@ def _sidecar(
         "printable_transmittance_range": [lo, hi],
         "texels_clipped_to_printable_range": int(np.count_nonzero(clipped != m)),
         "transmittance_min_max": [float(m.min()), float(m.max())],
+        "signed_pairs": pairs,
         "sheet_size_mm": [w, h],
         "mask_corners_on_sheet_mm": corners.tolist(),
         "camera": layout_cam.to_dict(),

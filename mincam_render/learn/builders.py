@@ -130,13 +130,16 @@ def build_mincam(
     head_hidden: int = HIDDEN_UNITS,
     head_bottleneck: int = 0,
     mask_block: int = 1,
+    signed: bool = False,
 ) -> MincamCamera:
     """A minimalist camera of ``pixels`` freeform pixels for ``data``'s task.
 
     Pixel ``j`` reads detector ``j`` of the data unless ``detectors`` is given
     (None: every rendered detector). More pixels than rendered detectors is an
     error: reusing a detector's transport for a second mask must be asked for
-    with an explicit ``detectors`` list.
+    with an explicit ``detectors`` list. ``signed``: ``pixels`` signed pixels,
+    each a pair of photodiodes and masks (:class:`MincamCamera`), so twice as
+    many detectors; ``detectors`` then lists both of every pair.
     COUNT labels are learned by ``count_loss`` (None: :func:`count_loss_for` the data);
     ``head`` chooses the inference network, ``head_hidden`` its width and
     ``head_bottleneck`` its linear bottleneck (:class:`Head`);
@@ -144,22 +147,14 @@ def build_mincam(
     """
     k_data = data.transport.shape[1]
     if detectors is None:
-        n = k_data if pixels is None else int(pixels)
-        if n < 1:
-            raise ValueError(f"pixels = {pixels!r}: need at least 1")
-        if n > k_data:
-            raise ValueError(
-                f"pixels = {n}: the data has only {k_data} rendered detectors; render it with "
-                f"more (`render --detectors {n}`, or camera.detectors = {n} in the scene "
-                "description), or ask for fewer pixels"
-            )
-        detectors = list(range(n))
+        detectors = _first_detectors(k_data, pixels, signed)
     detectors = list(detectors)
     if any(not 0 <= d < k_data for d in detectors):
         raise ValueError(f"detectors {detectors} outside the data's [0, {k_data})")
+    outputs = len(detectors) // 2 if signed else len(detectors)
     net = build_head(
         data,
-        len(detectors) * max(data.history - 1, 1),
+        outputs * max(data.history - 1, 1),
         count_classes=count_classes_for(data, count_loss),
         seed=seed,
         kind=head,
@@ -174,7 +169,28 @@ def build_mincam(
         history=data.history,
         init_seed=seed,
         mask_block=mask_block,
+        signed=signed,
     )
+
+
+def _first_detectors(k_data: int, pixels: int | None, signed: bool) -> list[int]:
+    """Detectors ``0 .. n-1`` for ``pixels`` pixels (``2 pixels`` signed; None: all ``k_data``)."""
+    if pixels is None:
+        n = k_data - k_data % 2 if signed else k_data
+        if n < 1:
+            raise ValueError("signed pixels: pairs of detectors; the data has only one")
+    else:
+        n = 2 * int(pixels) if signed else int(pixels)
+        if n < 1:
+            raise ValueError(f"pixels = {pixels!r}: need at least 1")
+    if n > k_data:
+        what = f"{pixels} signed pixels need {n} photodiodes" if signed else f"pixels = {n}"
+        raise ValueError(
+            f"{what}: the data has only {k_data} rendered detectors; render it with "
+            f"more (`render --detectors {n}`, or camera.detectors = {n} in the scene "
+            "description), or ask for fewer pixels"
+        )
+    return list(range(n))
 
 
 def build_baseline(
@@ -230,6 +246,7 @@ class ModelRecord(TypedDict, total=False):
     head: str
     hidden: int
     bottleneck: int
+    signed: bool
 
 
 def describe_model(model: Model) -> ModelRecord:
@@ -237,9 +254,9 @@ def describe_model(model: Model) -> ModelRecord:
 
     ``count_classes`` appears only for classified counts, ``head`` only for a
     head other than the paper's MLP, ``hidden`` only for a width other than the
-    paper's, ``bottleneck`` and ``mask_block`` only above 0 and 1, so
-    descriptions (and the resume check against checkpoints) of the paper's
-    models are unchanged.
+    paper's, ``bottleneck`` and ``mask_block`` only above 0 and 1, ``signed``
+    only when true, so descriptions (and the resume check against checkpoints)
+    of the paper's models are unchanged.
     """
     desc: ModelRecord
     if isinstance(model, MincamCamera):
@@ -252,6 +269,8 @@ def describe_model(model: Model) -> ModelRecord:
         }
         if model.mask_block != 1:
             desc["mask_block"] = model.mask_block
+        if model.signed:
+            desc["signed"] = True
     else:
         desc = {
             "kind": ModelKind.BASELINE.value,

@@ -12,7 +12,9 @@ units, leaky ReLU with slope 0.1).
   camera may use a subset of the rendered detectors (pruning) or reuse one
   detector's transport for several masks (more pixels than were rendered;
   this ignores the parallax between the reused and the real position, which is
-  sub-texel for the 20 mm pitch at scene depths beyond ~1 m).
+  sub-texel for the 20 mm pitch at scene depths beyond ~1 m). A *signed*
+  camera pairs its pixels (plus, minus) and feeds the head their differences:
+  a signed measurement from printable masks, at two photodiodes a pixel.
 * :class:`BaselineCamera` -- a traditional camera of ``R x C`` square pixels
   that box-integrate the light: the transport images averaged over the
   rendered detectors (approximating one central camera, the paper's auxiliary
@@ -485,10 +487,16 @@ class MincamCamera(CameraModel):
             averaged over its block, so (Adam being per-element and the logits'
             projection a clamp) the texels of a block stay equal through training;
             1: every texel free.
+        signed: pixels ``2j`` and ``2j + 1`` (photodiodes, masks) form signed
+            pixel ``j``: its output is the first's reading minus the second's, each
+            read by its own detector electronics (noise, saturation, ADC) and
+            subtracted digitally. The head reads ``len(detectors) / 2`` signed
+            outputs; a difference amplifier (one read noise for the pair) is not
+            modelled.
 
     Raises:
-        ValueError: no pixels, a head of the wrong width, or a ``mask_block`` that
-            does not divide the mask resolution.
+        ValueError: no pixels, a head of the wrong width, a ``mask_block`` that
+            does not divide the mask resolution, or an odd number of pixels signed.
 
     """
 
@@ -505,6 +513,7 @@ class MincamCamera(CameraModel):
         init_seed: int = 0,
         mask_plane: MaskPlaneBackend = MaskPlaneBackend.TORCH,
         mask_block: int = 1,
+        signed: bool = False,
     ) -> None:
         super().__init__()
         self.camera = camera
@@ -513,6 +522,11 @@ class MincamCamera(CameraModel):
         if not dets:
             raise ValueError("detectors is empty: a minimalist camera needs at least one pixel")
         self.register_buffer("detectors", torch.tensor(dets, dtype=torch.long))
+        self.signed = bool(signed)
+        if self.signed and len(dets) % 2:
+            raise ValueError(
+                f"{len(dets)} pixels signed: a signed pixel is a pair (plus, minus) of them"
+            )
         # every rendered detector once, in order: no gather of the transport needed
         self._identity_detectors = dets == tuple(range(camera.num_detectors))
         self.sensor_model = bool(sensor_model)
@@ -530,18 +544,23 @@ class MincamCamera(CameraModel):
         self.logits = nn.Parameter(logits_for_transmittance(m0, camera.transmittance_range))
         if b > 1:
             self.logits.register_hook(functools.partial(block_mean, block=b))
-        expected = len(dets) * max(self.history - 1, 1)
+        expected = self.num_outputs * max(self.history - 1, 1)
         if head.in_features != expected:
             raise ValueError(
                 f"head has {head.in_features} inputs; this camera gives {expected} "
-                f"({len(dets)} pixels x {max(self.history - 1, 1)} time steps)"
+                f"({self.num_outputs} outputs x {max(self.history - 1, 1)} time steps)"
             )
         self.head = head
 
     @property
     def num_pixels(self) -> int:
-        """Number of freeform pixels ``K``."""
+        """Number of freeform pixels ``K`` (masks and photodiodes; two per signed pixel)."""
         return int(self.detectors.numel())
+
+    @property
+    def num_outputs(self) -> int:
+        """Outputs the head reads per frame: ``K``, or ``K / 2`` signed pixels."""
+        return self.num_pixels // 2 if self.signed else self.num_pixels
 
     def transmittance(self) -> torch.Tensor:
         """``M[pixel, row, col]`` in the printable range (torch, differentiable)."""
@@ -608,12 +627,26 @@ class MincamCamera(CameraModel):
         generator: torch.Generator | None = None,
         draw: PerturbationDraw | None = None,
     ) -> torch.Tensor:
-        """Pixel outputs ``[batch, time, pixel]`` (V); arguments as :meth:`CameraModel.measure`.
+        """Pixel outputs ``[batch, time, output]`` (V); arguments as :meth:`CameraModel.measure`.
 
         Without the sensor model: noiseless power x responsivity x gain (V, unsaturated).
         A ``draw`` also scales each pixel's power by its gain mismatch and adds its
-        output offset (V).
+        output offset (V). A signed camera's outputs are its pairs' differences.
         """
+        v = self._readings(transport, windows, frame_scales, gain, noise, generator, draw)
+        return v[..., 0::2] - v[..., 1::2] if self.signed else v
+
+    def _readings(
+        self,
+        transport: torch.Tensor,
+        windows: torch.Tensor | None,
+        frame_scales: torch.Tensor | None,
+        gain: torch.Tensor | None,
+        noise: bool,
+        generator: torch.Generator | None,
+        draw: PerturbationDraw | None,
+    ) -> torch.Tensor:
+        """Every photodiode's reading ``[batch, time, pixel]`` (V), as :meth:`measure`."""
         frames = _frames_of(transport, windows)
         windows = _windows_for(transport, windows)
         power = _per_window(self.power(frames, draw), windows, frame_scales)

@@ -92,7 +92,13 @@ def greedy_prune(
     Returns:
         One :class:`PruneStep` per pixel count, from ``K`` down to ``min_pixels``.
 
+    Raises:
+        ValueError: a camera of signed pixels (pruning one photodiode of a pair
+            is not defined).
+
     """
+    if model.signed:
+        raise ValueError("greedy pruning drops single pixels; this camera's are signed pairs")
     current = model
     keep = list(range(model.num_pixels))  # indices into the original model's pixels
     removed: list[int] = []

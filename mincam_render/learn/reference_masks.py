@@ -193,8 +193,15 @@ def set_reference_masks(
     the texel grid with the paper's head (its first layer is what is distilled)
     and ``config``'s training recipe, into ``teacher_dir`` (resumable; None: in
     memory).
+
+    Raises:
+        ValueError: a camera of signed pixels (references are fitted as
+            single printable masks).
     """
     from mincam_render.learn.builders import build_baseline
+
+    if model.signed:
+        raise ValueError(f"reference masks ({kind}) are single printable masks; not signed pairs")
     from mincam_render.learn.loop import train_model
 
     def teacher() -> BaselineCamera:

@@ -159,9 +159,9 @@ def open_run(run_dir: str | os.PathLike, *, allow_unfinished: bool = False) -> T
 def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     """The trained camera of ``run``, to be measured on ``data`` (in evaluation mode).
 
-    Built from the run's own description (kind, detectors or grid, head kind,
-    width and bottleneck, count classes, history, sensor model, camera or
-    exposure) and loaded with its best state, strictly but for a privacy
+    Built from the run's own description (kind, detectors or grid, signed
+    pairs, head kind, width and bottleneck, count classes, history, sensor
+    model, camera or exposure) and loaded with its best state, strictly but for a privacy
     adversary's.
 
     Raises:
@@ -181,9 +181,10 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
     model: Model
     if run.kind is ModelKind.MINCAM:
         camera = _run_camera(run, data)
+        signed = bool(desc.get("signed", False))
         head = build_head(
             data,
-            len(desc["detectors"]) * steps,
+            len(desc["detectors"]) // (2 if signed else 1) * steps,
             count_classes=desc.get("count_classes"),
             kind=kind,
             hidden=hidden,
@@ -196,6 +197,7 @@ def restore_model(run: TrainedRun, data: TrainingData) -> Model:
             sensor_model=desc["sensor_model"],
             history=desc["history"],
             mask_block=desc.get("mask_block", 1),
+            signed=signed,
         )
     else:
         grid = (int(desc["grid"][0]), int(desc["grid"][1]))

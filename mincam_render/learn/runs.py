@@ -197,17 +197,19 @@ def _build_model(
     :class:`~mincam_render.learn.privacy_term.PrivacyAdversary` (``model.adversary``).
     """
     if baseline_grid is not None:
-        if config.privacy_weight > 0:
-            raise ValueError(
-                f"privacy_weight = {config.privacy_weight}: the privacy term trains masks; "
-                "a baseline camera has none"
-            )
+        for name in ("privacy_weight", "signed_pixels"):
+            if getattr(config, name):
+                raise ValueError(
+                    f"{name} = {getattr(config, name)}: an option of freeform pixels; a "
+                    "baseline camera has none"
+                )
         return build_baseline(train, baseline_grid, **config.head_options())
     model = build_mincam(
         train,
         pixels,
         sensor_model=sensor_model,
         mask_block=config.mask_block,
+        signed=config.signed_pixels,
         **config.head_options(),
     )
     if config.privacy_weight > 0:
@@ -229,7 +231,7 @@ def attach_adversary(model: MincamCamera, *, seed: int) -> None:
             "term is for static tasks"
         )
     grid = min(ADVERSARY_GRID, *model.camera.mask_resolution)
-    model.adversary = PrivacyAdversary(model.num_pixels, grid=grid, seed=seed)
+    model.adversary = PrivacyAdversary(model.num_outputs, grid=grid, seed=seed)
 
 
 def _frozen_mask_camera(
@@ -242,6 +244,7 @@ def _frozen_mask_camera(
         train,
         detectors=run.record["model"]["detectors"],
         sensor_model=sensor_model,
+        signed=bool(run.record["model"].get("signed", False)),
         **config.head_options(),
     )
     with torch.no_grad():
@@ -307,8 +310,9 @@ def config_record(config: TrainConfig) -> JsonObject:
     """``run.json``'s recipe: the fields of ``config``, the optional ones only when used.
 
     ``head`` appears only when not the paper's MLP, ``head_hidden`` only when not
-    the paper's width, ``head_bottleneck`` only when not 0, ``perturbation`` (in its
-    record's units, :meth:`~mincam_render.optics.perturbation.PerturbationModel.to_record`)
+    the paper's width, ``head_bottleneck`` only when not 0, ``signed_pixels`` only
+    when true, ``perturbation`` (in its record's units,
+    :meth:`~mincam_render.optics.perturbation.PerturbationModel.to_record`)
     and ``robust_validation_draws`` only when training is robust, ``privacy_weight``
     and the masks' priors and the transport noise only when not 0, ``mask_block``
     only above 1. Runs written before any was a choice then resume (their recipe
@@ -330,6 +334,8 @@ def config_record(config: TrainConfig) -> JsonObject:
         del record["head_hidden"]
     if not config.head_bottleneck:
         del record["head_bottleneck"]
+    if not config.signed_pixels:
+        del record["signed_pixels"]
     if config.head is HeadKind.MLP:
         del record["head"]
     else:

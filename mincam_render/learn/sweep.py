@@ -163,15 +163,24 @@ def _sweep_jobs(
     baseline_grids: Sequence[Any],
     config: TrainConfig,
 ) -> list[tuple[str, Callable[[], Model]]]:
-    """``(name, build the camera)`` of every camera of a sweep, minimalist cameras first."""
+    """``(name, build the camera)`` of every camera of a sweep, minimalist cameras first.
+
+    The minimalist cameras take the recipe's mask blocks and signed pixels
+    (``_signed`` in their names; by default up to half the detectors' pairs).
+    """
     jobs: list[tuple[str, Callable[[], Model]]] = []
-    for k in pixel_counts or default_pixel_counts(train.transport.shape[1]):
-        jobs.append(
-            (
-                f"mincam_{k}px",
-                functools.partial(build_mincam, train, k, **config.head_options()),
-            )
+    signed = config.signed_pixels
+    detectors = train.transport.shape[1] // (2 if signed else 1)
+    for k in pixel_counts or default_pixel_counts(detectors):
+        build = functools.partial(
+            build_mincam,
+            train,
+            k,
+            mask_block=config.mask_block,
+            signed=signed,
+            **config.head_options(),
         )
+        jobs.append((f"mincam_{k}px" + ("_signed" if signed else ""), build))
     for g in baseline_grids:
         grid = _parse_grid(g)
         jobs.append(

@@ -145,6 +145,11 @@ class TrainConfig:
         transport_noise: relative standard deviation of Gaussian noise multiplying
             every texel of every training sample's transport, ``T (1 + s e)``
             (like render noise, new at every step; both camera kinds); 0: none.
+        signed_pixels: every freeform pixel is signed: a pair of photodiodes
+            behind two masks, the first's reading minus the second's
+            (:class:`~mincam_render.learn.models.MincamCamera`), so a design of
+            ``K`` pixels has ``2 K`` photodiodes and ``K`` outputs. A minimalist
+            camera's option (the design protocol's ``signed`` diagnostic).
 
     """
 
@@ -171,6 +176,7 @@ class TrainConfig:
     mask_logit_decay: float = 0.0
     mask_block: int = 1
     transport_noise: float = 0.0
+    signed_pixels: bool = False
 
     def __post_init__(self) -> None:
         for name, lo in (
@@ -222,6 +228,8 @@ class TrainConfig:
         for name in ("mask_tv_weight", "mask_logit_decay"):
             check_number(f"TrainConfig.{name}", getattr(self, name), 0, 1e3, numpy=True)
         check_number("TrainConfig.transport_noise", self.transport_noise, 0, 1, numpy=True)
+        if not isinstance(self.signed_pixels, bool):
+            raise ValueError(f"TrainConfig.signed_pixels = {self.signed_pixels!r}: true or false")
         g0, g1 = self.gain_range
         if not 0 < g0 <= g1:
             raise ValueError(f"TrainConfig.gain_range = {self.gain_range!r}: need 0 < lo <= hi")

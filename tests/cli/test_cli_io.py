@@ -262,9 +262,9 @@ def test_robust_options_are_the_perturbation_record_with_its_defaults():
     ("names", "args", "config", "count"),
     [
         (("render",), ["patches", "--out", "o", "--frames", "5"], RenderRequest, 22),
-        (("train",), [], TrainConfig, 13),
-        (("sweep",), [], TrainConfig, 12),
-        (("prune",), ["--run", "r"], TrainConfig, 12),
+        (("train",), [], TrainConfig, 14),
+        (("sweep",), [], TrainConfig, 13),
+        (("prune",), ["--run", "r"], TrainConfig, 13),
         (("report", "robustness"), ["r"], RobustnessConfig, 4),
         (("report", "privacy"), [], AttackConfig, 2),
         (("bench", "fidelity"), ["patches"], FidelityBenchConfig, 6),

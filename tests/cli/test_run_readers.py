@@ -2,7 +2,7 @@
 
 ``export-masks``, ``prune`` and ``report robustness`` on minimalist runs trained
 nominally, with a temporal-convolution head, robustly, with the privacy term and
-with a head of another width;
+with a head of another width; a run of signed pixels (pruning refuses it);
 a baseline run refused by each; unfinished runs refused unless allowed (then
 marked); exports that replace their folder whole; names kept inside ``--out``;
 a run resumed through another spelling of its paths.
@@ -30,8 +30,9 @@ KINDS = {
     "robust": ["--robust"],
     "privacy": ["--privacy-weight", "1"],
     "head-24": ["--head-hidden", "24"],
+    "signed": ["--signed-pixels"],
 }
-MINCAM_KINDS = [k for k in KINDS if k != "baseline"]
+MINCAM_KINDS = [k for k in KINDS if k not in ("baseline", "signed")]
 
 
 def _invoke(args: list[str]):
@@ -102,6 +103,23 @@ def test_every_minimalist_run_is_read_by_every_reader(cli_runs, kind, command, t
         "report robustness": {"robustness.html", "robustness.png", "robustness.json"},
     }[command]
     assert expected <= written
+
+
+def test_a_signed_run_exports_its_pairs_reports_robustness_and_is_not_pruned(cli_runs, tmp_path):
+    run = json.loads((cli_runs["signed"] / "run.json").read_text())
+    assert run["model"]["signed"] and run["model"]["detectors"] == [0, 1]
+    _ok(_reader("export-masks", cli_runs["signed"], cli_runs["dataset"], tmp_path / "m"))
+    sidecar = json.loads((tmp_path / "m" / "t" / "masks.json").read_text())
+    assert sidecar["signed_pairs"] == [[0, 1]]
+    _ok(_reader("report robustness", cli_runs["signed"], cli_runs["dataset"], tmp_path / "r"))
+    assert any((tmp_path / "r").rglob("robustness.json"))
+    out = tmp_path / "p"
+    _refused(_reader("prune", cli_runs["signed"], cli_runs["dataset"], out), "signed pairs", out)
+    prune_signed = [
+        *_reader("prune", cli_runs["mincam"], cli_runs["dataset"], out),
+        "--signed-pixels",
+    ]
+    _refused(prune_signed, "--signed-pixels: prune keeps the run's pixels", out)
 
 
 @pytest.mark.parametrize("command", READERS)

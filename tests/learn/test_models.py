@@ -202,6 +202,55 @@ def test_detector_subset_and_reuse(variant, rng):
     assert not torch.allclose(v[:, 0], v[:, 2])
 
 
+def test_a_signed_pixel_reads_its_plus_photodiode_minus_its_minus_photodiode(variant, rng):
+    """Closed form: each output is the difference of its pair's readings, noise and all."""
+    cam = _camera(4, 4)
+    signed = MincamCamera(cam, Head(2, SPECS[:1]), signed=True)
+    plain = MincamCamera(cam, Head(4, SPECS[:1]))
+    plain.load_state_dict({k: v for k, v in signed.state_dict().items() if "head" not in k},
+                          strict=False)  # fmt: skip
+    assert signed.num_pixels == 4 and signed.num_outputs == 2 and plain.num_outputs == 4
+    t = torch.from_numpy(rng.uniform(0, 1e-9, (5, 4, 4, 4)).astype(np.float32))
+    for noise in (False, True):
+        v = signed.measure(t, noise=noise, generator=torch.Generator().manual_seed(3))
+        r = plain.measure(t, noise=noise, generator=torch.Generator().manual_seed(3))
+        assert v.shape == (5, 1, 2)
+        torch.testing.assert_close(v, r[..., 0::2] - r[..., 1::2], rtol=0, atol=0)
+    # the noiseless difference is the masks' difference dotted with the view
+    lo, hi = cam.transmittance_range
+    m = transmittance(signed.logits.detach(), (lo, hi))
+    e = cam.electronics
+    dot = (t * m).sum((2, 3)) * e.responsivity_a_per_w * e.gain_v_per_a
+    off = MincamCamera(cam, Head(2, SPECS[:1]), signed=True, sensor_model=False)
+    off.load_state_dict(signed.state_dict())
+    torch.testing.assert_close(off.measure(t)[:, 0], dot[:, 0::2] - dot[:, 1::2], rtol=1e-5, atol=0)
+
+
+def test_a_signed_pixels_gradient_pulls_its_two_masks_apart(variant, rng):
+    """d(output)/d(logits): the plus mask's closed form, and its negative on the minus mask."""
+    cam = _camera(2, 4)
+    model = MincamCamera(cam, Head(1, SPECS[:1]), signed=True)
+    with torch.no_grad():
+        model.logits[:] = 0.3
+    view = torch.from_numpy(rng.uniform(0, 1e-9, (1, 4, 4)).astype(np.float32))
+    t = view.expand(3, 2, 4, 4).contiguous()  # both photodiodes see the same view
+    model.measure(t, noise=False).sum().backward()
+    g = model.logits.grad
+    e = cam.electronics
+    lo, hi = cam.transmittance_range
+    s = torch.sigmoid(torch.tensor(0.3))
+    plus = e.responsivity_a_per_w * e.gain_v_per_a * 3 * view[0] * (hi - lo) * s * (1 - s)
+    torch.testing.assert_close(g[0], plus, rtol=1e-4, atol=0)
+    torch.testing.assert_close(g[1], -plus, rtol=1e-4, atol=0)
+
+
+def test_signed_pixels_come_in_pairs_and_the_head_reads_one_input_per_pair():
+    with pytest.raises(ValueError, match="3 pixels signed: a signed pixel is a pair"):
+        MincamCamera(_camera(3), Head(1, SPECS[:1]), signed=True)
+    with pytest.raises(ValueError, match="head has 4 inputs; this camera gives 2"):
+        MincamCamera(_camera(4), Head(4, SPECS[:1]), signed=True)
+
+
 @pytest.mark.parametrize("grid", [(1, 1), (2, 2), (4, 2), (8, 8)])
 def test_box_pixels_preserve_power(rng, grid):
     img = torch.from_numpy(rng.uniform(0, 1, (2, 8, 8)))

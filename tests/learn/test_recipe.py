@@ -104,6 +104,7 @@ def test_recipe_fields_are_validated():
         ("mask_logit_decay", float("nan")),
         ("transport_noise", 2.0),
         ("mask_block", 0),
+        ("signed_pixels", 1),
     ):
         with pytest.raises(ValueError, match=field):
             tr.TrainConfig(**{field: bad})
@@ -131,6 +132,25 @@ def test_sweep_cameras_get_the_recipes_head_and_seed():
         first = next(model.head.parameters())
         assert torch.equal(first, next(again.head.parameters())), name
         assert not torch.equal(first, next(other.head.parameters())), name
+
+
+def test_signed_pixels_take_pairs_of_detectors_and_no_baseline(tmp_path):
+    from mincam_render.learn.sweep import _sweep_jobs
+
+    four = linear_task(n=64, k=4)
+    assert tr.build_mincam(four, 2, signed=True).detectors.tolist() == [0, 1, 2, 3]
+    assert tr.build_mincam(four, signed=True).num_outputs == 2  # every detector, in pairs
+    with pytest.raises(ValueError, match="3 signed pixels need 6 photodiodes: the data has only 4"):
+        tr.build_mincam(four, 3, signed=True)
+    with pytest.raises(ValueError, match="pairs of detectors; the data has only one"):
+        tr.build_mincam(linear_task(n=64, k=1), signed=True)
+    jobs = dict(_sweep_jobs(four, None, [], tr.TrainConfig(signed_pixels=True)))
+    assert sorted(jobs) == ["mincam_1px_signed", "mincam_2px_signed"]
+    assert jobs["mincam_2px_signed"]().signed
+    train, val = four.split((0.5, 0.5))
+    with pytest.raises(ValueError, match="signed_pixels = True: an option of freeform pixels"):
+        tr.train_run(train, val, None, tmp_path / "b", baseline_grid=(2, 2),
+                     config=tr.TrainConfig(signed_pixels=True))  # fmt: skip
 
 
 def test_pooled_validation_is_the_sample_weighted_pool_of_the_episodes():

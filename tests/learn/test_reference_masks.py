@@ -16,6 +16,7 @@ from mincam_render.learn.reference_masks import (
     pls_directions,
     printable_masks,
     reference_directions,
+    set_reference_masks,
     task_targets,
     views,
 )
@@ -71,6 +72,9 @@ def test_reference_masks_are_refused_where_they_do_not_apply():
         reference_directions(MaskReference.PCA, data, 17)
     with pytest.raises(ValueError, match="teacher"):
         reference_directions(MaskReference.DISTILLED, data, 2)
+    signed = tr.build_mincam(data, 1, signed=True)
+    with pytest.raises(ValueError, match="not signed pairs"):
+        set_reference_masks(signed, MaskReference.PCA, data, data, tr.TrainConfig(), None)
 
 
 @pytest.mark.parametrize("tuned", [False, True])

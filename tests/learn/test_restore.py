@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from support import RUN_CONFIG, RUN_KINDS, linear_task, run_splits
 
+from mincam_render.cli.train import write_masks
 from mincam_render.learn import train as tr
 from mincam_render.learn.prune import _pruned_camera
 from mincam_render.learn.runs import _frozen_mask_camera, data_identity, describe_run
@@ -18,6 +19,8 @@ from mincam_render.studies.robustness.study import robustness_curves
 CFG = RUN_CONFIG
 KINDS = RUN_KINDS
 MINCAM_KINDS = [k for k in KINDS if not k.startswith("baseline")]
+#: what pruning takes: single pixels (a signed pair is refused)
+SINGLE_PIXEL_KINDS = [k for k in MINCAM_KINDS if k != "signed"]
 _splits = run_splits
 
 
@@ -31,7 +34,7 @@ def test_every_kind_of_run_restores_to_the_camera_it_tested(runs_of_each_kind, k
     assert tr.evaluate(model, test).error == pytest.approx(metrics.test.error)
 
 
-@pytest.mark.parametrize("kind", MINCAM_KINDS)
+@pytest.mark.parametrize("kind", SINGLE_PIXEL_KINDS)
 def test_every_minimalist_run_exports_prunes_and_takes_perturbations(runs_of_each_kind, kind):
     run_dir, _, test = runs_of_each_kind[kind]
     run = tr.open_run(run_dir)
@@ -68,6 +71,33 @@ def test_a_linear_bottleneck_is_recorded_and_restored(runs_of_each_kind):
     paper = tr.open_run(runs_of_each_kind["baseline"][0])
     assert "bottleneck" not in paper.record["model"]
     assert "head_bottleneck" not in paper.record["config"]
+
+
+def test_a_signed_run_is_recorded_restored_exported_and_refused_by_pruning(
+    runs_of_each_kind, tmp_path
+):
+    run_dir, metrics, test = runs_of_each_kind["signed"]
+    run = tr.open_run(run_dir)
+    assert run.record["model"]["signed"] is True and run.record["config"]["signed_pixels"]
+    assert run.record["model"]["detectors"] == [0, 1]
+    model = tr.restore_model(run, test)
+    assert model.signed and model.num_pixels == 2 and model.head.in_features == 1
+    assert tr.evaluate(model, test).error == pytest.approx(metrics.test.error)
+    for kind, pairs in (("signed", [[0, 1]]), ("mincam", None)):
+        folder = tmp_path / kind
+        files = write_masks(tr.open_run(runs_of_each_kind[kind][0]), folder, "t", pdf=False)
+        sidecar = json.loads((folder / files.json).read_text())
+        assert sidecar["signed_pairs"] == pairs and sidecar["masks"] == 2
+        assert ("signed pairs" in (folder / files.svg).read_text()) == (pairs is not None)
+    with pytest.raises(ValueError, match="signed pairs"):
+        tr.greedy_prune(tr.restore_mincam(run, test, "prune"), test, test, None, CFG)
+    # the masks frozen under a fresh head stay a signed pair
+    frozen = _frozen_mask_camera(test, run_dir, True, CFG)
+    assert frozen.signed and frozen.head.in_features == 1
+    # unsigned runs leave both keys out of run.json: runs from before the option resume
+    paper = tr.open_run(runs_of_each_kind["mincam"][0])
+    assert "signed" not in paper.record["model"]
+    assert "signed_pixels" not in paper.record["config"]
 
 
 def test_pruned_and_frozen_mask_cameras_keep_the_head_they_are_given(runs_of_each_kind):

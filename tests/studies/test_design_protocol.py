@@ -48,7 +48,12 @@ CFG = DesignProtocolConfig(
     recipes=(
         RecipeVariant(name="base"),
         RecipeVariant(name="tv", changes={"mask_tv_weight": 0.1}, minimalist_only=True),
-        RecipeVariant(name="linear", changes={"head_bottleneck": 1}, baselines_only=True),
+        RecipeVariant(
+            name="linear", changes={"head_bottleneck": 1}, baselines_only=True, diagnostic=True
+        ),
+        RecipeVariant(
+            name="signed", changes={"signed_pixels": True}, minimalist_only=True, diagnostic=True
+        ),
     ),
     reference_episodes=1,
     reference_pixels=(2,),
@@ -76,9 +81,13 @@ def test_every_section_reports_the_designs_it_ran(study):
         ("mincam-2px", (1, 2)),
         ("baseline-2x2", (1, 2)),
     ]
-    assert [r.variant for r in result.recipes] == ["base", "tv", "linear"]
+    assert [r.variant for r in result.recipes] == ["base", "tv", "linear", "signed"]
     assert set(result.recipes[1].designs) == {"mincam-2px"}  # a mask prior: masks only
     assert set(result.recipes[2].designs) == {"baseline-2x2"}  # a diagnostic of box cameras
+    assert set(result.recipes[3].designs) == {"mincam-2px"}  # 2 signed pixels: 4 photodiodes
+    signed = json.loads(next((out / "recipes" / "signed").rglob("run.json")).read_text())
+    assert signed["model"]["signed"] and signed["model"]["detectors"] == [0, 1, 2, 3]
+    assert result.chosen_recipe["mincam-2px"] in ("base", "tv")  # never a diagnostic
     assert result.recipes[0].versus_base["mincam-2px"].mean == 0.0
     assert set(result.chosen_recipe) == {"mincam-2px", "baseline-2x2"}
     assert result.chosen_recipe["baseline-2x2"] == "base"
@@ -89,7 +98,7 @@ def test_every_section_reports_the_designs_it_ran(study):
     )
     assert "mincam-2px" not in ref.versus_end_to_end
     # the base recipe on 2 episodes is the ladder's point: its runs count once
-    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 1)
+    assert result.selection is not None and result.selection.runs == 2 * (2 + 2 + 1 + 1 + 1)
     labels = [r.label for r in result.protocol]
     assert labels == ["count"]
     (restarts,) = result.restarts  # the minimalist design, 2 seeds x 2 restarts
@@ -358,5 +367,7 @@ def test_recipes_are_chosen_by_name_after_the_base():
         RecipeVariant(name="x", changes={"head_hidden": 0})
     with pytest.raises(ValueError, match="not both"):
         RecipeVariant(name="x", minimalist_only=True, baselines_only=True)
-    linear = recipes_named(["linear-8"])[1]
+    linear, signed = recipes_named(["linear-8", "signed"])[1:]
     assert linear.baselines_only and linear.apply(TrainConfig()).head_bottleneck == 8
+    assert signed.minimalist_only and signed.apply(TrainConfig()).signed_pixels
+    assert linear.diagnostic and signed.diagnostic

@@ -378,7 +378,8 @@ def keep_run_masks(
         "versions": package_versions(),
         **figures,
     }
-    return export_masks(m, camera, out_dir, task=task, provenance=provenance)
+    signed = bool(run["model"].get("signed", False))
+    return export_masks(m, camera, out_dir, task=task, provenance=provenance, signed=signed)
 
 
 def _keep_masks(

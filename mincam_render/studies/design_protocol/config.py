@@ -57,14 +57,18 @@ class RecipeVariant:
             replaced (JSON-ready values; tuples as lists are accepted).
         minimalist_only: the change acts on masks only (priors, block masks):
             tried on the minimalist designs alone.
-        baselines_only: the change is a diagnostic of the box cameras (a linear
+        baselines_only: the change is for the box cameras (a linear
             bottleneck): tried on the baselines alone.
+        diagnostic: a question asked of the designs, not a recipe: never
+            chosen (it changes what a design is: its measurements' kind, its
+            photodiodes).
     """
 
     name: str
     changes: Mapping[str, Any] = field(default_factory=dict)
     minimalist_only: bool = False
     baselines_only: bool = False
+    diagnostic: bool = False
 
     def __post_init__(self) -> None:
         known = {f.name for f in fields(TrainConfig)}
@@ -101,8 +105,12 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
     were added after the patches' 8-pixel floor was missed with the optimiser,
     head and budget ruled out: whether any 2 or 8 linear measurements of the
     view, printable or not, hold what the box pixels hold; ``linear-16`` after
-    they did not, beside 16 freeform pixels. Diagnostics, not recipes: they are
-    never chosen (``baselines_only``).
+    they did not, beside 16 freeform pixels. ``signed`` (every freeform pixel a
+    pair of masks and photodiodes read as one difference,
+    ``TrainConfig.signed_pixels``: twice the photodiodes) after 2 signed
+    combinations of 32x32's pixels beat 2 and 4 printable masks on the narrow
+    patches: whether the sign is what the masks lack. Diagnostics, not recipes:
+    they are never chosen (``diagnostic``).
     """
     return (
         RecipeVariant(name="base"),
@@ -117,9 +125,21 @@ def default_recipes() -> tuple[RecipeVariant, ...]:
         RecipeVariant(name="decay-0.01", changes={"mask_logit_decay": 0.01}, minimalist_only=True),
         RecipeVariant(name="head-512", changes={"head_hidden": 512}),
         RecipeVariant(name="steps-30k", changes={"max_steps": 30000}),
-        RecipeVariant(name="linear-2", changes={"head_bottleneck": 2}, baselines_only=True),
-        RecipeVariant(name="linear-8", changes={"head_bottleneck": 8}, baselines_only=True),
-        RecipeVariant(name="linear-16", changes={"head_bottleneck": 16}, baselines_only=True),
+        *(
+            RecipeVariant(
+                name=f"linear-{k}",
+                changes={"head_bottleneck": k},
+                baselines_only=True,
+                diagnostic=True,
+            )
+            for k in (2, 8, 16)
+        ),
+        RecipeVariant(
+            name="signed",
+            changes={"signed_pixels": True},
+            minimalist_only=True,
+            diagnostic=True,
+        ),
     )
 
 

@@ -296,7 +296,7 @@ def recipe_table(
         ``(rows, chosen)``: ``chosen[design]`` is the recipe validation picks:
         among the variants lower than the base on the validation episodes (the
         paired interval below 0), the one with the lowest validation error; the
-        base where no variant is. A diagnostic (``baselines_only``) is never picked.
+        base where no variant is. A diagnostic (``RecipeVariant.diagnostic``) is never picked.
     """
     rows: list[RecipeRow] = []
     for variant in cfg.recipes:
@@ -325,9 +325,9 @@ def recipe_table(
 def chosen_recipes(cfg: DesignProtocolConfig, rows: Sequence[RecipeRow]) -> dict[str, str]:
     """``{design: variant}`` validation picks from ``rows`` (:func:`recipe_table`).
 
-    A diagnostic (``baselines_only``) is no recipe and never picked.
+    A diagnostic (``RecipeVariant.diagnostic``) is no recipe and never picked.
     """
-    diagnostics = {v.name for v in cfg.recipes if v.baselines_only}
+    diagnostics = {v.name for v in cfg.recipes if v.diagnostic}
     candidates = [r for r in rows if r.variant not in diagnostics]
     return {d.name: _chosen(candidates, d.name) for d in cfg.ladder_designs}
 
