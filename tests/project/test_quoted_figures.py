@@ -134,6 +134,28 @@ NOT_KEPT = {
         "test_the_linear_diagnostics_paired_differences_are_their_episode_errors",
     )
     | dict.fromkeys(
+        (
+            "+0.017 [−0.000, +0.034]",
+            "+0.087 [+0.065, +0.109]",
+            "+0.007 [−0.005, +0.018]",
+            "+0.070 [+0.057, +0.083]",
+            "+0.015 [+0.005, +0.025]",
+            "+0.064 [+0.047, +0.082]",
+            "+0.061 [+0.045, +0.078]",
+            "+0.025 [+0.004, +0.045]",
+            "−0.018 [−0.029, −0.003]",
+            "−0.015 [−0.036, +0.007]",
+        ),
+        "signed pixels paired with another entry's design on the same episodes (the plain "
+        "camera of as many photodiodes, or 32x32 through K combinations), not stored: "
+        "recomputed by test_the_signed_pixels_paired_differences_are_their_episode_errors",
+    )
+    | dict.fromkeys(
+        ("+4.162 [+3.144, +5.091]", "+4.079 [+2.994, +5.006]", "+1.974 [+1.418, +2.478]"),
+        "paired differences at the traffic ladder's 4 episodes, not stored: recomputed by "
+        "test_the_design_protocols_paired_differences_are_its_episode_errors",
+    )
+    | dict.fromkeys(
         ("1.407 [1.386, 1.425]", "1.399 [1.375, 1.420]"),
         "the patches mask learning-rate diagnostic (mincam 8 px alone, mask_lr 0.01 and 0.2, "
         "on the ladder's 16 episodes, 2026-12-06); a comparison run outside the bench, not kept",
@@ -275,6 +297,9 @@ def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
         ("patches-narrow-pixels", "mincam-16px", "mincam-8px", "16 px − 8 px"),
         ("patches-narrow-pixels", "mincam-16px", "baseline-32x32", "mincam 16 px − 32×32"),
         ("patches-narrow-pixels", "mincam-16px", "baseline-8x8", "mincam 16 px − 8×8"),
+        ("traffic", "mincam-8px", "baseline-2x4", "mincam 8 px − 2×4"),
+        ("traffic", "mincam-2px", "baseline-2x4", "mincam 2 px − 2×4"),
+        ("traffic", "mincam-8px", "baseline-16x28", "mincam 8 px − 16×28"),
     ],
 )
 def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a, b, quoted):
@@ -319,6 +344,36 @@ def test_the_linear_diagnostics_paired_differences_are_their_episode_errors(entr
     first = results[entry]["ladder"][-1] if results[entry]["ladder"] else rows["base"]
     figure = _paired(first["designs"][a], rows[variant]["designs"][b])
     assert figure in _protocol_doc(), (entry, a, variant, b, figure)
+
+
+@pytest.mark.parametrize(
+    ("entry", "k", "other", "b"),
+    [
+        ("patches-signed", 2, "patches-pixels", "mincam-4px"),
+        ("patches-signed", 4, "patches-pixels", "mincam-8px"),
+        ("patches-signed", 8, "patches-pixels", "mincam-16px"),
+        ("patches-narrow-signed", 2, "patches-narrow-pixels", "mincam-4px"),
+        ("patches-narrow-signed", 4, "patches-narrow-pixels", "mincam-8px"),
+        ("patches-narrow-signed", 8, "patches-narrow-pixels", "mincam-16px"),
+        ("patches-signed", 2, "patches-linear", "baseline-32x32"),
+        ("patches-narrow-signed", 2, "patches-narrow-linear", "baseline-32x32"),
+        ("patches-signed", 8, "patches-linear", "baseline-32x32"),
+        ("patches-narrow-signed", 8, "patches-narrow-linear", "baseline-32x32"),
+    ],
+)
+def test_the_signed_pixels_paired_differences_are_their_episode_errors(entry, k, other, b):
+    """``k`` signed pixels against ``b`` of another entry on the same episodes: the
+    unsigned camera of as many photodiodes (its ladder point), or 32x32 read through
+    ``k`` signed combinations (the ``*-linear`` entry's ``linear-k``)."""
+    results = json.loads(_read(DESIGN_PROTOCOL))
+    signed = {r["variant"]: r for r in results[entry]["recipes"]}["signed"]
+    if other.endswith("-linear"):
+        rows = {r["variant"]: r for r in results[other]["recipes"]}
+        against = rows[f"linear-{k}"]["designs"][b]
+    else:
+        against = results[other]["ladder"][-1]["designs"][b]
+    figure = _paired(signed["designs"][f"mincam-{k}px"], against)
+    assert figure in _protocol_doc(), (entry, k, other, b, figure)
 
 
 # ---- the self-powered budget: energy.json's headline figures, as docs quote them ---------------
