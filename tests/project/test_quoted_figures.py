@@ -83,6 +83,10 @@ RESULTS = REPO / "benchmarks" / "results"
 INTERVAL = re.compile(r"([+\-−]?\d+\.\d{3})\s+\[([+\-−]?\d+\.\d{3}),\s+([+\-−]?\d+\.\d{3})\]")
 #: ... and ``x.x % [lo, hi]``, a fraction quoted in per cent (increases, accuracies).
 PERCENT = re.compile(r"([+\-−]?\d+\.\d) %\s+\[([+\-−]?\d+\.\d),\s+([+\-−]?\d+\.\d)\]")
+TRAFFIC_BLOCKS = (
+    "traffic's block-8 mincam 8 px paired with another recipe's box camera on the same "
+    "episodes, not stored: recomputed by test_the_traffic_block_masks_paired_differences"
+)
 #: Quoted intervals no kept JSON holds, each with where it comes from instead.
 NOT_KEPT = {
     "docs/design_protocol.md": dict.fromkeys(
@@ -156,6 +160,15 @@ NOT_KEPT = {
         "test_the_design_protocols_paired_differences_are_its_episode_errors",
     )
     | dict.fromkeys(
+        (
+            "+0.107 [−0.416, +0.730]",
+            "−1.303 [−1.804, −0.865]",
+            "−2.107 [−2.632, −1.618]",
+            "+0.421 [+0.026, +0.899]",
+        ),
+        TRAFFIC_BLOCKS,
+    )
+    | dict.fromkeys(
         ("1.407 [1.386, 1.425]", "1.399 [1.375, 1.420]"),
         "the patches mask learning-rate diagnostic (mincam 8 px alone, mask_lr 0.01 and 0.2, "
         "on the ladder's 16 episodes, 2026-12-06); a comparison run outside the bench, not kept",
@@ -195,7 +208,8 @@ NOT_KEPT = {
             "-0.050 [-0.152, +0.144]",
         ),
         "the main job run from a fresh clone at c8ce75e with root seeds 0, 1, 2; not kept",
-    ),
+    )
+    | dict.fromkeys(("+0.107 [−0.416, +0.730]",), TRAFFIC_BLOCKS),
 }
 #: Docs that must stay covered (a renamed results file would otherwise drop one silently).
 COVERED = {
@@ -374,6 +388,27 @@ def test_the_signed_pixels_paired_differences_are_their_episode_errors(entry, k,
         against = results[other]["ladder"][-1]["designs"][b]
     figure = _paired(signed["designs"][f"mincam-{k}px"], against)
     assert figure in _protocol_doc(), (entry, k, other, b, figure)
+
+
+@pytest.mark.parametrize(
+    ("variant", "b", "quoted"),
+    [
+        ("base", "baseline-2x4", "− 2×4 (base)"),
+        ("base", "baseline-8x14", "− 8×14"),
+        ("base", "baseline-16x28", "− 16×28"),
+        ("gain-20", "baseline-2x4", "− 2×4 (gain-20)"),
+    ],
+)
+def test_the_traffic_block_masks_paired_differences(variant, b, quoted):
+    """Traffic's mincam 8 px with 4x4-block masks against a box camera of another recipe row."""
+    rows = {
+        r["variant"]: r for r in json.loads(_read(DESIGN_PROTOCOL))["traffic-recipes"]["recipes"]
+    }
+    figure = _paired(rows["block-8"]["designs"]["mincam-8px"], rows[variant]["designs"][b])
+    assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (variant, b, figure)
+    if variant == "base" and b == "baseline-2x4":
+        studies = " ".join(_read(REPO / "docs" / "studies.md").replace("−", "-").split())
+        assert f"2x4 ({figure})" in studies, figure
 
 
 # ---- the self-powered budget: energy.json's headline figures, as docs quote them ---------------
