@@ -84,8 +84,9 @@ INTERVAL = re.compile(r"([+\-−]?\d+\.\d{3})\s+\[([+\-−]?\d+\.\d{3}),\s+([+\-
 #: ... and ``x.x % [lo, hi]``, a fraction quoted in per cent (increases, accuracies).
 PERCENT = re.compile(r"([+\-−]?\d+\.\d) %\s+\[([+\-−]?\d+\.\d),\s+([+\-−]?\d+\.\d)\]")
 TRAFFIC_BLOCKS = (
-    "traffic's block-8 mincam 8 px paired with another recipe's box camera on the same "
-    "episodes, not stored: recomputed by test_the_traffic_block_masks_paired_differences"
+    "traffic's mincam 8 px with block masks (block-8, block-4) paired with another recipe "
+    "row's design on the same episodes, not stored: recomputed by "
+    "test_the_traffic_block_masks_paired_differences"
 )
 #: Quoted intervals no kept JSON holds, each with where it comes from instead.
 NOT_KEPT = {
@@ -333,9 +334,18 @@ def _paired(a: dict, b: dict) -> str:
     return f"{diff.mean:+.3f} [{diff.low:+.3f}, {diff.high:+.3f}]"
 
 
+def _plain_doc(name: str) -> str:
+    """``docs/<name>`` with plain minus signs and single spaces."""
+    return " ".join(_read(REPO / "docs" / name).replace("−", "-").split())
+
+
 def _protocol_doc() -> str:
-    """``docs/design_protocol.md`` with plain minus signs and single spaces."""
-    return " ".join(_read(REPO / "docs" / "design_protocol.md").replace("−", "-").split())
+    return _plain_doc("design_protocol.md")
+
+
+def _recipe_rows(results: dict, entry: str) -> dict[str, dict]:
+    """``{variant: row}`` of a design-protocol entry's recipes table."""
+    return {r["variant"]: r for r in results[entry]["recipes"]}
 
 
 @pytest.mark.parametrize(
@@ -357,7 +367,7 @@ def test_the_linear_diagnostics_paired_differences_are_their_episode_errors(entr
     through ``variant`` on the same episodes (the wide or narrow ``*-linear`` entry)."""
     results = json.loads(_read(DESIGN_PROTOCOL))
     linear = "patches-narrow-linear" if "narrow" in entry else "patches-linear"
-    rows = {r["variant"]: r for r in results[linear]["recipes"]}
+    rows = _recipe_rows(results, linear)
     first = results[entry]["ladder"][-1] if results[entry]["ladder"] else rows["base"]
     figure = _paired(first["designs"][a], rows[variant]["designs"][b])
     assert figure in _protocol_doc(), (entry, a, variant, b, figure)
@@ -383,10 +393,9 @@ def test_the_signed_pixels_paired_differences_are_their_episode_errors(entry, k,
     unsigned camera of as many photodiodes (its ladder point), or 32x32 read through
     ``k`` signed combinations (the ``*-linear`` entry's ``linear-k``)."""
     results = json.loads(_read(DESIGN_PROTOCOL))
-    signed = {r["variant"]: r for r in results[entry]["recipes"]}["signed"]
+    signed = _recipe_rows(results, entry)["signed"]
     if other.endswith("-linear"):
-        rows = {r["variant"]: r for r in results[other]["recipes"]}
-        against = rows[f"linear-{k}"]["designs"][b]
+        against = _recipe_rows(results, other)[f"linear-{k}"]["designs"][b]
     else:
         against = results[other]["ladder"][-1]["designs"][b]
     figure = _paired(signed["designs"][f"mincam-{k}px"], against)
@@ -407,14 +416,11 @@ def test_the_signed_pixels_paired_differences_are_their_episode_errors(entry, k,
 )
 def test_the_traffic_block_masks_paired_differences(block, variant, b, quoted):
     """Traffic's mincam 8 px with block masks against a design of another recipe row."""
-    rows = {
-        r["variant"]: r for r in json.loads(_read(DESIGN_PROTOCOL))["traffic-recipes"]["recipes"]
-    }
+    rows = _recipe_rows(json.loads(_read(DESIGN_PROTOCOL)), "traffic-recipes")
     figure = _paired(rows[block]["designs"]["mincam-8px"], rows[variant]["designs"][b])
     assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (block, variant, b, figure)
     if (block, variant, b) == ("block-4", "base", "baseline-2x4"):
-        studies = " ".join(_read(REPO / "docs" / "studies.md").replace("−", "-").split())
-        assert f"2x4 ({figure})" in studies, figure
+        assert f"2x4 ({figure})" in _plain_doc("studies.md"), figure
 
 
 # ---- the self-powered budget: energy.json's headline figures, as docs quote them ---------------
