@@ -249,6 +249,18 @@ class ModelRecord(TypedDict, total=False):
     signed: bool
 
 
+def pixels_label(model: Model) -> str:
+    """A model's kind and pixel budget for progress bars and logs.
+
+    ``"mincam 8 px"``, ``"baseline 112 px"``; signed freeform pixels name their
+    outputs and their photodiodes, ``"mincam 2 signed px (4 photodiodes)"``.
+    """
+    if isinstance(model, MincamCamera) and model.signed:
+        return f"mincam {model.num_outputs} signed px ({model.num_pixels} photodiodes)"
+    kind = ModelKind.MINCAM if isinstance(model, MincamCamera) else ModelKind.BASELINE
+    return f"{kind.value} {model.num_pixels} px"
+
+
 def describe_model(model: Model) -> ModelRecord:
     """A JSON-ready description of a model (kind, pixels, options).
 

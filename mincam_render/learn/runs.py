@@ -22,7 +22,13 @@ from mincam_render.core import strict_json
 from mincam_render.core.strict_json import JsonObject
 from mincam_render.data.dataset import label_spec_to_dict
 from mincam_render.learn.batches import RenderedBatches
-from mincam_render.learn.builders import ModelRecord, build_baseline, build_mincam, describe_model
+from mincam_render.learn.builders import (
+    ModelRecord,
+    build_baseline,
+    build_mincam,
+    describe_model,
+    pixels_label,
+)
 from mincam_render.learn.evaluation import Evaluation, evaluate
 from mincam_render.learn.loop import TrainResult, train_model
 from mincam_render.learn.models import MincamCamera, Model
@@ -173,7 +179,7 @@ def train_run(
             out_dir=out,
             resume=resume,
             progress=progress,
-            desc=f"{run['model']['kind']} {model.num_pixels} px",
+            desc=pixels_label(model),
             on_progress=on_progress,
         )
         metrics = _run_metrics(run, res, model, len(train), test, episodes)

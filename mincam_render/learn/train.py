@@ -12,7 +12,7 @@ in its own module:
 * :mod:`~mincam_render.learn.temporal_head` -- the temporal convolution head
   (:class:`TemporalConvHead`, ``TrainConfig(head=HeadKind.TCN)``);
 * :mod:`~mincam_render.learn.builders` -- cameras and heads built for a task,
-  the paper's count loss and learning rate, :func:`describe_model`;
+  the paper's count loss and learning rate, :func:`describe_model`, :func:`pixels_label`;
 * :mod:`~mincam_render.learn.evaluation` -- :func:`predict`, the paper's
   :func:`postprocess`, :func:`metrics`, :func:`evaluate`;
 * :mod:`~mincam_render.learn.step` -- the optimiser and one :func:`train_step`;
@@ -40,6 +40,7 @@ from mincam_render.learn.builders import (
     describe_model,
     head_kind,
     learning_rate_for,
+    pixels_label,
 )
 from mincam_render.learn.evaluation import (
     Evaluation,
@@ -135,6 +136,7 @@ __all__ = [
     "median_filter_window",
     "metrics",
     "open_run",
+    "pixels_label",
     "plot_mask_evolution",
     "plot_sweep",
     "postprocess",

@@ -37,6 +37,14 @@ def test_baseline_trains(variant):
     assert tr.predict(model, val)[2] < 0.6 * before
 
 
+def test_the_progress_label_counts_signed_pixels_and_their_photodiodes(variant):
+    data = linear_task(40, k=4)
+    assert tr.pixels_label(tr.build_mincam(data, 2)) == "mincam 2 px"
+    signed = tr.build_mincam(data, 2, signed=True)
+    assert tr.pixels_label(signed) == "mincam 2 signed px (4 photodiodes)"
+    assert tr.pixels_label(tr.build_baseline(data, (2, 3))) == "baseline 6 px"
+
+
 def test_resume_equals_continuing(variant, tmp_path):
     train, val, _ = linear_task(120).split((0.7, 0.15, 0.15))
     cfg = tr.TrainConfig(max_steps=20, batch_size=16, eval_every=5, patience=100)
