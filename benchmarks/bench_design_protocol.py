@@ -6,7 +6,7 @@ Usage::
         [--sections protocol,recipes,ladder,references,oracle,restarts] [--train-workers 2]
         [--ladder 1,2,4,8] [--test-episodes 10] [--key workspace-10test]
         [--floor-test-factors 4,16] [--samples-factor 4]
-        [--reference-episodes 32] [--reference-pixels 8]
+        [--reference-episodes 32] [--reference-pixels 8] [--reference-recipe block-4]
         [--recipes head-512] [--recipe-episodes 16] [--pixels 2,4,8]
 
 Runs :func:`mincam_render.studies.design_protocol.run` for one task on its
@@ -221,6 +221,12 @@ def main() -> None:
         "default: every variant)",
     )
     ap.add_argument(
+        "--reference-recipe",
+        default=None,
+        help="the recipe the references section trains every design with, e.g. block-4 "
+        "(the one the recipes section chose; default: the base)",
+    )
+    ap.add_argument(
         "--samples-factor",
         type=float,
         default=None,
@@ -255,6 +261,12 @@ def main() -> None:
     if args.recipes:
         try:
             task["recipes"] = recipes_named([n.strip() for n in args.recipes.split(",")])
+        except ValueError as e:
+            ap.error(str(e))
+    if args.reference_recipe:
+        try:
+            recipe = recipes_named([args.reference_recipe.strip()])[-1]
+            task["reference_recipe"] = recipe if recipe.changes else None  # the base
         except ValueError as e:
             ap.error(str(e))
     if args.reference_pixels:

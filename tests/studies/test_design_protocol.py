@@ -155,6 +155,28 @@ def test_floors_are_paired_on_the_largest_training_set(study):
     assert check.verdict is expected
 
 
+def test_the_references_train_with_the_reference_recipe_in_their_own_folder(study, tmp_path):
+    import dataclasses
+
+    from mincam_render.learn.train_config import MaskReference
+    from mincam_render.studies.design_protocol.report import markdown
+
+    out, base = study
+    block = RecipeVariant(name="block-2", changes={"mask_block": 2}, minimalist_only=True)
+    cfg = dataclasses.replace(
+        CFG, references=(MaskReference.PCA,), reference_recipe=block, floor_test_factors=()
+    )
+    result = run(cfg, tmp_path, episodes_dir=out / "episodes", sections=("references",))
+    (ref,) = result.references
+    assert ref.recipe == "block-2" and base.references[0].recipe == "base"
+    assert sorted(ref.designs) == ["mincam-2px", "mincam-2px-pca", "mincam-2px-pca-tuned"]
+    runs = tmp_path / "references" / "2px-block-2" / "runs"
+    for name in ("mincam-2px-seed0", "mincam-2px-pca-tuned-seed1"):
+        assert json.loads((runs / name / "run.json").read_text())["model"]["mask_block"] == 2
+    assert not (tmp_path / "references" / "2px").exists()
+    assert "### 2 px (block-2 recipe)" in markdown(result)
+
+
 def test_retest_factors_count_from_the_plan_when_the_episodes_render_at_a_multiple(tmp_path):
     import dataclasses
 
@@ -329,6 +351,9 @@ def test_configuration_is_validated():
         DesignProtocolConfig(floors=floors, floor_test_factors=4)
     with pytest.raises(ValueError, match="floor_test_factors"):
         DesignProtocolConfig(floors=floors, floor_test_factors=(4, -4))
+    signed = recipes_named(["signed"])[-1]
+    with pytest.raises(ValueError, match="reference_recipe 'signed': a diagnostic, not a recipe"):
+        DesignProtocolConfig(reference_recipe=signed)
     given = DesignProtocolConfig(floors=floors, floor_test_factors=[4, 16])
     assert given.floor_test_factors == (4.0, 16.0)
 

@@ -18,6 +18,8 @@ BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_design_proto
         (["--recipes", "tv-0.3,tv-0.3"], "at most once"),
         (["--samples-factor", "1e5"], "--samples-factor 100000.0: need a multiple in (0, 1e4]"),
         (["--recipe-episodes", "0"], "training episodes"),
+        (["--reference-recipe", "block-3"], "recipes ['block-3']: give each of"),
+        (["--reference-recipe", "signed"], "reference_recipe 'signed': a diagnostic"),
         (["--pixels", "4,x"], "--pixels '4,x': pixel counts"),
         (["--pixels", "4,4"], "distinct counts"),
         (["--pixels", "2,4"], "floor mincam-8px against baseline-32x32: both must be ladder"),

@@ -175,6 +175,12 @@ class DesignProtocolConfig:
         reference_episodes: training episodes the references are compared on.
         reference_pixels: pixel counts at which end-to-end masks meet the references.
         references: the reference masks (each also tuned end to end from it).
+        reference_recipe: the recipe every design of the references section
+            trains with (one of :func:`default_recipes`, e.g. the one the
+            recipes section chose for the task's freeform pixels); None: the
+            base. The reference masks themselves are fitted at full resolution
+            whatever the recipe (a block recipe moves only the tuned ones, in
+            blocks).
         protocol_episodes: training episodes of the per-task against joint table.
         protocol_pixels: per-task pixel budgets of that table; each meets a joint
             camera of the same pixels and one of the per-task cameras' total.
@@ -202,6 +208,7 @@ class DesignProtocolConfig:
     reference_episodes: int = 8
     reference_pixels: tuple[int, ...] = (2, 8)
     references: tuple[MaskReference, ...] = tuple(MaskReference)
+    reference_recipe: RecipeVariant | None = None
     protocol_episodes: int = 8
     protocol_pixels: tuple[int, ...] = (2,)
     restarts: int = 3
@@ -224,6 +231,10 @@ class DesignProtocolConfig:
         if len(set(names)) != len(names):
             raise ValueError(f"recipes {names}: give each name once")
         object.__setattr__(self, "references", tuple(MaskReference(r) for r in self.references))
+        if self.reference_recipe is not None and self.reference_recipe.diagnostic:
+            raise ValueError(
+                f"reference_recipe {self.reference_recipe.name!r}: a diagnostic, not a recipe"
+            )
         ladder_names = {d.name for d in self.ladder_designs}
         for f in self.floors:
             if not {f.design, f.baseline} <= ladder_names:

@@ -202,7 +202,7 @@ def _reference_lines(result: DesignProtocolResult) -> list[str]:
             p = ref.versus_end_to_end.get(name)
             rows.append([name, _cell(f), p.statement if p else ""])
         lines += [
-            f"### {ref.pixels} px",
+            f"### {ref.pixels} px ({ref.recipe} recipe)",
             "",
             *_table(["design", "val", "test", "paired"], rows),
             "",

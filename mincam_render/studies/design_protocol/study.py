@@ -134,11 +134,15 @@ class Doubling:
 
 @dataclass(frozen=True)
 class ReferenceRow:
-    """End-to-end masks of ``pixels`` against the reference masks of as many pixels."""
+    """End-to-end masks of ``pixels`` against the reference masks of as many pixels.
+
+    ``recipe``: the recipe every design of the row trained with.
+    """
 
     pixels: int
     designs: Mapping[str, DesignFigure]
     versus_end_to_end: Mapping[str, Paired]
+    recipe: str = "base"
 
 
 @dataclass(frozen=True)
@@ -629,15 +633,14 @@ def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> l
                 Design(pixels=k, reference=ref),
                 Design(pixels=k, reference=ref, tuned=True),
             ]
-        result = compare(
-            cfg.comparison(cfg.reference_episodes, tuple(designs)), out / "references" / f"{k}px"
-        )
+        result = compare(_reference_comparison(cfg, tuple(designs)), reference_dir(cfg, out, k))
         block = result.block(cfg.task)
         figures = {d.name: block.figure(d.name) for d in designs}
         e2e = figures[designs[0].name]
         rows.append(
             ReferenceRow(
                 pixels=k,
+                recipe=cfg.reference_recipe.name if cfg.reference_recipe else "base",
                 designs=figures,
                 versus_end_to_end={
                     n: Paired.of(e2e, f) for n, f in figures.items() if f is not e2e
@@ -645,6 +648,21 @@ def reference_table(cfg: DesignProtocolConfig, compare: Compare, out: Path) -> l
             )
         )
     return rows
+
+
+def _reference_comparison(
+    cfg: DesignProtocolConfig, designs: tuple[Design, ...]
+) -> ComparisonConfig:
+    """What the references section trains: ``designs`` with the reference recipe."""
+    recipe = cfg.reference_recipe
+    train = recipe.apply(cfg.episodes.train) if recipe else cfg.episodes.train
+    return cfg.comparison(cfg.reference_episodes, designs, train=train)
+
+
+def reference_dir(cfg: DesignProtocolConfig, out: Path, pixels: int) -> Path:
+    """The references section's comparison at ``pixels`` (``-<recipe>`` unless the base)."""
+    recipe = cfg.reference_recipe
+    return out / "references" / (f"{pixels}px-{recipe.name}" if recipe else f"{pixels}px")
 
 
 def selection_agreement(figures: Sequence[DesignFigure]) -> Selection:
