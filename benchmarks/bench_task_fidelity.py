@@ -62,8 +62,12 @@ others rendered), as kept in ``benchmarks/results/task_fidelity.json``::
     python benchmarks/bench_task_fidelity.py --work /work/tf38-patches --family patches \
         --sections render,check --levels 0.25x,4x --one-x /work/episodes/patches \
         --seeds 3 --replicate-seeds 3 --episodes 2,2,2 --lock /tmp/mincam-cpu.lock
+    python benchmarks/bench_task_fidelity.py --work /work/tf38-traffic --family traffic \
+        --sections render,check --levels 1x,4x --cross 1x:4x,4x:1x \
+        --one-x /work/protocol-traffic/episodes --seeds 3 --replicate-seeds 3 \
+        --episodes 2,2,2 --train-workers 2 --lock /tmp/mincam-cpu.lock
 
-and the workspace's reduced check at the learning curves' size (32 training, 4
+(traffic without 0.25x, its 32x32 runs taking 10-16 minutes each) and the workspace's reduced check at the learning curves' size (32 training, 4
 validation and 10 test episodes, the plan as the reference; 4x renders of the
 test episodes alone)::
 
