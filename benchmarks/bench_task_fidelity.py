@@ -330,6 +330,10 @@ def summary(result: dict[str, Any], cfg: TaskFidelityConfig) -> dict[str, Any]:
         "noise_over_signal_at_plan": {
             k: noise["error_rms_w"][v] / noise["signal_rms_w"][v] for k, v in kinds.items()
         },
+        "step_noise_over_step_signal_at_plan": {
+            k: noise["step_error_rms_w"][v] / noise["step_signal_rms_w"][v]
+            for k, v in kinds.items()
+        },
         "noise_autocorrelation_at_plan": noise["autocorrelation"]["random_masks"],
         "window_frames": noise["window_frames"],
         "chosen_level": chosen,

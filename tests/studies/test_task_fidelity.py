@@ -165,6 +165,15 @@ def test_noise_figures_against_closed_forms():
     np.testing.assert_allclose(acf["lag_1_frame"], (window - 1) / window, atol=0.02)
     np.testing.assert_allclose(acf["lag_1_window"], 0.0, atol=0.05)
     assert figures.ratio()["box_1"] == pytest.approx(box / figures.signal_rms_w["box_1"])
+    # frame steps: the pattern changes at 1 step in W, by a power of 2 sigma^2
+    steps = np.diff(signal, axis=0)
+    np.testing.assert_allclose(figures.step_error_rms_w["box_1"], 0.1 * np.sqrt(2 / window),
+                               rtol=0.1)  # fmt: skip
+    np.testing.assert_allclose(figures.step_signal_rms_w["box_1"], np.sqrt(
+        np.mean((steps - steps.mean(0)) ** 2)), rtol=1e-9)  # fmt: skip
+    assert figures.step_ratio()["box_1"] == pytest.approx(
+        figures.step_error_rms_w["box_1"] / figures.step_signal_rms_w["box_1"]
+    )
 
 
 def test_a_window_as_long_as_the_episodes_leaves_its_lag_unmeasured():
@@ -189,6 +198,8 @@ def test_a_window_as_long_as_the_episodes_leaves_its_lag_unmeasured():
     assert acf["lag_1_window"] is None
     np.testing.assert_allclose(acf["lag_1_frame"], 0.0, atol=0.1)
     np.testing.assert_allclose(figures.error_rms_w["box_1"], 0.1, rtol=0.05)
+    # noise new in every frame: its frame steps have sqrt(2) times its RMS
+    np.testing.assert_allclose(figures.step_error_rms_w["box_1"], 0.1 * np.sqrt(2), rtol=0.05)
 
 
 def test_levels_take_the_plans_seeds_unless_told(tmp_path):

@@ -12,6 +12,15 @@ episode, the frame itself (its static part is its mean over frames). Two
 renders of the episode (the reference and a second level) give two estimates
 whose covariance over frames is the signal's power without their noise
 (:class:`~mincam_render.render.precision.LabelSignal`).
+
+A temporal task reads its label from what changes between frames (traffic's
+speed from the frames of the head's history), where the whole frame's light
+cancels and noise that is new in every frame does not. So every figure is also
+taken on *frame steps*, ``x[f + 1] - x[f]`` of the error and of each signal
+estimate: noise independent from frame to frame has sqrt(2) times its frame RMS
+there, a pattern held for a background window nearly none, and a signal that
+changes slowly little. The level's share of the steps' error power is taken as
+the frames' (both levels' noises repeat alike: the same seeding).
 """
 
 from __future__ import annotations
@@ -46,6 +55,9 @@ class NoiseFigures:
             part that moves from frame to frame (a constant offset, like a
             missing bounce or a converged background's noise, is left out).
         signal_rms_w: the label signal's RMS over frames (W).
+        step_error_rms_w: RMS of the error's frame steps ``e[f + 1] - e[f]`` (W),
+            the reference's share out.
+        step_signal_rms_w: the label signal's frame steps' RMS (W).
         autocorrelation: ``{kind: {"lag_1_frame", "lag_1_window"}}`` of the error;
             ``lag_1_window`` is None where no episode is longer than a window
             (the lighting room's 1,800-frame test episodes hold one 60 s window
@@ -58,6 +70,8 @@ class NoiseFigures:
     error_rms_w: Mapping[str, float]
     noise_rms_w: Mapping[str, float]
     signal_rms_w: Mapping[str, float]
+    step_error_rms_w: Mapping[str, float]
+    step_signal_rms_w: Mapping[str, float]
     autocorrelation: Mapping[str, Mapping[str, float | None]]
     window_frames: int
 
@@ -65,6 +79,10 @@ class NoiseFigures:
         """``figure`` over the label signal's RMS, per measurement kind (dimensionless)."""
         values = getattr(self, figure)
         return {k: values[k] / self.signal_rms_w[k] for k in values}
+
+    def step_ratio(self) -> dict[str, float]:
+        """The frame steps' error over their label signal's, per kind (dimensionless)."""
+        return {k: v / self.step_signal_rms_w[k] for k, v in self.step_error_rms_w.items()}
 
 
 def measurement_kinds(
@@ -145,11 +163,12 @@ def noise_figures(
     for i, path in enumerate(paths):
         t, _ = load(path)
         t_ref, s_ref = load(ref_paths[i])
-        estimates = [s_ref] if second is None else [s_ref, load(second[i])[1]]
-        signal = LabelSignal(parts=(np.stack(estimates),))
+        estimates = np.stack([s_ref] if second is None else [s_ref, load(second[i])[1]])
+        signal = LabelSignal(parts=(estimates,))
+        steps = LabelSignal(parts=(np.diff(estimates, axis=1),))
         for kind, measure in measurement_kinds(t.shape[1:], lo_hi).items():
             error = measure(t) - measure(t_ref)
-            _add(sums, kind, error, signal.rms(measure), window_frames)
+            _add(sums, kind, error, (signal.rms(measure), steps.rms(measure)), window_frames)
     pooled = {kind: _pooled(v, share) for kind, v in sums.items()}
     return NoiseFigures(
         episodes=tuple(Path(p).name for p in paths),
@@ -157,6 +176,8 @@ def noise_figures(
         error_rms_w={k: v.error for k, v in pooled.items()},
         noise_rms_w={k: v.noise for k, v in pooled.items()},
         signal_rms_w={k: v.signal for k, v in pooled.items()},
+        step_error_rms_w={k: v.step_error for k, v in pooled.items()},
+        step_signal_rms_w={k: v.step_signal for k, v in pooled.items()},
         autocorrelation={
             k: {"lag_1_frame": v.lag_1, "lag_1_window": v.lag_window} for k, v in pooled.items()
         },
@@ -175,19 +196,25 @@ def _add(
     sums: dict[str, dict[str, list[float]]],
     kind: str,
     error: np.ndarray,
-    signal_rms: float,
+    signal_rms: tuple[float, float],
     window_frames: int,
 ) -> None:
-    """One episode's powers and autocorrelations, weighted by its frames."""
+    """One episode's powers and autocorrelations, weighted by its frames.
+
+    ``signal_rms`` is the label signal's RMS over frames and over frame steps (W).
+    """
     frames = error.shape[0]
     flat = error.reshape(frames, -1)
     # a lag of one window needs an episode longer than a window; else not measured
     acf = noise_autocorrelation(flat, [1] + ([window_frames] if window_frames < frames else []))
-    entry = sums.setdefault(kind, {k: [] for k in ("w", "e2", "n2", "s2", "r1", "rw")})
+    keys = ("w", "e2", "n2", "s2", "d2", "ds2", "r1", "rw")
+    entry = sums.setdefault(kind, {k: [] for k in keys})
     entry["w"].append(frames)
     entry["e2"].append(float(np.mean(flat**2)))
     entry["n2"].append(float(np.mean((flat - flat.mean(axis=0)) ** 2)))
-    entry["s2"].append(signal_rms**2)
+    entry["s2"].append(signal_rms[0] ** 2)
+    entry["d2"].append(float(np.mean(np.diff(flat, axis=0) ** 2)))
+    entry["ds2"].append(signal_rms[1] ** 2)
     entry["r1"].append(acf[1])
     entry["rw"].append(acf.get(window_frames, math.nan))
 
@@ -199,6 +226,8 @@ class _Pooled:
     error: float
     noise: float
     signal: float
+    step_error: float
+    step_signal: float
     lag_1: float
     lag_window: float | None
 
@@ -217,6 +246,8 @@ def _pooled(entry: Mapping[str, list[float]], share: float) -> _Pooled:
         error=float(np.sqrt(share * mean("e2"))),
         noise=float(np.sqrt(share * mean("n2"))),
         signal=float(np.sqrt(mean("s2"))),
+        step_error=float(np.sqrt(share * mean("d2"))),
+        step_signal=float(np.sqrt(mean("ds2"))),
         lag_1=mean("r1"),
         lag_window=float(np.sum(w[measured] * rw[measured]) / np.sum(w[measured]))
         if measured.any()

@@ -56,6 +56,7 @@ def markdown(result: TaskFidelityResult) -> str:
             "reference",
             "error/signal: random masks / 4x4 box / 1 texel",
             "noise/signal (mean over frames out): the same three",
+            "frame steps' error/signal: the same three",
             "autocorrelation (random masks): lag 1 frame / 1 window",
         ],
         [_noise_row(lv) for lv in result.levels if lv.noise is not None],
@@ -125,7 +126,7 @@ def _acceptance_cell(a: Acceptance) -> str:
 
 def _noise_row(lv: LevelFigures) -> list[str]:
     assert lv.noise is not None  # rows are made for measured levels only
-    err, noise = lv.noise.ratio(), lv.noise.ratio("noise_rms_w")
+    err, noise, steps = lv.noise.ratio(), lv.noise.ratio("noise_rms_w"), lv.noise.step_ratio()
     acf = lv.noise.autocorrelation["random_masks"]
     kinds = ("random_masks", "box_4", "box_1")
     return [
@@ -133,6 +134,7 @@ def _noise_row(lv: LevelFigures) -> list[str]:
         lv.noise.reference,
         " / ".join(f"{err[k]:.3f}" for k in kinds),
         " / ".join(f"{noise[k]:.3f}" for k in kinds),
+        " / ".join(f"{steps[k]:.3f}" for k in kinds),
         f"{acf['lag_1_frame']:.2f} / {_lag(acf['lag_1_window'])}",
     ]
 
@@ -153,13 +155,15 @@ def plot_paretos(levels: Sequence[LevelFigures], error_name: str, path: Path) ->
     ):
         x = [lv.render_s_per_frame for lv in measured]
         y = [lv.noise.ratio()[kind] for lv in measured if lv.noise is not None]
-        left.plot(x, y, marker="o", ls="", label=label)
+        steps = [lv.noise.step_ratio()[kind] for lv in measured if lv.noise is not None]
+        (dots,) = left.plot(x, y, marker="o", ls="", label=label)
+        left.plot(x, steps, marker="x", ls="", color=dots.get_color(), label=f"{label}, steps")
         for lv, xi, yi in zip(measured, x, y, strict=True):
             left.annotate(lv.level, (xi, yi), textcoords="offset points", xytext=(3, 3), fontsize=7)
     left.set_xscale("log")
     left.set_yscale("log")
     left.set_xlabel("render seconds per frame")
-    left.set_ylabel("render error / label signal (RMS)")
+    left.set_ylabel("render error / label signal (RMS; x: frame steps)")
     left.set_title("measurement error against run time")
     for name in levels[0].designs:
         x = [lv.render_s_per_frame for lv in levels]
