@@ -84,7 +84,7 @@ INTERVAL = re.compile(r"([+\-−]?\d+\.\d{3})\s+\[([+\-−]?\d+\.\d{3}),\s+([+\-
 #: ... and ``x.x % [lo, hi]``, a fraction quoted in per cent (increases, accuracies).
 PERCENT = re.compile(r"([+\-−]?\d+\.\d) %\s+\[([+\-−]?\d+\.\d),\s+([+\-−]?\d+\.\d)\]")
 TRAFFIC_BLOCKS = (
-    "traffic's mincam 8 px with block masks (block-8, block-4) paired with another recipe "
+    "traffic's freeform pixels with block masks (block-8, block-4) paired with another recipe "
     "row's design on the same episodes, not stored: recomputed by "
     "test_the_traffic_block_masks_paired_differences"
 )
@@ -169,8 +169,19 @@ NOT_KEPT = {
             "−0.264 [−0.673, +0.077]",
             "−0.158 [−0.598, +0.369]",
             "+0.157 [−0.113, +0.503]",
+            "+0.227 [−0.289, +0.900]",
         ),
         TRAFFIC_BLOCKS,
+    )
+    | dict.fromkeys(
+        (
+            "−0.391 [−0.870, +0.175]",
+            "−0.414 [−0.901, +0.088]",
+            "−0.420 [−0.875, +0.067]",
+            "+0.048 [−0.506, +0.846]",
+        ),
+        "paired differences at the largest point of the traffic ladder at 4x (traffic-4x), not "
+        "stored: recomputed by test_the_design_protocols_paired_differences_are_its_episode_errors",
     )
     | dict.fromkeys(
         ("1.407 [1.386, 1.425]", "1.399 [1.375, 1.420]"),
@@ -318,6 +329,10 @@ def test_every_interval_a_doc_quotes_is_in_the_results_it_names(doc):
         ("traffic", "mincam-8px", "baseline-2x4", "mincam 8 px − 2×4"),
         ("traffic", "mincam-2px", "baseline-2x4", "mincam 2 px − 2×4"),
         ("traffic", "mincam-8px", "baseline-16x28", "mincam 8 px − 16×28"),
+        ("traffic-4x", "mincam-8px", "baseline-2x4", "mincam 8 px − 2×4"),
+        ("traffic-4x", "mincam-8px", "baseline-8x14", "mincam 8 px − 8×14"),
+        ("traffic-4x", "mincam-8px", "baseline-16x28", "mincam 8 px − 16×28"),
+        ("traffic-4x", "mincam-2px", "baseline-2x4", "mincam 2 px − 2×4"),
     ],
 )
 def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a, b, quoted):
@@ -403,23 +418,24 @@ def test_the_signed_pixels_paired_differences_are_their_episode_errors(entry, k,
 
 
 @pytest.mark.parametrize(
-    ("block", "variant", "b", "quoted"),
+    ("entry", "design", "block", "variant", "b", "quoted"),
     [
-        ("block-8", "base", "baseline-2x4", "− 2×4 (base)"),
-        ("block-8", "base", "baseline-8x14", "− 8×14"),
-        ("block-8", "base", "baseline-16x28", "− 16×28"),
-        ("block-8", "gain-20", "baseline-2x4", "− 2×4 (gain-20)"),
-        ("block-4", "base", "baseline-2x4", "− 2×4 (base)"),
-        ("block-4", "gain-20", "baseline-2x4", "− 2×4 (gain-20)"),
-        ("block-4", "block-8", "mincam-8px", "− block-8"),
+        ("traffic-recipes", "mincam-8px", "block-8", "base", "baseline-2x4", "− 2×4 (base)"),
+        ("traffic-recipes", "mincam-8px", "block-8", "base", "baseline-8x14", "− 8×14"),
+        ("traffic-recipes", "mincam-8px", "block-8", "base", "baseline-16x28", "− 16×28"),
+        ("traffic-recipes", "mincam-8px", "block-8", "gain-20", "baseline-2x4", "− 2×4 (gain-20)"),
+        ("traffic-recipes", "mincam-8px", "block-4", "base", "baseline-2x4", "− 2×4 (base)"),
+        ("traffic-recipes", "mincam-8px", "block-4", "gain-20", "baseline-2x4", "− 2×4 (gain-20)"),
+        ("traffic-recipes", "mincam-8px", "block-4", "block-8", "mincam-8px", "− block-8"),
+        ("traffic-4x", "mincam-2px", "block-4", "base", "baseline-2x4", "block-4 − 2×4"),
     ],
 )
-def test_the_traffic_block_masks_paired_differences(block, variant, b, quoted):
-    """Traffic's mincam 8 px with block masks against a design of another recipe row."""
-    rows = _recipe_rows(json.loads(_read(DESIGN_PROTOCOL)), "traffic-recipes")
-    figure = _paired(rows[block]["designs"]["mincam-8px"], rows[variant]["designs"][b])
+def test_the_traffic_block_masks_paired_differences(entry, design, block, variant, b, quoted):
+    """Traffic's freeform design with block masks against a design of another recipe row."""
+    rows = _recipe_rows(json.loads(_read(DESIGN_PROTOCOL)), entry)
+    figure = _paired(rows[block]["designs"][design], rows[variant]["designs"][b])
     assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (block, variant, b, figure)
-    if (block, variant, b) == ("block-4", "base", "baseline-2x4"):
+    if (entry, block, variant, b) == ("traffic-recipes", "block-4", "base", "baseline-2x4"):
         assert f"2x4 ({figure})" in _plain_doc("studies.md"), figure
 
 
