@@ -67,7 +67,8 @@ others rendered), as kept in ``benchmarks/results/task_fidelity.json``::
         --one-x /work/protocol-traffic/episodes --seeds 3 --replicate-seeds 3 \
         --episodes 2,2,2 --train-workers 2 --lock /tmp/mincam-cpu.lock
 
-(traffic without 0.25x, its 32x32 runs taking 10-16 minutes each) and the workspace's reduced check at the learning curves' size (32 training, 4
+(traffic without 0.25x, its 32x32 runs taking 10-16 minutes each) and the
+workspace's reduced check at the learning curves' size (32 training, 4
 validation and 10 test episodes, the plan as the reference; 4x renders of the
 test episodes alone)::
 

@@ -171,7 +171,7 @@ def test_noise_figures_against_closed_forms():
                                rtol=0.1)  # fmt: skip
     np.testing.assert_allclose(figures.step_signal_rms_w["box_1"], np.sqrt(
         np.mean((steps - steps.mean(0)) ** 2)), rtol=1e-9)  # fmt: skip
-    assert figures.step_ratio()["box_1"] == pytest.approx(
+    assert figures.ratio("step_error_rms_w", "step_signal_rms_w")["box_1"] == pytest.approx(
         figures.step_error_rms_w["box_1"] / figures.step_signal_rms_w["box_1"]
     )
 
@@ -405,3 +405,35 @@ def test_the_report_shows_each_levels_figures_and_its_pairs_between_designs():
     assert not [ln for ln in lines if ln.startswith("- 4x")]  # no pairs, no empty line
     result = dataclasses.replace(result, levels=(unpaired,))
     assert "Between designs at each level" not in markdown(result)
+
+
+def test_the_reports_noise_table_and_plot_show_the_frame_steps(tmp_path):
+    from mincam_render.studies.task_fidelity.noise import NoiseFigures
+    from mincam_render.studies.task_fidelity.report import markdown, plot_paretos
+    from mincam_render.studies.task_fidelity.study import TaskFidelityResult
+
+    kinds = ("random_masks", "box_4", "box_1")
+
+    def per_kind(*values: float) -> dict[str, float]:
+        return dict(zip(kinds, values, strict=True))
+
+    noise = NoiseFigures(
+        episodes=("test-0",),
+        reference="4x",
+        error_rms_w=per_kind(1.0, 2.0, 3.0),
+        noise_rms_w=per_kind(1.0, 2.0, 3.0),
+        signal_rms_w=per_kind(10.0, 10.0, 10.0),
+        step_error_rms_w=per_kind(1.5, 3.0, 4.5),
+        step_signal_rms_w=per_kind(1.0, 2.0, 1.5),
+        autocorrelation={k: {"lag_1_frame": 0.0, "lag_1_window": None} for k in kinds},
+        window_frames=1800,
+    )
+    level = dataclasses.replace(_level({"a": _figure("a", [[1.0, 1.0]])}), noise=noise)
+    result = TaskFidelityResult(
+        config={}, task="speed", error_name="mph", levels=(level,),
+        acceptance={}, chosen=None, versions={},
+    )  # fmt: skip
+    # frame scale: error / signal; steps: 1.5 / 1.0, 3.0 / 2.0, 4.5 / 1.5
+    row = "| 1x | 4x | 0.100 / 0.200 / 0.300 | 0.100 / 0.200 / 0.300 | 1.500 / 1.500 / 3.000 |"
+    assert any(ln.startswith(row) for ln in markdown(result).splitlines())
+    assert plot_paretos([level], "mph", tmp_path / "p.png").stat().st_size > 0

@@ -75,14 +75,13 @@ class NoiseFigures:
     autocorrelation: Mapping[str, Mapping[str, float | None]]
     window_frames: int
 
-    def ratio(self, figure: str = "error_rms_w") -> dict[str, float]:
-        """``figure`` over the label signal's RMS, per measurement kind (dimensionless)."""
-        values = getattr(self, figure)
-        return {k: values[k] / self.signal_rms_w[k] for k in values}
+    def ratio(self, figure: str = "error_rms_w", signal: str = "signal_rms_w") -> dict[str, float]:
+        """``figure`` over ``signal``, per measurement kind (dimensionless).
 
-    def step_ratio(self) -> dict[str, float]:
-        """The frame steps' error over their label signal's, per kind (dimensionless)."""
-        return {k: v / self.step_signal_rms_w[k] for k, v in self.step_error_rms_w.items()}
+        On frame steps: ``ratio("step_error_rms_w", "step_signal_rms_w")``.
+        """
+        values, over = getattr(self, figure), getattr(self, signal)
+        return {k: values[k] / over[k] for k in values}
 
 
 def measurement_kinds(

@@ -13,6 +13,9 @@ from mincam_render.studies.task_fidelity.study import (
     TaskFidelityResult,
 )
 
+#: ``NoiseFigures.ratio`` arguments of the frame steps' error over their label signal.
+STEP_FIGURES = ("step_error_rms_w", "step_signal_rms_w")
+
 
 def write_report(result: TaskFidelityResult, out: str | Path, *, stem: str) -> dict[str, Path]:
     """``<stem>.md`` (the tables) and ``<stem>.png`` (error against render time) in ``out``."""
@@ -126,7 +129,8 @@ def _acceptance_cell(a: Acceptance) -> str:
 
 def _noise_row(lv: LevelFigures) -> list[str]:
     assert lv.noise is not None  # rows are made for measured levels only
-    err, noise, steps = lv.noise.ratio(), lv.noise.ratio("noise_rms_w"), lv.noise.step_ratio()
+    err, noise = lv.noise.ratio(), lv.noise.ratio("noise_rms_w")
+    steps = lv.noise.ratio(*STEP_FIGURES)
     acf = lv.noise.autocorrelation["random_masks"]
     kinds = ("random_masks", "box_4", "box_1")
     return [
@@ -155,7 +159,7 @@ def plot_paretos(levels: Sequence[LevelFigures], error_name: str, path: Path) ->
     ):
         x = [lv.render_s_per_frame for lv in measured]
         y = [lv.noise.ratio()[kind] for lv in measured if lv.noise is not None]
-        steps = [lv.noise.step_ratio()[kind] for lv in measured if lv.noise is not None]
+        steps = [lv.noise.ratio(*STEP_FIGURES)[kind] for lv in measured if lv.noise is not None]
         (dots,) = left.plot(x, y, marker="o", ls="", label=label)
         left.plot(x, steps, marker="x", ls="", color=dots.get_color(), label=f"{label}, steps")
         for lv, xi, yi in zip(measured, x, y, strict=True):
