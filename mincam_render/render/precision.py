@@ -71,18 +71,28 @@ class LabelSignal:
     signal's, not the signal's plus its estimate's noise. With one estimate
     (``S[1, ...]``) it is the plain spread.
 
+    Where the labels are read from the change between frames (frame steps,
+    ``S[f + 1] - S[f]``), a frame's render error reaches them through two
+    frames: ``noise_gain`` says by how much (``sqrt(2)`` for frames whose noises
+    do not correlate), and signal-relative errors are counted that many times.
+
     Args:
         parts: one array per part, each ``[1 or 2, frame >= 2, detector, row, col]``.
+        noise_gain: what one frame's render error becomes where the signal is
+            read (1: on the frames themselves).
 
     Raises:
-        ValueError: no part, or a part of another shape.
+        ValueError: no part, a part of another shape, or a gain not > 0.
     """
 
     parts: tuple[np.ndarray, ...]
+    noise_gain: float = 1.0
 
     def __post_init__(self) -> None:
         if not self.parts:
             raise ValueError("LabelSignal.parts is empty: give at least one part")
+        if not self.noise_gain > 0:
+            raise ValueError(f"LabelSignal.noise_gain = {self.noise_gain!r}: allowed a number > 0")
         for i, part in enumerate(self.parts):
             if part.ndim != 5 or part.shape[0] not in (1, 2) or part.shape[1] < 2:
                 raise ValueError(
@@ -234,11 +244,12 @@ def measurement_relative_error(
     ``|P_ref|`` over the frames (per detector and mask), so a frame ten times
     dimmer than the others weighs by its absolute error, not ten times more;
     ``scale="signal"`` divides every error by the label signal's RMS for the
-    same masks (:meth:`LabelSignal.rms`, pooled over detectors and masks).
+    same masks (:meth:`LabelSignal.rms`, pooled over detectors and masks) and
+    counts it ``g = signal.noise_gain`` times (frame steps: sqrt(2)).
 
     .. math::
 
-        e_\text{signal} = \frac{\sqrt{\langle (P - P_\text{ref})^2 \rangle}}
+        e_\text{signal} = g \, \frac{\sqrt{\langle (P - P_\text{ref})^2 \rangle}}
             {\sqrt{\langle (S - \bar S)^2 \rangle}}
 
     with ``S`` a measurement of the label signal and ``\bar S`` its mean over frames.
@@ -279,7 +290,7 @@ def measurement_relative_error(
         denom = np.broadcast_to(denom.mean(axis=0), denom.shape)
     elif scale is ErrorScale.SIGNAL:
         assert signal is not None  # checked above
-        denom = np.full(p.shape, signal.rms(measure))
+        denom = np.full(p.shape, signal.rms(measure) / signal.noise_gain)
     ok = denom > 0
     if not np.any(ok):
         return {"rms": 0.0, "max": 0.0}

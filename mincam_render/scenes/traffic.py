@@ -45,6 +45,8 @@ from mincam_render.core.strict_json import JsonObject
 from mincam_render.optics.camera import FreeformCamera
 from mincam_render.render import mitsuba_scene as ms
 from mincam_render.render.capabilities import Preview, TemporalLabels, View
+from mincam_render.render.fidelity.signal import SignalSource
+from mincam_render.render.precision import ErrorScale
 from mincam_render.scenes import sky
 from mincam_render.scenes.base import CameraMount, SceneFamily
 from mincam_render.scenes.sumo import (
@@ -628,6 +630,16 @@ class TrafficFamily(SceneFamily, TemporalLabels, Preview):
     name = "traffic"
     config_type = TrafficConfig
     history_frames = 30  # the paper's 1 s of history at 30 fps
+    # the speed is read from what changes between frames over that history
+    label_signal = SignalSource.FRAME_STEPS
+    # Planned on the frame steps: 1 % of the total (35 spp) left noise 1.73
+    # times the steps' signal and was rejected by the task check; the design
+    # protocol's cameras learn the speed from renders at 4x those samples,
+    # whose noise the planner measures at 0.53 of the steps' signal (its pilot's
+    # 3.12 at 4 spp, scaled to 140 spp). No level above 4x is checked: the
+    # target is 4x's, not the loosest the task accepts (docs/fidelity.md).
+    planning_error_scale = ErrorScale.SIGNAL
+    signal_target_error = 0.53
 
     def __init__(self, config: TrafficConfig, *, seed: int, num_frames: int) -> None:
         super().__init__(config, seed=seed, num_frames=num_frames)

@@ -5,7 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mincam_render.render.fidelity.signal import noise_autocorrelation
+from mincam_render.render.fidelity.signal import (
+    SignalSource,
+    noise_autocorrelation,
+    render_label_signal,
+)
 from mincam_render.render.precision import (
     ErrorScale,
     LabelSignal,
@@ -88,6 +92,96 @@ def test_the_weakest_part_sets_the_signal(rng):
     np.testing.assert_allclose(
         signal.rms(measure), 0.1 * LabelSignal(parts=(part,)).rms(measure), rtol=1e-12
     )
+
+
+def test_frame_steps_count_independent_noise_as_the_task_check_measures_it(rng):
+    # frames a_f D plus noise new in every frame: the planner's figure (the
+    # frame error over the steps' signal, counted sqrt(2) times) is what the
+    # task check measures directly, the error's steps over the signal's steps
+    _, mover, _, _ = _scene(rng)
+    amplitude = np.cumsum(rng.normal(0.0, 1.0, 3000))  # a slow walk: small steps
+    clean = amplitude[:, None, None, None] * mover[None]
+    noisy = clean + rng.normal(0.0, 0.01, clean.shape)
+    steps = np.diff(clean, axis=0)
+    signal = LabelSignal(parts=(np.stack([steps] * 2),), noise_gain=np.sqrt(2.0))
+    planned = measurement_relative_error(
+        noisy, clean, LO_HI, scale=ErrorScale.SIGNAL, signal=signal, box_texels=4
+    )["rms"]
+
+    def measure(t):
+        return box_measurements(t, 4)
+
+    error_steps = np.diff(measure(noisy) - measure(clean), axis=0)
+    signal_steps = np.diff(measure(clean), axis=0)
+    direct = np.sqrt(np.mean(error_steps**2) / np.var(signal_steps, axis=0).mean())
+    np.testing.assert_allclose(planned, direct, rtol=0.03)
+    frames_only = LabelSignal(parts=(np.stack([steps] * 2),))
+    np.testing.assert_allclose(
+        measurement_relative_error(
+            noisy, clean, LO_HI, scale=ErrorScale.SIGNAL, signal=frames_only, box_texels=4
+        )["rms"],
+        planned / np.sqrt(2.0),
+        rtol=1e-12,
+    )
+
+
+class _Strip:
+    """A numpy stand-in for a family: frame ``f`` renders ``B + a[f] D`` plus noise of its seed."""
+
+    def __init__(self, rng, frames=12, shape=(2, 4, 4)):
+        self.num_frames = frames
+        self.background = rng.uniform(1.0, 2.0, size=shape)
+        self.mover = rng.uniform(0.0, 0.05, size=shape)
+        self.amplitude = rng.normal(0.0, 1.0, size=frames)
+        self.noise = {}  # seed -> its noise image: one pattern per seed
+        self.rng, self.shape, self.frame = rng, shape, 0
+
+    def set_frame(self, scene, index):
+        self.frame = index
+        return {}
+
+    def render_transport(self, scene, camera, *, spp, seed, max_depth):
+        noise = self.noise.setdefault(seed, self.rng.normal(0.0, 0.1, size=self.shape))
+        return self.background + self.amplitude[self.frame] * self.mover + noise
+
+
+def _steps(family, frames):
+    return render_label_signal(
+        family,
+        None,
+        None,
+        frames,
+        source=SignalSource.FRAME_STEPS,
+        spp=1,
+        seeds=lambda i, e: 1000 * e + i,
+        interval_s=1.0,
+    )
+
+
+def test_frame_step_signal_renders_each_pair_under_one_seed(rng):
+    # the background and each seed's noise cancel in a step: what is left is
+    # exactly the mover's change; the last frame pairs with the one before
+    family = _Strip(rng)
+    signal = _steps(family, [0, 5, 11])
+    a, d = family.amplitude, family.mover
+    expected = np.stack([(a[f + 1] - a[f]) * d for f in (0, 5, 10)])
+    assert len(signal.parts) == 1 and signal.parts[0].shape == (2, 3, *family.shape)
+    for estimate in signal.parts[0]:
+        np.testing.assert_allclose(estimate, expected, atol=1e-12)
+    assert signal.noise_gain == pytest.approx(np.sqrt(2.0))
+    assert len(family.noise) == 6  # 3 pairs x 2 estimates, each its own seed
+
+
+@pytest.mark.parametrize("frames", [[10, 11], [3, 3]])
+def test_frame_steps_need_two_distinct_pairs(rng, frames):
+    with pytest.raises(ValueError, match="2 distinct frame pairs"):
+        _steps(_Strip(rng), frames)
+
+
+@pytest.mark.parametrize("gain", [0.0, -1.0, float("nan")])
+def test_label_signal_refuses_a_gain_that_is_not_positive(gain):
+    with pytest.raises(ValueError, match="noise_gain"):
+        LabelSignal(parts=(np.zeros((2, 2, 1, 4, 4)),), noise_gain=gain)
 
 
 def test_box_measurements_are_block_sums(rng):

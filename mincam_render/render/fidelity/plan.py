@@ -51,8 +51,10 @@ over probe frames, detectors and masks, relative to one of two things
   before; the bounds of the biases (path depth, float16) stay in this scale;
 - the **label signal**: the RMS over frames of the part of each measurement
   that the state the labels are computed from changes (:mod:`.signal`: what
-  movers and doors change, ``X - C``; what each switched light adds; or the
-  frames themselves less their mean), rendered on ``SIGNAL_FRAMES`` frames of
+  movers and doors change, ``X - C``; what each switched light adds; the
+  frames themselves less their mean; or, for a task read from motion, the
+  steps from one frame to the next, where a frame's independent error counts
+  sqrt(2) times), rendered on ``SIGNAL_FRAMES`` frames (or frame pairs) of
   the planning episode as two estimates whose covariance has no noise term.
   One person changes a workspace measurement by about 1 % of its total, so
   "1 % of the total" can be as large as what the camera must read.

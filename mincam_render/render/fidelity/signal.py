@@ -75,8 +75,15 @@ class SignalSource(enum.StrEnum):
     #: component times its on/off state); the weakest light sets the signal.
     LIGHTS = "lights"
     #: The frames themselves: their static background is their mean over frames
-    #: (families without a separated background: patches, traffic).
+    #: (families without a separated background: patches).
     FRAMES = "frames"
+    #: What changes from one frame to the next, ``S[f + 1] - S[f]``: a temporal
+    #: task that reads its label from motion (traffic's speed, from the head's
+    #: frame history), where the frames' light cancels and render noise that is
+    #: new in every frame does not. For families without a separated background
+    #: whose frames each have their own seed: a frame's error counts sqrt(2)
+    #: times on a step (``LabelSignal.noise_gain``).
+    FRAME_STEPS = "frame-steps"
 
 
 #: A render of the family's scene as it is set: ``seed -> T[detector, row, col]`` (W).
@@ -97,6 +104,10 @@ def render_label_signal(
 ) -> LabelSignal:
     """The label signal of ``frames``: two estimates per part with independent seeds.
 
+    FRAME_STEPS renders each frame with the next (the last with the one
+    before), both with one seed per estimate so that what the step leaves
+    unchanged cancels with its noise.
+
     Args:
         family: the scene family (a ``SceneFamily``; MOVERS and LIGHTS need its
             static background).
@@ -114,12 +125,14 @@ def render_label_signal(
     """
     if len(frames) < 2:
         raise ValueError(f"frames = {list(frames)}: the signal's spread needs at least 2")
-    # MOVERS and LIGHTS need the static background: checked where every renderer checks it
-    background = None if source is SignalSource.FRAMES else background_family(family)
 
     def render(seed: int) -> np.ndarray:
         return family.render_transport(scene, camera, spp=spp, seed=seed, max_depth=max_depth)
 
+    if source is SignalSource.FRAME_STEPS:
+        return _steps_signal(family, scene, render, frames, seeds)
+    # MOVERS and LIGHTS need the static background: checked where every renderer checks it
+    background = None if source is SignalSource.FRAMES else background_family(family)
     if source is SignalSource.LIGHTS and background is not None:
         return _lights_signal(background, scene, render, frames, seeds, interval_s)
     estimates = []
@@ -134,6 +147,33 @@ def render_label_signal(
                 per_frame.append(render(seeds(i, e)))
         estimates.append(np.stack(per_frame))
     return LabelSignal(parts=(np.stack(estimates),))
+
+
+def _steps_signal(
+    family: ProbedFamily,
+    scene: mi.Scene,
+    render: FrameRender,
+    frames: Sequence[int],
+    seeds: Callable[[int, int], int],
+) -> LabelSignal:
+    """The steps ``T[f + 1] - T[f]`` at ``frames``, each pair under one seed per estimate."""
+    firsts = sorted({min(int(i), family.num_frames - 2) for i in frames})
+    if len(firsts) < 2 or firsts[0] < 0:
+        raise ValueError(
+            f"frames {list(frames)} of a {family.num_frames}-frame episode: the steps' "
+            "spread needs at least 2 distinct frame pairs"
+        )
+    estimates = []
+    for e in (0, 1):
+        steps = []
+        for first in firsts:
+            pair = []
+            for index in (first, first + 1):
+                family.set_frame(scene, index)
+                pair.append(render(seeds(first, e)))
+            steps.append(pair[1] - pair[0])
+        estimates.append(np.stack(steps))
+    return LabelSignal(parts=(np.stack(estimates),), noise_gain=float(np.sqrt(2.0)))
 
 
 def difference_pair(
