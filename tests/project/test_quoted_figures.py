@@ -184,6 +184,17 @@ NOT_KEPT = {
         "stored: recomputed by test_the_design_protocols_paired_differences_are_its_episode_errors",
     )
     | dict.fromkeys(
+        (
+            "−0.507 [−1.013, −0.033]",
+            "−0.529 [−0.877, −0.157]",
+            "−0.535 [−0.874, −0.176]",
+            "+0.119 [−0.404, +0.742]",
+        ),
+        "traffic's PCA-tuned masks (traffic-4x-references) paired with the traffic-4x ladder's "
+        "designs on the same episodes, two entries: recomputed by "
+        "test_the_traffic_references_paired_with_the_ladders_designs",
+    )
+    | dict.fromkeys(
         ("1.407 [1.386, 1.425]", "1.399 [1.375, 1.420]"),
         "the patches mask learning-rate diagnostic (mincam 8 px alone, mask_lr 0.01 and 0.2, "
         "on the ladder's 16 episodes, 2026-12-06); a comparison run outside the bench, not kept",
@@ -224,7 +235,12 @@ NOT_KEPT = {
         ),
         "the main job run from a fresh clone at c8ce75e with root seeds 0, 1, 2; not kept",
     )
-    | dict.fromkeys(("−0.158 [−0.598, +0.369]",), TRAFFIC_BLOCKS),
+    | dict.fromkeys(("−0.158 [−0.598, +0.369]",), TRAFFIC_BLOCKS)
+    | dict.fromkeys(
+        ("−0.507 [−1.013, −0.033]", "−0.535 [−0.874, −0.176]"),
+        "traffic's PCA-tuned masks paired with the traffic-4x ladder's box cameras: "
+        "recomputed by test_the_traffic_references_paired_with_the_ladders_designs",
+    ),
 }
 #: Docs that must stay covered (a renamed results file would otherwise drop one silently).
 COVERED = {
@@ -339,6 +355,28 @@ def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a
     ladder = json.loads(_read(DESIGN_PROTOCOL))[entry]["ladder"][-1]
     figure = _paired(ladder["designs"][a], ladder["designs"][b])
     assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (entry, a, b, figure)
+
+
+@pytest.mark.parametrize(
+    ("pixels", "design", "b", "quoted"),
+    [
+        (8, "mincam-8px-pca-tuned", "baseline-2x4", "PCA-tuned − 2×4"),
+        (8, "mincam-8px-pca-tuned", "baseline-8x14", "− 8×14"),
+        (8, "mincam-8px-pca-tuned", "baseline-16x28", "− 16×28"),
+        (2, "mincam-2px-pca-tuned", "baseline-2x4", "tuned − 2×4"),
+    ],
+)
+def test_the_traffic_references_paired_with_the_ladders_designs(pixels, design, b, quoted):
+    """A design of ``traffic-4x-references`` against one of the ``traffic-4x`` ladder's last
+    point: the same 8 training and 6 test episodes, in two entries."""
+    results = json.loads(_read(DESIGN_PROTOCOL))
+    rows = {r["pixels"]: r for r in results["traffic-4x-references"]["references"]}
+    ladder = results["traffic-4x"]["ladder"][-1]["designs"]
+    figure = _paired(rows[pixels]["designs"][design], ladder[b])
+    assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (design, b, figure)
+    if pixels == 8 and b in ("baseline-2x4", "baseline-16x28"):
+        grid = b.removeprefix("baseline-")
+        assert f"{grid} {figure}" in _plain_doc("studies.md"), (design, b, figure)
 
 
 def _paired(a: dict, b: dict) -> str:
