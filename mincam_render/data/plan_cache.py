@@ -38,7 +38,7 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypedDict
+from typing import NotRequired, TypedDict
 
 from mincam_render.core.package_data import shipped_path
 from mincam_render.core.strict_json import JsonObject
@@ -72,12 +72,22 @@ class PlanSource(enum.StrEnum):
     CACHE = "cache"  # the user's cache directory
 
 
+#: The label-signal sources of the plans kept before the source was part of a
+#: plan's key (:class:`~mincam_render.render.fidelity.signal.SignalSource`
+#: values): their plans keep their keys; a later source (frame steps) is a field.
+KEYLESS_SIGNALS = frozenset({"movers", "lights", "frames"})
+
+
 class Planning(TypedDict):
-    """What a request leaves to the family or the planner, resolved (:func:`plan_fields`)."""
+    """What a request leaves to the family or the planner, resolved (:func:`plan_fields`).
+
+    ``label_signal`` only where it is not one of :data:`KEYLESS_SIGNALS`.
+    """
 
     error_scale: str
     target_error: float
     difference_seeds: str
+    label_signal: NotRequired[str]
 
 
 class KeptPlan(TypedDict):
@@ -131,11 +141,12 @@ def plan_fields(
             (``{"error_scale", "target_error", "difference_seeds"}``): a family's
             task-checked target can change without its description changing. A
             field unless it is :data:`TOTAL_PLANNING` (the only planning before
-            it; those plans' keys stay valid).
+            it; those plans' keys stay valid) with no ``label_signal``.
     """
     fields = {k: v for k, v in identity.items() if k not in EPISODE_FIELDS}
     fields.update(family_name=family_name, renderer=renderer, planner_version=PLANNER_VERSION)
-    if {k: v for k, v in planning.items() if k in TOTAL_PLANNING} != TOTAL_PLANNING:
+    total = {k: v for k, v in planning.items() if k in TOTAL_PLANNING} == TOTAL_PLANNING
+    if not total or "label_signal" in planning:
         fields["planning"] = planning
     return json.loads(json.dumps(fields, sort_keys=True))
 

@@ -17,6 +17,7 @@ the camera must read; relative to the signal it reads as what it is.
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -91,8 +92,10 @@ class LabelSignal:
     def __post_init__(self) -> None:
         if not self.parts:
             raise ValueError("LabelSignal.parts is empty: give at least one part")
-        if not self.noise_gain > 0:
-            raise ValueError(f"LabelSignal.noise_gain = {self.noise_gain!r}: allowed a number > 0")
+        if not (math.isfinite(self.noise_gain) and self.noise_gain > 0):
+            raise ValueError(
+                f"LabelSignal.noise_gain = {self.noise_gain!r}: allowed a finite number > 0"
+            )
         for i, part in enumerate(self.parts):
             if part.ndim != 5 or part.shape[0] not in (1, 2) or part.shape[1] < 2:
                 raise ValueError(

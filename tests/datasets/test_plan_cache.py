@@ -123,6 +123,30 @@ def test_a_plan_of_another_variant_is_measured_again_and_said(own_cache, caplog)
     assert "plans are measured per variant: planning again for cuda_ad_mono" in caplog.text
 
 
+def test_a_plan_on_frame_steps_is_kept_apart_from_one_on_frames():
+    # plans measured against the frames' signal keep their keys; the same
+    # targets measured against frame steps are another plan (their signal
+    # figures and a signal-scale spp mean something else)
+    identity = {"family": "traffic", "num_frames": 1800, "seed": 0}
+    renderer = {"variant": "llvm_ad_mono", "mitsuba": "3.9.1", "drjit": "1.5.0"}
+    planning = {"error_scale": "frame", "target_error": 0.01, "difference_seeds": "window"}
+    frames = plan_cache.plan_fields(identity, "traffic", renderer, planning)
+    steps = plan_cache.plan_fields(
+        identity, "traffic", renderer, {**planning, "label_signal": "frame-steps"}
+    )
+    assert "planning" not in frames  # the keys of plans kept before the source was a field
+    assert steps["planning"]["label_signal"] == "frame-steps"
+    assert plan_cache.plan_key(frames) != plan_cache.plan_key(steps)
+
+
+@pytest.mark.parametrize(("family", "source"), [("traffic", "frame-steps"), ("workspace", None)])
+def test_a_plans_key_names_its_label_signal_where_it_is_newer_than_the_keys(family, source):
+    from mincam_render.data.render_job.planning import resolved_planning
+
+    planning = resolved_planning(family, RenderRequest(family=family, num_frames=100))
+    assert planning.get("label_signal") == source
+
+
 def test_requests_without_the_later_fields_keep_their_format_4_identity():
     # datasets rendered before error_scale, signal_target_error, difference_seeds
     # and samples_factor existed resume: those fields stay out while None

@@ -178,7 +178,7 @@ def test_frame_steps_need_two_distinct_pairs(rng, frames):
         _steps(_Strip(rng), frames)
 
 
-@pytest.mark.parametrize("gain", [0.0, -1.0, float("nan")])
+@pytest.mark.parametrize("gain", [0.0, -1.0, float("nan"), float("inf")])
 def test_label_signal_refuses_a_gain_that_is_not_positive(gain):
     with pytest.raises(ValueError, match="noise_gain"):
         LabelSignal(parts=(np.zeros((2, 2, 1, 4, 4)),), noise_gain=gain)

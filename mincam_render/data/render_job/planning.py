@@ -23,6 +23,7 @@ from mincam_render.render.capabilities import history_frames
 from mincam_render.render.fidelity import FidelityPlan
 
 if TYPE_CHECKING:
+    from mincam_render.data import plan_cache
     from mincam_render.optics.camera import FreeformCamera
     from mincam_render.scenes.base import SceneFamily
 
@@ -241,6 +242,32 @@ def _manifest(
     }
 
 
+def resolved_planning(family_name: str, request: RenderRequest) -> plan_cache.Planning:
+    """What the family and the planner resolve of ``request``'s planning (part of a plan's key).
+
+    The target's scale and value, the difference seeds and, for a label-signal
+    source newer than :data:`~mincam_render.data.plan_cache.KEYLESS_SIGNALS`,
+    the source: what the plan's signal figures (and a signal-scale target) are
+    relative to.
+    """
+    from mincam_render.data import plan_cache
+    from mincam_render.render.differential import DifferenceSeeds
+    from mincam_render.render.fidelity.constants import DIFFERENCE_SEEDS
+    from mincam_render.render.fidelity.probes import planning_targets
+    from mincam_render.scenes.registry import family_class
+
+    cls = family_class(family_name)
+    scale, target = planning_targets(cls.planning_error_scale, cls.signal_target_error, request)
+    planning: plan_cache.Planning = {
+        "error_scale": scale.value,
+        "target_error": target,
+        "difference_seeds": DifferenceSeeds(request.difference_seeds or DIFFERENCE_SEEDS).value,
+    }
+    if str(cls.label_signal) not in plan_cache.KEYLESS_SIGNALS:
+        planning["label_signal"] = str(cls.label_signal)
+    return planning
+
+
 def _fidelity_plan(
     request: RenderRequest,
     family_name: str,
@@ -253,22 +280,12 @@ def _fidelity_plan(
     """The fidelity plan of a request: kept, or measured on the planning episode."""
     from mincam_render.data import plan_cache
     from mincam_render.render import backend
-    from mincam_render.render.differential import DifferenceSeeds
     from mincam_render.render.fidelity import decide_fidelity
-    from mincam_render.render.fidelity.constants import DIFFERENCE_SEEDS
-    from mincam_render.render.fidelity.probes import planning_targets
-    from mincam_render.scenes.registry import family_class
 
     info = backend.describe()
     versions = package_versions()
     renderer = {"variant": info["variant"], **{k: versions[k] for k in ("mitsuba", "drjit")}}
-    cls = family_class(family_name)
-    scale, target = planning_targets(cls.planning_error_scale, cls.signal_target_error, request)
-    planning: plan_cache.Planning = {
-        "error_scale": scale.value,
-        "target_error": target,
-        "difference_seeds": DifferenceSeeds(request.difference_seeds or DIFFERENCE_SEEDS).value,
-    }
+    planning = resolved_planning(family_name, request)
     fields = plan_cache.plan_fields(identity, family_name, renderer, planning)
     found = plan_cache.find_plan(fields) if use_cache else None
     if found is not None:

@@ -121,7 +121,8 @@ def render_label_signal(
         max_depth: path depth (None: the scene's integrator).
 
     Raises:
-        ValueError: fewer than 2 frames; a source the family cannot give.
+        ValueError: fewer than 2 frames (FRAME_STEPS: fewer than 2 distinct
+            frame pairs, e.g. a 2-frame episode); a source the family cannot give.
     """
     if len(frames) < 2:
         raise ValueError(f"frames = {list(frames)}: the signal's spread needs at least 2")

@@ -364,7 +364,8 @@ class _Bench:
 
         assert self.p_ref is not None and self.t_ref is not None
         signal_rms = signal.rms(lambda x: measurements(x, self.masks_random))
-        random = float(np.sqrt(np.mean((p - self.p_ref[0]) ** 2))) / signal_rms
+        error = float(np.sqrt(np.mean((p - self.p_ref[0]) ** 2)))
+        random = error * signal.noise_gain / signal_rms  # on frame steps: sqrt(2)
         box = None
         if t.shape == self.t_ref.shape:
             lo_hi = self.camera.transmittance_range
