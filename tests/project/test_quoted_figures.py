@@ -193,6 +193,12 @@ NOT_KEPT = {
             "−0.919 [−1.372, −0.411]",
             "−0.410 [−1.054, +0.177]",
             "−0.048 [−0.260, +0.169]",
+            "−0.590 [−1.014, −0.088]",
+            "−0.613 [−1.117, −0.174]",
+            "−0.619 [−1.081, −0.192]",
+            "−0.083 [−0.328, +0.165]",
+            "+0.157 [−0.150, +0.538]",
+            "−0.199 [−0.528, +0.074]",
         ),
         "traffic's PCA-tuned masks (traffic-4x-references) paired with the traffic-4x ladder's "
         "designs on the same episodes, two entries: recomputed by "
@@ -376,17 +382,31 @@ def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a
             ("references-4", 8, "mincam-8px-pca-tuned"),
             "8 − 4",
         ),
+        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-2x4"), "chosen − 2×4"),
+        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-8x14"), "− 8×14"),
+        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-16x28"), "− 16×28"),
+        (
+            ("restarts", 8, "mincam-8px"),
+            ("references", 8, "mincam-8px-pca-tuned"),
+            "chosen − PCA-tuned",
+        ),
+        (("restarts", 2, "mincam-2px"), ("restarts-plain", 2, "mincam-2px"), "0.068) |"),
+        (("restarts", 8, "mincam-8px"), ("restarts-plain", 8, "mincam-8px"), "0.092) |"),
     ],
 )
 def test_the_traffic_references_paired_with_the_ladders_designs(a, b, quoted):
-    """A design of ``traffic-4x-references`` (8 training episodes) or ``-references-4`` (4)
-    against another entry's on the same test episodes: the ``traffic-4x`` ladder's point
-    of ``k`` episodes, or the same reference at the other training size."""
+    """A design of ``traffic-4x-references`` (8 training episodes), ``-references-4`` (4) or
+    ``-restarts`` (the chosen runs) against another entry's on the same test episodes: the
+    ``traffic-4x`` ladder's point of ``k`` episodes, or a reference."""
     results = json.loads(_read(DESIGN_PROTOCOL))
 
     def design(where: str, k: int, name: str) -> dict:
+        """The record of ``name``'s episode errors (restarts: the chosen or the plain runs')."""
         if where == "ladder":
             return {p["episodes"]: p for p in results["traffic-4x"]["ladder"]}[k]["designs"][name]
+        if where.startswith("restarts"):
+            rows = {r["design"]: r for r in results["traffic-4x-restarts"]["restarts"]}
+            return rows[name]["plain" if where.endswith("-plain") else "chosen"]
         rows = results[f"traffic-4x-{where}"]["references"]
         return {r["pixels"]: r for r in rows}[k]["designs"][name]
 
