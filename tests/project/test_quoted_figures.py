@@ -367,31 +367,29 @@ def test_the_design_protocols_paired_differences_are_its_episode_errors(entry, a
     assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (entry, a, b, figure)
 
 
+#: Designs of the traffic entries at 4x: ``(where, k, design)``, ``k`` the pixels of a
+#: references row or the training episodes of a ladder point.
+PCA_TUNED_8 = ("references", 8, "mincam-8px-pca-tuned")
+PCA_TUNED_8_AT_4 = ("references-4", 8, "mincam-8px-pca-tuned")
+CHOSEN_8 = ("restarts", 8, "mincam-8px")
+
+
+def _boxes(episodes: int) -> list[tuple[str, int, str]]:
+    """The box cameras of the ``traffic-4x`` ladder's point of ``episodes``."""
+    return [("ladder", episodes, f"baseline-{g}") for g in ("2x4", "8x14", "16x28")]
+
+
 @pytest.mark.parametrize(
     ("a", "b", "quoted"),
     [
-        (("references", 8, "mincam-8px-pca-tuned"), ("ladder", 8, "baseline-2x4"), "tuned − 2×4"),
-        (("references", 8, "mincam-8px-pca-tuned"), ("ladder", 8, "baseline-8x14"), "− 8×14"),
-        (("references", 8, "mincam-8px-pca-tuned"), ("ladder", 8, "baseline-16x28"), "− 16×28"),
-        (("references", 2, "mincam-2px-pca-tuned"), ("ladder", 8, "baseline-2x4"), "tuned − 2×4"),
-        (("references-4", 8, "mincam-8px-pca-tuned"), ("ladder", 4, "baseline-8x14"), "− 8×14"),
-        (("references-4", 8, "mincam-8px-pca-tuned"), ("ladder", 4, "baseline-16x28"), "− 16×28"),
-        (("references-4", 8, "mincam-8px-pca-tuned"), ("ladder", 4, "baseline-2x4"), "− 2×4"),
-        (
-            ("references", 8, "mincam-8px-pca-tuned"),
-            ("references-4", 8, "mincam-8px-pca-tuned"),
-            "8 − 4",
-        ),
-        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-2x4"), "chosen − 2×4"),
-        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-8x14"), "− 8×14"),
-        (("restarts", 8, "mincam-8px"), ("ladder", 8, "baseline-16x28"), "− 16×28"),
-        (
-            ("restarts", 8, "mincam-8px"),
-            ("references", 8, "mincam-8px-pca-tuned"),
-            "chosen − PCA-tuned",
-        ),
+        *zip([PCA_TUNED_8] * 3, _boxes(8), ["tuned − 2×4", "− 8×14", "− 16×28"], strict=True),
+        *zip([PCA_TUNED_8_AT_4] * 3, _boxes(4), ["− 2×4", "− 8×14", "− 16×28"], strict=True),
+        *zip([CHOSEN_8] * 3, _boxes(8), ["chosen − 2×4", "− 8×14", "− 16×28"], strict=True),
+        (("references", 2, "mincam-2px-pca-tuned"), _boxes(8)[0], "tuned − 2×4"),
+        (PCA_TUNED_8, PCA_TUNED_8_AT_4, "8 − 4"),
+        (CHOSEN_8, PCA_TUNED_8, "chosen − PCA-tuned"),
         (("restarts", 2, "mincam-2px"), ("restarts-plain", 2, "mincam-2px"), "0.068) |"),
-        (("restarts", 8, "mincam-8px"), ("restarts-plain", 8, "mincam-8px"), "0.092) |"),
+        (CHOSEN_8, ("restarts-plain", 8, "mincam-8px"), "0.092) |"),
     ],
 )
 def test_the_traffic_references_paired_with_the_ladders_designs(a, b, quoted):
@@ -412,7 +410,7 @@ def test_the_traffic_references_paired_with_the_ladders_designs(a, b, quoted):
 
     figure = _paired(design(*a), design(*b))
     assert f"{quoted} {figure}".replace("−", "-") in _protocol_doc(), (a, b, figure)
-    if a == ("references", 8, "mincam-8px-pca-tuned") and b[::2] in (
+    if a == PCA_TUNED_8 and b[::2] in (
         ("ladder", "baseline-2x4"),
         ("ladder", "baseline-16x28"),
     ):
