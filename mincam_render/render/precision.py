@@ -59,6 +59,10 @@ class ErrorScale(enum.StrEnum):
 ERROR_SCALES = tuple(s.value for s in ErrorScale)
 
 
+class UnmeasurableSignalError(ValueError):
+    """An error relative to a label signal whose RMS is 0 (:meth:`LabelSignal.rms`)."""
+
+
 @dataclass(frozen=True)
 class LabelSignal:
     """Transport images of the label signal: what the labels' state changes, over frames.
@@ -105,6 +109,9 @@ class LabelSignal:
 
     def rms(self, measure: Callable[[np.ndarray], np.ndarray]) -> float:
         """The weakest part's RMS over frames of its measurements about their mean (W).
+
+        0 where the two estimates do not co-vary over frames (no signal, or one
+        below their noise).
 
         Args:
             measure: ``T[frame, detector, row, col] -> P[frame, ...]`` (the masks
@@ -274,6 +281,8 @@ def measurement_relative_error(
     Raises:
         ValueError: shapes differ or are not 4-D; unknown ``scale``; ``"signal"``
             without a signal; a box size that does not divide the texels.
+        UnmeasurableSignalError: ``"signal"`` with a signal whose RMS is 0 for
+            these masks (a relative error would be undefined, not 0).
     """
     t = np.asarray(transport_w, dtype=np.float64)
     ref = np.asarray(reference_w, dtype=np.float64)
@@ -293,7 +302,16 @@ def measurement_relative_error(
         denom = np.broadcast_to(denom.mean(axis=0), denom.shape)
     elif scale is ErrorScale.SIGNAL:
         assert signal is not None  # checked above
-        denom = np.full(p.shape, signal.rms(measure) / signal.noise_gain)
+        signal_rms = signal.rms(measure)
+        if not signal_rms > 0:
+            raise UnmeasurableSignalError(
+                "the label signal is not measurable for these masks: its two estimates "
+                "do not co-vary over frames (nothing the labels read changes in the "
+                "signal's frames, or the change is below the estimates' render noise), "
+                "so an error relative to it is undefined; check the family's "
+                "label_signal source against what its labels read"
+            )
+        denom = np.full(p.shape, signal_rms / signal.noise_gain)
     ok = denom > 0
     if not np.any(ok):
         return {"rms": 0.0, "max": 0.0}

@@ -413,6 +413,11 @@ def test_converged_backgrounds_are_the_frames_without_their_movers(
         moving = fam.track.active[i].sum() > 0 or fam.track.door_angle_rad[i] != 0.0
         assert np.array_equal(t[i], b[i]) is not moving
         assert moving is not empty_room
+    if empty_room:  # no movers: their signal is not measurable, its relative figures undefined
+        achieved = ds.read_manifest(out)["fidelity"]["achieved"]
+        assert achieved["label_signal_rms"]["random_masks_w"] == 0.0
+        assert achieved["against_reference"]["signal_relative"] is None
+        assert achieved["against_reference"]["total_relative"]["rms"] > 0
 
 
 def test_converged_backgrounds_need_a_differential_dataset(tiny_patches):
@@ -474,3 +479,17 @@ def test_frames_share_the_windows_seed_or_have_their_own(seeds):
 def test_unknown_difference_seeds_are_refused():
     with pytest.raises(ValueError, match="difference_seeds"):
         BackgroundSettings(interval_s=1.0, spp=4, max_depth=None, difference_seeds="episode")
+
+
+def test_planning_against_a_signal_that_is_not_measurable_is_refused():
+    from mincam_render.data.render_job import RenderRequest
+    from mincam_render.render.fidelity import decide_fidelity
+    from mincam_render.render.precision import UnmeasurableSignalError
+
+    overrides = {"fps": 2.0, "camera": {"mask_resolution": 8, "detectors": 2}, **EMPTY_ROOM}
+    request = RenderRequest(
+        family="workspace", num_frames=24, overrides=overrides, error_scale="signal"
+    )
+    fam = load_family("workspace", seed=0, num_frames=24, overrides=overrides)
+    with pytest.raises(UnmeasurableSignalError, match="label_signal"):
+        decide_fidelity(fam, fam.camera(), request)

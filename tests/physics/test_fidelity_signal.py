@@ -13,6 +13,7 @@ from mincam_render.render.fidelity.signal import (
 from mincam_render.render.precision import (
     ErrorScale,
     LabelSignal,
+    UnmeasurableSignalError,
     box_measurements,
     measurement_relative_error,
 )
@@ -246,3 +247,19 @@ def test_noise_shared_by_a_window_correlates_as_the_windows_overlap(rng):
 def test_autocorrelation_refuses_what_it_cannot_measure(noise, lags, match):
     with pytest.raises(ValueError, match=match):
         noise_autocorrelation(noise, lags)
+
+
+def _anticorrelated_estimates(rng, frames=6):
+    # the second estimate's deviations are the first's negated: no common signal
+    first = rng.normal(size=(frames, 1, 4, 4))
+    return np.stack([first, 2 * first.mean(axis=0) - first])
+
+
+@pytest.mark.parametrize("part", ["zeros", "anticorrelated"])
+def test_an_error_against_a_signal_that_is_not_measurable_is_refused(rng, part):
+    estimates = np.zeros((2, 6, 1, 4, 4)) if part == "zeros" else _anticorrelated_estimates(rng)
+    moving = np.stack([rng.normal(size=(6, 1, 4, 4))] * 2)
+    signal = LabelSignal(parts=(moving, estimates))
+    t = rng.uniform(size=(6, 1, 4, 4))
+    with pytest.raises(UnmeasurableSignalError, match="not measurable"):
+        measurement_relative_error(t, 1.01 * t, LO_HI, scale="signal", signal=signal)

@@ -23,6 +23,7 @@ from mincam_render.render.precision import (
     ErrorScale,
     LabelSignal,
     StorageDtype,
+    UnmeasurableSignalError,
     measurement_relative_error,
     measurements_of,
 )
@@ -231,17 +232,25 @@ class Probes:
         b: np.ndarray,
         scale: ErrorScale | None = None,
         box_texels: int | None = None,
-    ) -> dict[str, float]:
+    ) -> dict[str, float] | None:
         """Relative measurement error of ``a`` against ``b`` for random printable masks.
 
         Relative to ``scale`` (default :attr:`scale`, the planning target's);
         with ``box_texels``, of box pixels of that size instead of random masks.
+        None: relative to a label signal that is not measurable, in a figure the
+        plan only reports (planning against it raises
+        :class:`~mincam_render.render.precision.UnmeasurableSignalError`).
         """
         scale = self.scale if scale is None else scale
         signal = self.label_signal() if scale is ErrorScale.SIGNAL else None
-        return measurement_relative_error(
-            a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
-        )
+        try:
+            return measurement_relative_error(
+                a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
+            )
+        except UnmeasurableSignalError:
+            if scale is self.scale:
+                raise
+            return None
 
     def figures(self, a: np.ndarray, b: np.ndarray) -> ReferenceFigures:
         """``a`` against ``b`` in every metric: relative to the total and to the label signal.

@@ -286,23 +286,30 @@ class ReferenceFigures:
         total_relative: random printable masks, relative to the total light.
         total_scale: the total scale's value
             (:class:`~mincam_render.render.precision.ErrorScale`).
-        signal_relative: random printable masks, relative to the label signal.
-        signal_relative_finest_box: single-texel box pixels, relative to the label signal.
+        signal_relative: random printable masks, relative to the label signal
+            (None: the signal is not measurable, :meth:`Probes.error`).
+        signal_relative_finest_box: single-texel box pixels, relative to the
+            label signal (None likewise).
     """
 
     total_relative: Mapping[str, float]
     total_scale: str
-    signal_relative: Mapping[str, float]
-    signal_relative_finest_box: Mapping[str, float]
+    signal_relative: Mapping[str, float] | None
+    signal_relative_finest_box: Mapping[str, float] | None
 
     def as_json(self) -> JsonObject:
         """The four figures by name, as a plan's ``achieved`` record holds them."""
         return {
             "total_relative": dict(self.total_relative),
             "total_scale": self.total_scale,
-            "signal_relative": dict(self.signal_relative),
-            "signal_relative_finest_box": dict(self.signal_relative_finest_box),
+            "signal_relative": _figure(self.signal_relative),
+            "signal_relative_finest_box": _figure(self.signal_relative_finest_box),
         }
+
+
+def _figure(figure: Mapping[str, float] | None) -> dict[str, float] | None:
+    """A ``{rms, max}`` figure as JSON: a plain dict, or None where it is undefined."""
+    return None if figure is None else dict(figure)
 
 
 @dataclass(frozen=True, kw_only=True)
