@@ -218,7 +218,7 @@ def decide_spp(
     elif e_pilot is None:  # not auto
         value, source, reason = FULL_SPP, Source.FULL, f"full fidelity default {FULL_SPP} spp"
     else:
-        spp = spp_for(e_pilot, target, MAX_AUTO_SPP, steps_per_octave=4)  # <= 25 % above need
+        spp = spp_for(e_pilot, target, MAX_AUTO_SPP)
         predicted = measured["predicted_error_rms"] = e_pilot * math.sqrt(PILOT_SPP / spp)
         verdict = (
             f"{spp} spp meets target {target:g}"
