@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -361,6 +362,22 @@ def test_ray_renders_differential_datasets_byte_identically(differential_dataset
     for rec in ds.read_manifest(out)["shards"]:
         for name in ("transport", "metadata"):
             assert (tmp_path / "ray" / rec[name]).read_bytes() == (out / rec[name]).read_bytes()
+
+
+def test_spp_rounds_up_at_most_a_quarter_octave_then_to_a_stratification_grid():
+    from mincam_render.render.fidelity import PILOT_SPP
+    from mincam_render.render.fidelity.budget import round_up_spp, spp_for
+
+    assert round_up_spp(139, 4096, 4) == 168  # 160 on the grid, then 12 x 14
+    assert round_up_spp(139, 4096, 1) == 256  # a whole octave
+    assert round_up_spp(5000, 4096, 4) == 4096  # the cap
+    for need in np.geomspace(1.0, 3000.0, 200):
+        n = round_up_spp(need, 1 << 20, 4)
+        assert need <= n <= 1.25 * need * (1 + 2 / np.sqrt(need)) + 1
+        assert n % math.isqrt(n) == 0  # one pass of a full stratification grid
+    # the plain estimator's spp: the smallest on that grid whose 1/sqrt(spp) error meets the target
+    spp = spp_for(3.12, 0.53, 4096, steps_per_octave=4)
+    assert 3.12 * math.sqrt(PILOT_SPP / spp) <= 0.53 < 3.12 * math.sqrt(PILOT_SPP / (0.75 * spp))
 
 
 def test_noise_budget_split_is_the_cheapest_that_meets_the_target():
