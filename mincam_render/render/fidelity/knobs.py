@@ -27,7 +27,6 @@ from mincam_render.render.fidelity.constants import (
 from mincam_render.render.fidelity.probes import Probes
 from mincam_render.render.fidelity.records import Decision, Parallax, SharingChange, Source
 from mincam_render.render.precision import (
-    ErrorScale,
     StorageDtype,
     decode_transport,
     encode_transport,
@@ -244,7 +243,7 @@ def decide_dtype(p: Probes, auto: bool, chosen: np.ndarray) -> Decision:
     f16_err = p.error(decoded, chosen, p.total_scale)
     measured = {
         "float16_error": f16_err,
-        "float16_error_signal_relative": p.error(decoded, chosen, ErrorScale.SIGNAL),
+        "float16_error_signal_relative": p.signal_figure(decoded, chosen),
         "bound": request.dtype_error_bound,
     }
     if request.dtype is not None:

@@ -232,23 +232,33 @@ class Probes:
         b: np.ndarray,
         scale: ErrorScale | None = None,
         box_texels: int | None = None,
-    ) -> dict[str, float] | None:
+    ) -> dict[str, float]:
         """Relative measurement error of ``a`` against ``b`` for random printable masks.
 
         Relative to ``scale`` (default :attr:`scale`, the planning target's);
         with ``box_texels``, of box pixels of that size instead of random masks.
-        None: relative to a label signal that is not measurable, in a figure the
-        plan only reports (planning against it raises
-        :class:`~mincam_render.render.precision.UnmeasurableSignalError`).
+
+        Raises:
+            UnmeasurableSignalError: relative to a label signal that is not measurable.
         """
         scale = self.scale if scale is None else scale
         signal = self.label_signal() if scale is ErrorScale.SIGNAL else None
+        return measurement_relative_error(
+            a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
+        )
+
+    def signal_figure(
+        self, a: np.ndarray, b: np.ndarray, box_texels: int | None = None
+    ) -> dict[str, float] | None:
+        """:meth:`error` relative to the label signal, for a figure the plan only reports.
+
+        None where the signal is not measurable; a plan on the signal scale
+        raises instead, since its target would be undefined.
+        """
         try:
-            return measurement_relative_error(
-                a, b, self.lo_hi, scale=scale, signal=signal, box_texels=box_texels
-            )
+            return self.error(a, b, ErrorScale.SIGNAL, box_texels)
         except UnmeasurableSignalError:
-            if scale is self.scale:
+            if self.scale is ErrorScale.SIGNAL:
                 raise
             return None
 
@@ -260,10 +270,8 @@ class Probes:
         return ReferenceFigures(
             total_relative=self.error(a, b, self.total_scale),
             total_scale=self.total_scale.value,
-            signal_relative=self.error(a, b, ErrorScale.SIGNAL),
-            signal_relative_finest_box=self.error(
-                a, b, ErrorScale.SIGNAL, box_texels=FINEST_BOX_TEXELS
-            ),
+            signal_relative=self.signal_figure(a, b),
+            signal_relative_finest_box=self.signal_figure(a, b, box_texels=FINEST_BOX_TEXELS),
         )
 
     def label_signal(self) -> LabelSignal:
