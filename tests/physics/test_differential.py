@@ -510,3 +510,25 @@ def test_planning_against_a_signal_that_is_not_measurable_is_refused():
     fam = load_family("workspace", seed=0, num_frames=24, overrides=overrides)
     with pytest.raises(UnmeasurableSignalError, match="label_signal"):
         decide_fidelity(fam, fam.camera(), request)
+
+
+@pytest.mark.parametrize(
+    ("floor", "blamed", "part"), [(1.5, "--spp", 0.765), (0.3, "--per-detector", 1.439)]
+)
+def test_a_missed_target_blames_sharing_only_for_its_change_above_two_seeds_noise(
+    floor, blamed, part
+):
+    from mincam_render.render.fidelity.check import _knobs_to_turn
+    from mincam_render.render.fidelity.records import Decision, Source
+
+    measured = {
+        "error_shared_vs_per_detector": {"rms": 1.47},
+        "noise_floor_two_seeds": {"rms": floor},
+    }
+    decisions = {
+        "shared_render": Decision(value=True, source=Source.AUTO, reason="", measured=measured),
+        "max_depth": Decision(value=4, source=Source.AUTO, reason=""),
+    }
+    knobs = _knobs_to_turn(0.765, decisions, 0.53, 168, depth_in_scale=False)
+    assert len(knobs) == 1 and knobs[0][0].startswith(blamed)
+    assert knobs[0][1] == pytest.approx(part, abs=1e-3)  # 1.439 = sqrt(1.47^2 - 0.3^2)

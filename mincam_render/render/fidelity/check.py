@@ -249,13 +249,17 @@ def _knobs_to_turn(
 ) -> list[tuple[str, float]]:
     """``[(flag, its part of the error)]``: those above the target, else the largest.
 
-    The path depth's change is measured relative to the total; it is a part of
-    the error only when the target is too (``depth_in_scale``).
+    Sharing's part is its measured change less, in quadrature, the noise of two
+    seeds it was measured with (the change of two renders holds both: only the
+    rest is a bias). The path depth's change is measured relative to the total;
+    it is a part of the error only when the target is too (``depth_in_scale``).
     """
     shared = decisions["shared_render"]
     parts = {}
     if shared.value and "error_shared_vs_per_detector" in shared.measured:
-        parts["--per-detector"] = shared.measured["error_shared_vs_per_detector"]["rms"]
+        change = shared.measured["error_shared_vs_per_detector"]["rms"]
+        floor = shared.measured.get("noise_floor_two_seeds", {}).get("rms", 0.0)
+        parts["--per-detector"] = math.sqrt(max(change**2 - floor**2, 0.0))
     depth = decisions["max_depth"]
     changes = depth.measured.get("change_vs_reference", {})
     kept = changes.get(str(depth.measured.get("plain_value", depth.value)))
