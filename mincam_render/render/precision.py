@@ -119,6 +119,26 @@ class LabelSignal:
         """
         return min(_spread_rms(np.stack([measure(e) for e in part])) for part in self.parts)
 
+    def error_scale_w(self, measure: Callable[[np.ndarray], np.ndarray]) -> float:
+        """What one frame's render error is divided by on the signal scale (W).
+
+        :meth:`rms` over :attr:`noise_gain`.
+
+        Raises:
+            UnmeasurableSignalError: the RMS is 0 (a relative error would be
+                undefined, not 0).
+        """
+        signal_rms = self.rms(measure)
+        if not signal_rms > 0:
+            raise UnmeasurableSignalError(
+                "the label signal is not measurable for these masks: its two estimates "
+                "do not co-vary over frames (nothing the labels read changes in the "
+                "signal's frames, or the change is below the estimates' render noise), "
+                "so an error relative to it is undefined; check the family's "
+                "label_signal source against what its labels read"
+            )
+        return signal_rms / self.noise_gain
+
 
 def _spread_rms(p: np.ndarray) -> float:
     """RMS over frames (axis 1) about the mean, pooled; ``p[estimate, frame, ...]``."""
@@ -255,7 +275,8 @@ def measurement_relative_error(
     dimmer than the others weighs by its absolute error, not ten times more;
     ``scale="signal"`` divides every error by the label signal's RMS for the
     same masks (:meth:`LabelSignal.rms`, pooled over detectors and masks) and
-    counts it ``g = signal.noise_gain`` times (frame steps: sqrt(2)).
+    counts it ``g = signal.noise_gain`` times (frame steps: sqrt(2);
+    :meth:`LabelSignal.error_scale_w`).
 
     .. math::
 
@@ -282,7 +303,7 @@ def measurement_relative_error(
         ValueError: shapes differ or are not 4-D; unknown ``scale``; ``"signal"``
             without a signal; a box size that does not divide the texels.
         UnmeasurableSignalError: ``"signal"`` with a signal whose RMS is 0 for
-            these masks (a relative error would be undefined, not 0).
+            these masks (:meth:`LabelSignal.error_scale_w`).
     """
     t = np.asarray(transport_w, dtype=np.float64)
     ref = np.asarray(reference_w, dtype=np.float64)
@@ -302,16 +323,7 @@ def measurement_relative_error(
         denom = np.broadcast_to(denom.mean(axis=0), denom.shape)
     elif scale is ErrorScale.SIGNAL:
         assert signal is not None  # checked above
-        signal_rms = signal.rms(measure)
-        if not signal_rms > 0:
-            raise UnmeasurableSignalError(
-                "the label signal is not measurable for these masks: its two estimates "
-                "do not co-vary over frames (nothing the labels read changes in the "
-                "signal's frames, or the change is below the estimates' render noise), "
-                "so an error relative to it is undefined; check the family's "
-                "label_signal source against what its labels read"
-            )
-        denom = np.full(p.shape, signal_rms / signal.noise_gain)
+        denom = np.full(p.shape, signal.error_scale_w(measure))
     ok = denom > 0
     if not np.any(ok):
         return {"rms": 0.0, "max": 0.0}

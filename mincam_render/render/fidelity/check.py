@@ -258,7 +258,7 @@ def _knobs_to_turn(
     parts = {}
     if shared.value and "error_shared_vs_per_detector" in shared.measured:
         change = shared.measured["error_shared_vs_per_detector"]["rms"]
-        floor = shared.measured.get("noise_floor_two_seeds", {}).get("rms", 0.0)
+        floor = shared.measured["noise_floor_two_seeds"]["rms"]
         parts["--per-detector"] = math.sqrt(max(change**2 - floor**2, 0.0))
     depth = decisions["max_depth"]
     changes = depth.measured.get("change_vs_reference", {})

@@ -287,7 +287,7 @@ class ReferenceFigures:
         total_scale: the total scale's value
             (:class:`~mincam_render.render.precision.ErrorScale`).
         signal_relative: random printable masks, relative to the label signal
-            (None: the signal is not measurable, :meth:`Probes.error`).
+            (None: the signal is not measurable, :meth:`Probes.signal_figure`).
         signal_relative_finest_box: single-texel box pixels, relative to the
             label signal (None likewise).
     """

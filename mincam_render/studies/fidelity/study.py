@@ -360,18 +360,11 @@ class _Bench:
 
         The single texel's is None for a transport at a coarser resolution.
         """
-        from mincam_render.render.precision import (
-            ErrorScale,
-            UnmeasurableSignalError,
-            measurement_relative_error,
-        )
+        from mincam_render.render.precision import ErrorScale, measurement_relative_error
 
         assert self.p_ref is not None and self.t_ref is not None
-        signal_rms = signal.rms(lambda x: measurements(x, self.masks_random))
-        if not signal_rms > 0:
-            raise UnmeasurableSignalError("the study's label signal is 0 for its random masks")
         error = float(np.sqrt(np.mean((p - self.p_ref[0]) ** 2)))
-        random = error * signal.noise_gain / signal_rms  # on frame steps: sqrt(2)
+        random = error / signal.error_scale_w(lambda x: measurements(x, self.masks_random))
         box = None
         if t.shape == self.t_ref.shape:
             lo_hi = self.camera.transmittance_range
